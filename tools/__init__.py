@@ -1,0 +1,1 @@
+"""Command-line wrappers (installed as the ``mrsteer_cli`` package, command ``mrsteer``)."""
