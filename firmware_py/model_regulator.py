@@ -253,8 +253,10 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     du = c.du_max
     if s.recovering and c.fade_step < du:
         du = c.fade_step
-    lo = s.u_prev - du
-    hi = s.u_prev + du
+    lo_slew = s.u_prev - du
+    hi_slew = s.u_prev + du
+    lo = lo_slew
+    hi = hi_slew
     if lo < -c.u_max:
         lo = -c.u_max
     if hi > c.u_max:
@@ -272,8 +274,8 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     y = p + c.g_w0 * u
 
     s.z = c.g_w1 * (delta_driver + u) - c.g_r1 * rho + c.a * y
-    if s.recovering and lo < y_free < hi:
-        s.recovering = False  # caught up with the control law: normal slew from now on
+    if s.recovering and lo_slew < u < hi_slew:
+        s.recovering = False  # the slew no longer binds: caught up with the control law
     s.u_prev = u
     s.status = STATUS_SATURATED if (u >= c.u_max or u <= -c.u_max) else STATUS_ACTIVE
     return u

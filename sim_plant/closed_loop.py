@@ -236,6 +236,9 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace
         cfg = replace(exp.config, q_form=exp.controller, ts=ts)
         coeffs = mr.configure(cfg)
         state = mr.State()
+        # At rest before t = 0, as the continuous reference is: one sample with zero inputs
+        # takes the firmware out of its power-on (inactive) state without a command.
+        mr.step(coeffs, state, 0.0, 0.0, exp.params.v)
     n = int(round(exp.duration / ts)) + 1
     beta_hist = np.empty(n)
     r_hist = np.empty(n)
