@@ -300,3 +300,10 @@ def test_firmware_imports_no_numpy_or_io() -> None:
 def test_bad_calibration_is_rejected_at_configuration(bad: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         mr.configure(replace(mr.ControllerConfig(), **bad))
+
+
+def test_shipped_default_is_stable_with_one_sample_of_delay_over_the_envelope() -> None:
+    c = mr.configure(mr.ControllerConfig())
+    worst = max(float(np.max(np.abs(discrete_loop_poles(VehicleParams(v=v, mu=mu, mass=m), c, 1))))
+                for v in (5.0, 10.0, 20.0, 35.0, 50.0) for mu in (0.1, 0.4, 1.0) for m in (1296.0, 1800.0))
+    assert worst < 1.0
