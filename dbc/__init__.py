@@ -1,0 +1,226 @@
+"""The bus contract: ``mrsteer.dbc`` and its executable form (installed as ``mrsteer_dbc``).
+
+Every frame layout, range, cycle time and E2E data ID comes from the DBC through cantools;
+nothing here knows a bit position.  E2E protection is in the style of AUTOSAR E2E profile 1,
+variant 1A (``E2E_Profile "P01A"`` in the DBC):
+
+* a CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, final XOR 0xFF; check value 0x4B for "123456789")
+  in the message's ``*_CRC`` signal, computed over the data ID's low byte, its high byte,
+  then every payload byte except the CRC byte;
+* a 4-bit alive counter 0..14 in the ``*_Counter`` signal, incremented per frame sent.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import cantools
+from crccheck.crc import Crc8SaeJ1850
+
+DBC_PATH = Path(__file__).with_name("mrsteer.dbc")
+COUNTER_MODULO = 15  # profile 1: counter values 0..14; 15 is never sent
+
+
+class ContractError(ValueError):
+    """The DBC does not satisfy what the code requires of it."""
+
+
+def crc8_sae_j1850(data: bytes) -> int:
+    return Crc8SaeJ1850.calc(data)
+
+
+@dataclass(frozen=True)
+class E2EConfig:
+    data_id: int
+    crc_signal: str
+    counter_signal: str
+    crc_byte: int
+
+
+class E2EStatus(enum.Enum):
+    OK = "ok"
+    OK_SOME_LOST = "ok_some_lost"  # counter jumped by 2..max_delta: frames lost, data valid
+    INITIAL = "initial"  # first frame seen: accepted, no sequence to compare with
+    REPEATED = "repeated"  # same counter again: stale or replayed
+    WRONG_SEQUENCE = "wrong_sequence"  # counter jumped too far
+    BAD_CRC = "bad_crc"
+    BAD_COUNTER = "bad_counter"  # 15, which profile 1 never sends
+    BAD_LENGTH = "bad_length"
+    OUT_OF_RANGE = "out_of_range"  # a signal outside the DBC's [min, max] or not finite
+
+    @property
+    def accepted(self) -> bool:
+        return self in (E2EStatus.OK, E2EStatus.OK_SOME_LOST, E2EStatus.INITIAL)
+
+
+@dataclass
+class Decoded:
+    name: str
+    signals: dict[str, float]
+    status: E2EStatus
+    counter: int | None
+
+
+class Contract:
+    """The DBC loaded once (strict), with per-message E2E configuration."""
+
+    def __init__(self, path: Path | str = DBC_PATH) -> None:
+        try:
+            self.db = cantools.database.load_file(str(path), strict=True)
+        except FileNotFoundError:
+            raise ContractError(f"DBC file not found: {path}") from None
+        except Exception as exc:  # cantools raises several parser error types
+            raise ContractError(f"cannot load DBC {path}: {exc}") from None
+        self.path = Path(path)
+        self._by_name = {m.name: m for m in self.db.messages}
+        self._by_id = {m.frame_id: m for m in self.db.messages}
+        self._e2e = {m.name: self._e2e_config(m) for m in self.db.messages}
+
+    @staticmethod
+    def _e2e_config(msg: Any) -> E2EConfig | None:
+        attrs = msg.dbc.attributes if msg.dbc is not None else {}
+        profile = attrs.get("E2E_Profile")
+        if profile is None or profile.value in ("", None):
+            return None
+        if profile.value != "P01A":
+            raise ContractError(f"{msg.name}: unsupported E2E profile {profile.value!r}")
+        data_id = attrs["E2E_DataID"].value if "E2E_DataID" in attrs else 0
+        crc = [s for s in msg.signals if s.name.endswith("_CRC")]
+        ctr = [s for s in msg.signals if s.name.endswith("_Counter")]
+        if len(crc) != 1 or len(ctr) != 1:
+            raise ContractError(f"{msg.name}: E2E needs exactly one *_CRC and one *_Counter signal")
+        if crc[0].length != 8 or crc[0].start % 8 != 0 or crc[0].byte_order != "little_endian":
+            raise ContractError(f"{msg.name}: the CRC must be one whole byte")
+        if ctr[0].length != 4:
+            raise ContractError(f"{msg.name}: the alive counter must be 4 bits")
+        return E2EConfig(int(data_id), crc[0].name, ctr[0].name, crc[0].start // 8)
+
+    # ------------------------------------------------------------------ lookup
+
+    def message(self, name: str) -> Any:
+        return self._by_name[name]
+
+    def frame_id(self, name: str) -> int:
+        return self._by_name[name].frame_id
+
+    def name_of(self, frame_id: int) -> str | None:
+        msg = self._by_id.get(frame_id)
+        return msg.name if msg is not None else None
+
+    def e2e(self, name: str) -> E2EConfig | None:
+        return self._e2e[name]
+
+    def cycle_time_s(self, name: str) -> float | None:
+        ms = self._by_name[name].cycle_time
+        return ms / 1000.0 if ms else None
+
+    def signal_range(self, name: str, signal: str) -> tuple[float, float]:
+        sig = self._by_name[name].get_signal_by_name(signal)
+        return float(sig.minimum), float(sig.maximum)
+
+    # ------------------------------------------------------------------ encode
+
+    def e2e_crc(self, name: str, payload: bytes) -> int:
+        cfg = self._e2e[name]
+        assert cfg is not None
+        body = payload[:cfg.crc_byte] + payload[cfg.crc_byte + 1:]
+        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body)
+
+    def encode(self, name: str, values: Mapping[str, float | str], counter: int | None = None,
+               *, strict: bool = True) -> bytes:
+        """Encode physical values; for E2E messages set the counter and the CRC.
+
+        ``strict=False`` lets a test bench send values outside the DBC ranges on purpose.
+        """
+        msg = self._by_name[name]
+        cfg = self._e2e[name]
+        full = dict(values)
+        if cfg is not None:
+            if counter is None:
+                raise ValueError(f"{name} is E2E-protected: give the alive counter")
+            full[cfg.counter_signal] = counter
+            full[cfg.crc_signal] = 0
+        data = bytearray(msg.encode(full, strict=strict, scaling=True))
+        if cfg is not None:
+            data[cfg.crc_byte] = self.e2e_crc(name, bytes(data))
+        return bytes(data)
+
+    # ------------------------------------------------------------------ decode
+
+    def decode(self, frame_id: int, data: bytes) -> Decoded | None:
+        """Decode a frame and check its length, CRC and ranges (not its counter sequence:
+        that needs receiver state, see ``E2EReceiver``).  None for frames not in the DBC."""
+        msg = self._by_id.get(frame_id)
+        if msg is None:
+            return None
+        if len(data) != msg.length:
+            return Decoded(msg.name, {}, E2EStatus.BAD_LENGTH, None)
+        cfg = self._e2e[msg.name]
+        if cfg is not None and data[cfg.crc_byte] != self.e2e_crc(msg.name, data):
+            return Decoded(msg.name, {}, E2EStatus.BAD_CRC, None)
+        signals = msg.decode(data, decode_choices=False, scaling=True)
+        counter = int(signals[cfg.counter_signal]) if cfg is not None else None
+        if counter is not None and counter >= COUNTER_MODULO:
+            return Decoded(msg.name, signals, E2EStatus.BAD_COUNTER, counter)
+        for sig in msg.signals:
+            value = signals[sig.name]
+            if not math.isfinite(value) or (sig.minimum is not None and value < sig.minimum) or (
+                    sig.maximum is not None and value > sig.maximum):
+                return Decoded(msg.name, signals, E2EStatus.OUT_OF_RANGE, counter)
+        return Decoded(msg.name, signals, E2EStatus.OK, counter)
+
+
+class E2EReceiver:
+    """Counter-sequence check of one E2E-protected message (profile 1 style)."""
+
+    def __init__(self, max_delta: int = 3) -> None:
+        if not 1 <= max_delta < COUNTER_MODULO:
+            raise ValueError("max_delta must be in 1..14")
+        self.max_delta = max_delta
+        self.last: int | None = None
+
+    def check(self, counter: int) -> E2EStatus:
+        if self.last is None:
+            self.last = counter
+            return E2EStatus.INITIAL
+        delta = (counter - self.last) % COUNTER_MODULO
+        if delta == 0:
+            return E2EStatus.REPEATED
+        # Accept and re-synchronise on the new value either way, so one bad jump costs one frame.
+        self.last = counter
+        if delta == 1:
+            return E2EStatus.OK
+        if delta <= self.max_delta:
+            return E2EStatus.OK_SOME_LOST
+        return E2EStatus.WRONG_SEQUENCE
+
+    def reset(self) -> None:
+        self.last = None
+
+
+class AliveCounter:
+    """Sender side: 0, 1, ..., 14, 0, ..."""
+
+    def __init__(self) -> None:
+        self.value = COUNTER_MODULO - 1
+
+    def next(self) -> int:
+        self.value = (self.value + 1) % COUNTER_MODULO
+        return self.value
+
+
+_default: Contract | None = None
+
+
+def load(path: Path | str | None = None) -> Contract:
+    """The contract from ``path``, or the shipped ``mrsteer.dbc`` (loaded once)."""
+    global _default
+    if path is not None:
+        return Contract(path)
+    if _default is None:
+        _default = Contract()
+    return _default

@@ -1,0 +1,372 @@
+"""The controller process: the firmware ``step()`` in a fixed-rate loop on a CAN bus.
+
+Each cycle, in this order (the scheduling contract a port must keep):
+
+1. drain every received frame; check length, E2E CRC, alive counter and DBC range; keep the
+   newest accepted value of each input (driver angle, yaw rate, speed);
+2. freshness: an input whose last accepted frame is older than ``timeout_cycles`` of its own
+   DBC cycle time, or which has been rejected ``e2e_fail_max`` times in a row, is invalid;
+3. run ``step()``; an invalid input is passed as NaN, which makes the firmware fade its
+   command to zero and re-initialise bumplessly once the input is good again;
+4. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
+
+Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
+overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
+plant, where simulated time is set by the plant).  Freshness is counted in controller cycles
+either way.  SIGINT/SIGTERM end the loop after the current cycle with a final zero command
+marked inactive, and exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import array
+import gc
+import json
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence
+
+import can
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py.bus_open import BusOpenError, open_bus
+from firmware_py.cli_support import Parser
+
+MSG_STEER = "MRS_DriverSteer"
+MSG_YAW = "MRS_YawRate"
+MSG_SPEED = "MRS_VehicleSpeed"
+MSG_CMD = "MRS_AuxSteerCmd"
+MSG_STATUS = "MRS_CtrlStatus"
+
+# CtrlStatus_Cause bits (documented in the DBC)
+CAUSE_STEER_MISSING = 0x01
+CAUSE_YAW_MISSING = 0x02
+CAUSE_SPEED_MISSING = 0x04
+CAUSE_E2E = 0x08
+CAUSE_RANGE = 0x10
+CAUSE_LOW_SPEED = 0x20
+
+DEFAULT_RATE_HZ = 1000.0
+TRIGGERS = ("clock", "sensors")
+
+
+@dataclass(frozen=True)
+class RuntimeConfig:
+    rate_hz: float = DEFAULT_RATE_HZ
+    timeout_cycles: int = 10  # per input, in units of that input's DBC cycle time
+    e2e_fail_max: int = 3  # consecutive rejected frames of one input that fault it at once
+    max_counter_delta: int = 3
+    trigger: str = "clock"
+    duration: float | None = None  # s; None runs until a signal
+    controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
+
+
+class _Input:
+    """Receive state of one sensor message (the C port's per-signal RX record)."""
+
+    __slots__ = ("name", "signal", "missing_cause", "value", "age", "limit", "rejects", "receiver",
+                 "last_counter", "bad_cause")
+
+    def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int, max_delta: int) -> None:
+        self.name = name
+        self.signal = signal_name
+        self.missing_cause = missing_cause
+        self.value = math.nan
+        self.age = limit_cycles + 1  # never received: invalid until the first good frame
+        self.limit = limit_cycles
+        self.rejects = 0
+        self.receiver = mrsteer_dbc.E2EReceiver(max_delta)
+        self.last_counter = 0
+        self.bad_cause = 0
+
+
+@dataclass
+class LoopStats:
+    cycles: int = 0
+    overruns: int = 0
+    missed_cycles: int = 0
+    rx_frames: int = 0
+    rx_rejected: int = 0
+    rx_ignored: int = 0
+    tx_frames: int = 0
+    faults_entered: int = 0
+    lateness: array.array = field(default_factory=lambda: array.array("d"))
+
+    def summary(self) -> dict[str, Any]:
+        lat = sorted(self.lateness)
+
+        def pct(p: float) -> float:
+            return lat[min(len(lat) - 1, int(p * len(lat)))] if lat else 0.0
+
+        return {
+            "cycles": self.cycles, "overruns": self.overruns, "missed_cycles": self.missed_cycles,
+            "rx_frames": self.rx_frames, "rx_rejected": self.rx_rejected, "rx_ignored": self.rx_ignored,
+            "tx_frames": self.tx_frames, "faults_entered": self.faults_entered,
+            "lateness_p50_s": pct(0.5), "lateness_p99_s": pct(0.99), "lateness_max_s": lat[-1] if lat else 0.0,
+        }
+
+
+class ControllerNode:
+    """One controller on one bus.  ``cycle()`` is the periodic body; ``run()`` the loop."""
+
+    def __init__(self, bus: can.BusABC, config: RuntimeConfig, contract: mrsteer_dbc.Contract | None = None) -> None:
+        self.bus = bus
+        self.cfg = config
+        self.contract = contract or mrsteer_dbc.load()
+        period = 1.0 / config.rate_hz
+        self.period = period
+        c = self.contract
+        # The firmware's input ranges are the DBC's: one source of truth for what is valid.
+        ctrl = replace(config.controller, ts=period,
+                       driver_angle_max=c.signal_range(MSG_STEER, "DriverSteer_Angle")[1],
+                       yaw_rate_max=c.signal_range(MSG_YAW, "YawRate_YawRate")[1],
+                       speed_max=c.signal_range(MSG_SPEED, "VehicleSpeed_Speed")[1],
+                       aux_limit=min(config.controller.aux_limit, c.signal_range(MSG_CMD, "AuxSteerCmd_Angle")[1]))
+        self.coeffs = mr.configure(ctrl)
+        self.state = mr.State()
+
+        def limit(name: str) -> int:
+            cycle = c.cycle_time_s(name) or period
+            return max(1, int(math.ceil(config.timeout_cycles * cycle / period)))
+
+        self.inputs = {
+            c.frame_id(MSG_STEER): _Input(MSG_STEER, "DriverSteer_Angle", CAUSE_STEER_MISSING, limit(MSG_STEER),
+                                          config.max_counter_delta),
+            c.frame_id(MSG_YAW): _Input(MSG_YAW, "YawRate_YawRate", CAUSE_YAW_MISSING, limit(MSG_YAW),
+                                        config.max_counter_delta),
+            c.frame_id(MSG_SPEED): _Input(MSG_SPEED, "VehicleSpeed_Speed", CAUSE_SPEED_MISSING, limit(MSG_SPEED),
+                                          config.max_counter_delta),
+        }
+        self._steer, self._yaw, self._speed = self.inputs.values()
+        self.yaw_id = c.frame_id(MSG_YAW)
+        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in self.inputs])
+        self.cmd_id = c.frame_id(MSG_CMD)
+        self.status_id = c.frame_id(MSG_STATUS)
+        self.cmd_counter = mrsteer_dbc.AliveCounter()
+        status_cycle = c.cycle_time_s(MSG_STATUS) or 0.1
+        self.status_every = max(1, int(round(status_cycle / period)))
+        self.stats = LoopStats()
+        self.cause = 0
+        self.command = 0.0
+        self._max_lateness = 0.0
+        self._running = True
+        self._was_fault = False
+
+    # ---------------------------------------------------------------- receive
+
+    def _receive(self, msg: can.Message) -> bool:
+        """Check and store one frame; True if it was an accepted yaw-rate frame."""
+        self.stats.rx_frames += 1
+        inp = self.inputs.get(msg.arbitration_id)
+        if inp is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
+            self.stats.rx_ignored += 1
+            return False
+        decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
+        status = decoded.status if decoded is not None else mrsteer_dbc.E2EStatus.BAD_LENGTH
+        if status is mrsteer_dbc.E2EStatus.OK:
+            status = inp.receiver.check(decoded.counter)
+        if not status.accepted:
+            self.stats.rx_rejected += 1
+            inp.rejects += 1
+            inp.bad_cause = CAUSE_RANGE if status is mrsteer_dbc.E2EStatus.OUT_OF_RANGE else CAUSE_E2E
+            return False
+        inp.rejects = 0
+        inp.value = decoded.signals[inp.signal]
+        inp.last_counter = decoded.counter
+        inp.age = 0
+        return msg.arbitration_id == self.yaw_id
+
+    def drain(self) -> bool:
+        got_yaw = False
+        recv = self.bus.recv
+        while True:
+            msg = recv(0.0)
+            if msg is None:
+                return got_yaw
+            got_yaw = self._receive(msg) or got_yaw
+
+    # ---------------------------------------------------------------- control
+
+    def control(self) -> None:
+        """Steps 2-4 of the cycle, after the receive queue has been drained."""
+        cause = 0
+        values = []
+        for inp in (self._steer, self._yaw, self._speed):
+            ok = inp.age <= inp.limit and inp.rejects < self.cfg.e2e_fail_max
+            if not ok:
+                cause |= inp.missing_cause if inp.rejects < self.cfg.e2e_fail_max else inp.bad_cause
+            values.append(inp.value if ok else math.nan)
+            inp.age += 1
+        u = mr.step(self.coeffs, self.state, values[0], values[1], values[2])
+        if self.state.fault_flags and not cause:
+            cause |= CAUSE_RANGE
+        if self.state.status == mr.STATUS_INACTIVE and not cause:
+            cause |= CAUSE_LOW_SPEED
+        fault = self.state.status == mr.STATUS_FAULT
+        if fault and not self._was_fault:
+            self.stats.faults_entered += 1
+        self._was_fault = fault
+        self.cause = cause
+        self.command = u
+        self._send_command(u, self.state.status)
+        self.stats.cycles += 1
+        if self.stats.cycles % self.status_every == 0:
+            self._send_status()
+
+    def _send_command(self, u: float, state: int) -> None:
+        data = self.contract.encode(MSG_CMD, {"AuxSteerCmd_State": state, "AuxSteerCmd_Angle": u,
+                                              "AuxSteerCmd_MeasCounter": self._yaw.last_counter},
+                                    self.cmd_counter.next())
+        self.bus.send(can.Message(arbitration_id=self.cmd_id, data=data, is_extended_id=False))
+        self.stats.tx_frames += 1
+
+    def _send_status(self) -> None:
+        data = self.contract.encode(MSG_STATUS, {
+            "CtrlStatus_State": self.state.status,
+            "CtrlStatus_InputFlags": self.state.fault_flags,
+            "CtrlStatus_Cause": self.cause,
+            "CtrlStatus_Rejected": self.stats.rx_rejected % 65536,
+            "CtrlStatus_Overruns": self.stats.overruns % 65536,
+            "CtrlStatus_MaxLateness": min(self._max_lateness, 0.65535),
+        })
+        self.bus.send(can.Message(arbitration_id=self.status_id, data=data, is_extended_id=False))
+        self.stats.tx_frames += 1
+        self._max_lateness = 0.0
+
+    # ---------------------------------------------------------------- loop
+
+    def stop(self, *_: Any) -> None:
+        self._running = False
+
+    def run(self) -> None:
+        end = None if self.cfg.duration is None else time.monotonic() + self.cfg.duration
+        gc.collect()
+        gc.freeze()  # keep start-up objects out of the collector's way during the loop
+        try:
+            if self.cfg.trigger == "sensors":
+                self._run_on_sensors(end)
+            else:
+                self._run_on_clock(end)
+        finally:
+            gc.unfreeze()
+        self.finish()
+
+    def _run_on_clock(self, end: float | None) -> None:
+        period = self.period
+        deadline = time.monotonic()
+        lateness = self.stats.lateness
+        while self._running:
+            now = time.monotonic()
+            if now < deadline:
+                time.sleep(deadline - now)
+                now = time.monotonic()
+            late = now - deadline
+            lateness.append(late)
+            if late > self._max_lateness:
+                self._max_lateness = late
+            if late >= period:
+                # Whole periods were lost: count them and restart the grid from now.
+                missed = int(late / period)
+                self.stats.overruns += 1
+                self.stats.missed_cycles += missed
+                deadline += missed * period
+            self.drain()
+            self.control()
+            deadline += period
+            if end is not None and now >= end:
+                break
+
+    def _run_on_sensors(self, end: float | None) -> None:
+        # One cycle per accepted yaw-rate frame; if none comes for the yaw input's timeout,
+        # run a cycle anyway so that the fault path (fade to zero) still executes.
+        wait = self._yaw.limit * self.period
+        while self._running:
+            got = False
+            msg = self.bus.recv(wait)
+            if msg is not None:
+                got = self._receive(msg)
+            got = self.drain() or got
+            if got or msg is None:
+                self.control()
+            if end is not None and time.monotonic() >= end:
+                break
+
+    def finish(self) -> None:
+        """Final zero command marked inactive, as on an orderly shutdown."""
+        try:
+            self._send_command(0.0, mr.STATUS_INACTIVE)
+        except can.CanError:
+            pass  # the bus is already gone: nothing more can be said on it
+
+
+def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
+    d = mr.ControllerConfig()
+    p = Parser(prog=prog, description="Run the model-regulator controller on a CAN bus: read driver angle, "
+               "yaw rate and speed, send the auxiliary steering command.")
+    p.add_argument("--interface", help="python-can interface (default: python-can config, else SocketCAN vcan0 "
+                   "if present, else the mrsteer fallback bus)")
+    p.add_argument("--channel", help="channel for the interface (default vcan0 / mrsteer0)")
+    p.add_argument("--rate-hz", type=float, default=DEFAULT_RATE_HZ,
+                   help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}: the paper's tuning needs about 1 kHz)")
+    p.add_argument("--trigger", choices=TRIGGERS, default="clock",
+                   help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
+    p.add_argument("--timeout-cycles", type=int, default=10,
+                   help="an input missing for more than this many of its own cycle times is a fault (default 10)")
+    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
+                   help="Q filter: limited (eq. 22, default) or standard (eq. 17)")
+    p.add_argument("--k", type=float, default=d.k, help=f"eq. (22) gain K (default {d.k:g})")
+    p.add_argument("--tau", type=float, default=d.tau, help=f"eq. (22) time constant in s (default {d.tau:g})")
+    p.add_argument("--tau-n", type=float, default=d.tau_n, help=f"eq. (18) time constant in s (default {d.tau_n:g})")
+    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method)
+    p.add_argument("--rate-limit", type=float, default=0.0, metavar="RAD_S",
+                   help="command rate limit in rad/s (default 0: off)")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
+    p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
+                   help="write loop statistics as JSON here on exit")
+    return p
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    if not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
+        parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
+    if args.timeout_cycles < 1:
+        parser.error("--timeout-cycles must be at least 1")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        parser.error("--duration must be positive")
+    try:
+        ctrl = mr.ControllerConfig(q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
+                                   method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz)
+        mr.configure(ctrl)
+    except ValueError as exc:
+        parser.error(str(exc))
+    cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
+                        duration=args.duration, controller=ctrl)
+    try:
+        bus = open_bus(args.interface, args.channel)
+    except BusOpenError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    node = ControllerNode(bus, cfg)
+    signal.signal(signal.SIGTERM, node.stop)
+    signal.signal(signal.SIGINT, node.stop)
+    print(f"{prog}: running at {args.rate_hz:g} Hz ({args.trigger} trigger) on {bus.channel_info}",
+          file=sys.stderr, flush=True)
+    code = 0
+    try:
+        node.run()
+    except can.CanError as exc:
+        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        bus.shutdown()
+        if args.stats_out is not None:
+            args.stats_out.write_text(json.dumps(node.stats.summary(), indent=2))
+    return code

@@ -1,0 +1,89 @@
+"""Bus logger: every frame on the bus to a candump ``-L`` log (``(time) iface ID#DATA``).
+
+Runs until SIGINT/SIGTERM, then drains what is still queued, flushes and reports its count.
+``cantools decode dbc/mrsteer.dbc < LOG`` decodes the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from pathlib import Path
+from typing import Any, Sequence, TextIO
+
+import can
+
+from firmware_py.bus_open import BusOpenError, open_bus
+from firmware_py.cli_support import Parser
+
+
+def candump_line(msg: can.Message, iface: str) -> str:
+    """One line of ``candump -L``: extended IDs in 8 hex digits, standard in 3."""
+    ident = f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
+    if msg.is_remote_frame:
+        body = f"{ident}#R"
+    elif msg.is_fd:
+        flags = (1 if msg.bitrate_switch else 0) | (2 if msg.error_state_indicator else 0)
+        body = f"{ident}##{flags:X}{bytes(msg.data).hex().upper()}"
+    else:
+        body = f"{ident}#{bytes(msg.data).hex().upper()}"
+    return f"({msg.timestamp:.6f}) {iface} {body}\n"
+
+
+class Logger:
+    def __init__(self, bus: can.BusABC, out: TextIO, iface: str) -> None:
+        self.bus, self.out, self.iface = bus, out, iface
+        self.frames = 0
+        self._running = True
+
+    def stop(self, *_: Any) -> None:
+        self._running = False
+
+    def run(self) -> None:
+        while self._running:
+            msg = self.bus.recv(0.1)
+            if msg is not None:
+                self._write(msg)
+        while (msg := self.bus.recv(0.05)) is not None:  # what was already on its way to us
+            self._write(msg)
+        self.out.flush()
+
+    def _write(self, msg: can.Message) -> None:
+        self.out.write(candump_line(msg, self.iface))
+        self.frames += 1
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.buslog") -> int:
+    p = Parser(prog=prog, description="Log every CAN frame to a candump -L file until SIGINT/SIGTERM.")
+    p.add_argument("--interface")
+    p.add_argument("--channel")
+    p.add_argument("--out", type=Path, required=True, help="log file to write")
+    p.add_argument("--iface-name", default=None, help="interface name written in the log (default: the channel)")
+    p.add_argument("--stats-out", type=Path, help="write the frame count as JSON here on exit")
+    args = p.parse_args(argv)
+    try:
+        bus = open_bus(args.interface, args.channel, notice=lambda m: None)
+    except BusOpenError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    with args.out.open("w") as out:
+        log = Logger(bus, out, args.iface_name or args.channel or "can0")
+        signal.signal(signal.SIGTERM, log.stop)
+        signal.signal(signal.SIGINT, log.stop)
+        print("ready", flush=True)
+        try:
+            log.run()
+        except can.CanError as exc:
+            print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+            return 1
+        finally:
+            bus.shutdown()
+    if args.stats_out is not None:
+        args.stats_out.write_text(json.dumps({"frames": log.frames}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

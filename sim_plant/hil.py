@@ -1,0 +1,396 @@
+"""Hardware-in-the-loop runner: plant, controller and bus logger as separate processes.
+
+``run()`` starts (on the fallback bus: a private broker first) the logger, the controller and
+the plant, waits for the plant to play its scenario, stops the controller (which sends its
+final zero command) and the logger, and turns the log into a CSV of decoded signals, a plot
+and a JSON summary.  If any process dies early the others are stopped, nothing is left
+running, and ``HilError`` names the process and its exit status.  Every child gets SIGTERM if
+this process dies (Linux ``PR_SET_PDEATHSIG``), so even a killed runner leaves no orphans.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import csv
+import json
+import math
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import IO, Any, Callable
+
+import numpy as np
+
+import mrsteer_dbc
+from firmware_py import bus_open
+from firmware_py import model_regulator as mr
+from sim_plant import scenario as scn
+from sim_plant.closed_loop import discrete_loop_poles
+from sim_plant.vbus import socket_path
+from sim_plant.vehicle import VehicleParams
+
+MODES = ("lockstep", "realtime")
+_LINE = re.compile(r"\((?P<t>[0-9.]+)\)\s+(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<data>[0-9A-Fa-f]*)")
+
+
+class HilError(RuntimeError):
+    """A HIL run failed; the message says which process and how."""
+
+
+@dataclass(frozen=True)
+class HilConfig:
+    scenario: str = "paper-fig9"
+    mode: str = "lockstep"
+    rate_hz: float = 1000.0
+    interface: str | None = None
+    channel: str | None = None
+    v: float | None = None
+    mu: float | None = None
+    mz: float | None = None
+    controller: str = mr.Q_LIMITED  # or "none"
+    k: float = 10.0
+    tau: float = 0.006
+    tau_n: float = mr.DEFAULT_TAU_N
+    delay_steps: int = 1
+    out: Path = Path("out/hil")
+
+
+@dataclass
+class _Proc:
+    name: str
+    popen: subprocess.Popen
+    stderr: IO[bytes]
+
+
+def _pdeathsig() -> None:  # runs in the child between fork and exec
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+@dataclass
+class HilRun:
+    """What ``run()`` produced."""
+
+    summary: dict[str, Any]
+    out: Path
+    files: list[Path] = field(default_factory=list)
+
+
+def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun:
+    say = progress or (lambda m: None)
+    if cfg.mode not in MODES:
+        raise ValueError(f"mode must be one of {', '.join(MODES)}")
+    sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz)
+    ctrl = mr.ControllerConfig(q_form=cfg.controller if cfg.controller != "none" else mr.Q_LIMITED, k=cfg.k,
+                               tau=cfg.tau, tau_n=cfg.tau_n, ts=1.0 / cfg.rate_hz)
+    mr.configure(ctrl)  # reject an impossible calibration before starting anything
+    if cfg.out.exists() and not cfg.out.is_dir():
+        raise ValueError(f"--out {cfg.out} exists and is not a directory")
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=".hil-", dir=cfg.out))
+    procs: list[_Proc] = []
+    try:
+        iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=say)
+        bus_args = ["--interface", iface] + (["--channel", channel] if channel else [])
+        env = dict(os.environ)
+        if iface == bus_open.FALLBACK[0] and cfg.channel is None:
+            # A private bus for this run: nothing else on it, and it goes away with the run.
+            channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
+            bus_args = ["--interface", iface, "--channel", channel]
+            procs.append(_spawn("bus broker", [sys.executable, "-m", "sim_plant.vbus", "--channel", channel],
+                                work, env))
+            _wait_for_socket(channel, procs[-1])
+        say(f"bus: {iface} {channel}")
+
+        logger = _spawn("logger", [sys.executable, "-m", "sim_plant.buslog", *bus_args, "--out",
+                                   str(work / "traffic.log"), "--iface-name", str(channel),
+                                   "--stats-out", str(work / "logger.json")], work, env, stdout=True)
+        procs.append(logger)
+        _wait_ready(logger)
+
+        if cfg.controller != "none":
+            procs.append(_spawn("controller", [
+                sys.executable, "-m", "firmware_py", *bus_args, "--rate-hz", repr(cfg.rate_hz),
+                "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
+                "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
+                "--stats-out", str(work / "controller.json")], work, env))
+            time.sleep(0.3)  # let it open the bus and set its filters before the first frame
+        plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
+                     "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
+                     "--stats-out", str(work / "plant.json")]
+        for flag, value in (("--v", cfg.v), ("--mu", cfg.mu), ("--mz", cfg.mz)):
+            if value is not None:
+                plant_cmd += [flag, repr(value)]
+        if cfg.controller == "none":
+            plant_cmd += ["--no-controller"]
+        plant = _spawn("plant", plant_cmd, work, env)
+        procs.append(plant)
+        say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}")
+
+        limit = time.monotonic() + max(120.0, 40.0 * sc.duration)
+        while plant.popen.poll() is None:
+            for p in procs:
+                if p is not plant and p.popen.poll() is not None:
+                    raise HilError(f"{p.name} exited unexpectedly with status {p.popen.returncode}"
+                                   f"{_tail(p)} ; stopped the others")
+            if time.monotonic() > limit:
+                raise HilError("the plant did not finish in time; stopped everything")
+            time.sleep(0.05)
+        if plant.popen.returncode != 0:
+            raise HilError(f"plant exited with status {plant.popen.returncode}{_tail(plant)}")
+        for p in [p for p in procs if p.name == "controller"] + [logger]:
+            _stop(p)
+            if p.popen.returncode not in (0, -signal.SIGTERM):
+                raise HilError(f"{p.name} exited with status {p.popen.returncode}{_tail(p)}")
+        return _finish(cfg, sc, ctrl, work, say)
+    except BaseException:
+        partial = work / "traffic.log"
+        if partial.exists():
+            shutil.copy(partial, cfg.out / "traffic.partial.log")
+        raise
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _spawn(name: str, argv: list[str], work: Path, env: dict[str, str], stdout: bool = False) -> _Proc:
+    err = open(work / f"{name.replace(' ', '_')}.stderr", "w+b")
+    popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE if stdout else subprocess.DEVNULL,
+                             stderr=err, env=env, preexec_fn=_pdeathsig)
+    return _Proc(name, popen, err)
+
+
+def _tail(p: _Proc) -> str:
+    try:
+        p.stderr.flush()
+        p.stderr.seek(0)
+        lines = [ln for ln in p.stderr.read().decode(errors="replace").splitlines() if ln.strip()]
+    except (OSError, ValueError):
+        return ""
+    return f" (last words: {lines[-1]})" if lines else ""
+
+
+def _wait_ready(p: _Proc, timeout: float = 10.0) -> None:
+    assert p.popen.stdout is not None
+    os.set_blocking(p.popen.stdout.fileno(), False)
+    deadline = time.monotonic() + timeout
+    buf = b""
+    while time.monotonic() < deadline:
+        if p.popen.poll() is not None:
+            raise HilError(f"{p.name} exited with status {p.popen.returncode} before it was ready{_tail(p)}")
+        chunk = p.popen.stdout.read() or b""
+        buf += chunk
+        if b"ready" in buf:
+            return
+        time.sleep(0.02)
+    raise HilError(f"{p.name} did not become ready")
+
+
+def _wait_for_socket(channel: str, broker: _Proc) -> None:
+    path = socket_path(channel)
+    deadline = time.monotonic() + 10.0
+    while not path.exists():
+        if broker.popen.poll() is not None:
+            raise HilError(f"bus broker exited with status {broker.popen.returncode}{_tail(broker)}")
+        if time.monotonic() > deadline:
+            raise HilError("bus broker did not come up")
+        time.sleep(0.02)
+
+
+def _stop(p: _Proc, timeout: float = 10.0) -> None:
+    if p.popen.poll() is None:
+        p.popen.send_signal(signal.SIGTERM)
+        try:
+            p.popen.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.popen.kill()
+            p.popen.wait()
+    if p.popen.stdout is not None:
+        p.popen.stdout.close()
+    p.stderr.close()
+
+
+# ------------------------------------------------------------------------- results
+
+
+@dataclass
+class Frame:
+    t: float
+    frame_id: int
+    data: bytes
+
+
+def read_candump(path: Path) -> list[Frame]:
+    frames = []
+    for line in path.read_text().splitlines():
+        m = _LINE.match(line.strip())
+        if m:
+            frames.append(Frame(float(m["t"]), int(m["id"], 16), bytes.fromhex(m["data"])))
+    return frames
+
+
+def _finish(cfg: HilConfig, sc: scn.Scenario, ctrl: mr.ControllerConfig, work: Path,
+            say: Callable[[str], None]) -> HilRun:
+    contract = mrsteer_dbc.load()
+    frames = read_candump(work / "traffic.log")
+    stats = {name: _load_json(work / f"{name}.json") for name in ("plant", "controller", "logger")}
+    rows, summary = summarize(frames, contract, cfg, sc, ctrl)
+    summary["frames"] = {
+        "on_bus_logged": stats["logger"].get("frames", len(frames)),
+        "sent_plant": stats["plant"].get("tx_frames"),
+        "sent_controller": stats["controller"].get("tx_frames"),
+        "received_controller": stats["controller"].get("rx_frames"),
+        "rejected_controller": stats["controller"].get("rx_rejected"),
+        "rejected_plant": stats["plant"].get("cmd_rejected"),
+    }
+    summary["loop"] = {"controller": stats["controller"], "plant": stats["plant"]}
+    files = {
+        "traffic.log": (work / "traffic.log").read_bytes(),
+        "signals.csv": _signals_csv(rows),
+        "summary.json": (json.dumps(summary, indent=2) + "\n").encode(),
+    }
+    png = _plot(rows, summary)
+    if png is not None:
+        files["plot.png"] = png
+    written = []
+    for name, data in files.items():
+        tmp = work / (name + ".tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, cfg.out / name)
+        written.append(cfg.out / name)
+    say(f"wrote {', '.join(files)} to {cfg.out}/")
+    return HilRun(summary, cfg.out, written)
+
+
+def _load_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: HilConfig, sc: scn.Scenario,
+              ctrl: mr.ControllerConfig) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Decoded rows for the CSV, and the summary with the keys of ``mrsteer sim disturbance``."""
+    rows = []
+    for f in frames:
+        d = contract.decode(f.frame_id, f.data)
+        if d is None:
+            rows.append({"t_s": f.t, "message": f"0x{f.frame_id:X}", "e2e": "unknown"})
+            continue
+        rows.append({"t_s": f.t, "message": d.name, "e2e": d.status.value, **d.signals})
+    yaw = [r for r in rows if r["message"] == "MRS_YawRate" and "YawRate_YawRate" in r]
+    cmds = [r for r in rows if r["message"] == "MRS_AuxSteerCmd" and "AuxSteerCmd_Angle" in r]
+    if not yaw:
+        raise HilError("no yaw-rate frames on the bus: the plant never published")
+    t0, t_end = yaw[0]["t_s"], yaw[-1]["t_s"]
+    # Commands that belong to the plant's run: each answers a yaw-rate frame (matched by counter).
+    answered, latencies = [], []
+    j = 0
+    for i, y in enumerate(yaw):
+        nxt = yaw[i + 1]["t_s"] if i + 1 < len(yaw) else math.inf
+        while j < len(cmds) and cmds[j]["t_s"] < y["t_s"]:
+            j += 1
+        k = j
+        while k < len(cmds) and cmds[k]["t_s"] < nxt + 0.5 / cfg.rate_hz:
+            if int(cmds[k]["AuxSteerCmd_MeasCounter"]) == int(y["YawRate_Counter"]):
+                answered.append(cmds[k])
+                latencies.append(cmds[k]["t_s"] - y["t_s"])
+                break
+            k += 1
+    in_run = [c for c in cmds if t0 <= c["t_s"] <= t_end + 1.0 / cfg.rate_hz]
+    aux = np.array([c["AuxSteerCmd_Angle"] for c in (answered if cfg.mode == "lockstep" else in_run)] or [0.0])
+    r = np.array([y["YawRate_YawRate"] for y in yaw])
+    lat = np.array(latencies) if latencies else np.array([math.nan])
+    ts = 1.0 / cfg.rate_hz
+    if cfg.mode == "lockstep":
+        delay = cfg.delay_steps
+    else:
+        # Measurement to application: the command's latency plus up to one plant step before the
+        # actuator picks it up.
+        delay = max(1, int(math.ceil(float(np.nanmedian(lat)) / ts))) if latencies else 1
+    params = VehicleParams(v=sc.v, mu=sc.mu, mass=sc.mass)
+    if cfg.controller == "none":
+        stable = True
+    else:
+        poles = discrete_loop_poles(params, mr.configure(replace(ctrl, ts=ts)), delay)
+        stable = bool(np.all(np.abs(poles) < 1.0))
+    limit = mr.ControllerConfig().aux_limit
+    summary = {
+        "peak_aux_steer_deg": math.degrees(float(np.max(np.abs(aux)))),
+        "final_aux_steer_deg": math.degrees(float(aux[-1])),
+        "peak_yaw_rate_rad_s": float(np.max(np.abs(r))),
+        "final_yaw_rate_rad_s": float(r[-1]),
+        "saturated": bool(np.any(np.abs(aux) >= limit - 1e-6)),
+        "stable": stable,
+        "rate_hz": cfg.rate_hz,
+        "delay_steps": delay,
+        "mode": cfg.mode,
+        "scenario": sc.name,
+        "v": sc.v, "mu": sc.mu, "mass": sc.mass,
+        "m_z": next((e.value for e in sc.events if e.kind == "yaw_moment"), 0.0),
+        "controller": cfg.controller, "k": cfg.k, "tau": cfg.tau, "tau_n": cfg.tau_n,
+        "duration": sc.duration,
+        "latency_p50_s": float(np.nanmedian(lat)),
+        "latency_p99_s": float(np.nanpercentile(lat, 99)) if latencies else math.nan,
+        "commands_answering_measurements": len(answered),
+        "measurements": len(yaw),
+    }
+    return rows, summary
+
+
+def _signals_csv(rows: list[dict[str, Any]]) -> bytes:
+    import io
+
+    columns: list[str] = ["t_s", "message", "e2e"]
+    for r in rows:
+        for k in r:
+            if k not in columns:
+                columns.append(k)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, columns, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{v:.9g}" if isinstance(v, float) else v) for k, v in r.items()})
+    return buf.getvalue().encode()
+
+
+def _plot(rows: list[dict[str, Any]], summary: dict[str, Any]) -> bytes | None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    import io
+
+    yaw = [r for r in rows if r["message"] == "MRS_YawRate" and "YawRate_YawRate" in r]
+    cmd = [r for r in rows if r["message"] == "MRS_AuxSteerCmd" and "AuxSteerCmd_Angle" in r]
+    t0 = yaw[0]["t_s"] if yaw else 0.0
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    a1.plot([r["t_s"] - t0 for r in yaw], [r["YawRate_YawRate"] for r in yaw])
+    a1.set_ylabel("yaw rate [rad/s]")
+    a1.grid(True, alpha=0.3)
+    a2.plot([r["t_s"] - t0 for r in cmd], [math.degrees(r["AuxSteerCmd_Angle"]) for r in cmd], color="C1")
+    a2.set_ylabel("aux steering [deg]")
+    a2.set_xlabel("time since first measurement [s]")
+    a2.grid(True, alpha=0.3)
+    fig.suptitle(f"HIL {summary['scenario']} ({summary['mode']}, {summary['rate_hz']:g} Hz, "
+                 f"controller {summary['controller']})")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    return buf.getvalue()

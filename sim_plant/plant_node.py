@@ -1,0 +1,314 @@
+"""The plant process: the single-track car, its sensors and the auxiliary actuator on a bus.
+
+Each plant step (period ``ts``):
+
+1. apply the scenario events due (and any ``MRS_BenchInject`` received), re-discretising the
+   model if speed or friction changed;
+2. the driver model sets the driver's front-wheel angle;
+3. publish the sensor messages due at this step (each at its DBC cycle time, never faster than
+   the plant step): driver angle, speed, then yaw rate last, so a controller triggered by the
+   yaw-rate frame sees a complete set;
+4. receive auxiliary commands: only frames that pass length, CRC, alive-counter and range
+   checks count; with no valid command for ``cmd_timeout`` the actuator fades to zero;
+5. advance the exactly discretised model with front-wheel angle = driver angle + actuator.
+
+``lockstep`` mode waits in step 4 for the command that answers this step's yaw-rate frame
+(``AuxSteerCmd_MeasCounter``), up to ``lockstep_timeout``, and applies it ``delay_steps``
+steps later: a bus run is then the offline ``sim --ts T --delay-steps N`` exactly, up to the
+DBC's signal resolution.  ``realtime`` mode runs on absolute deadlines of the monotonic clock
+and applies the newest valid command at each step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import csv
+import json
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import can
+
+import mrsteer_dbc
+from firmware_py.bus_open import BusOpenError, open_bus
+from firmware_py.cli_support import Parser
+from sim_plant import scenario as scn
+from sim_plant.vehicle import DiscretePlant
+
+MODES = ("realtime", "lockstep")
+
+
+@dataclass
+class PlantStats:
+    steps: int = 0
+    tx_frames: int = 0
+    cmd_accepted: int = 0
+    cmd_rejected: int = 0
+    cmd_unmatched: int = 0  # valid commands that did not answer the awaited measurement (lockstep)
+    lockstep_timeouts: int = 0
+    actuator_timeouts: int = 0
+    bench_injections: int = 0
+    overruns: int = 0
+    wall_time_s: float = 0.0
+    trace: list[tuple[float, ...]] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != "trace"}
+
+
+class PlantNode:
+    TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
+                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2")
+
+    def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
+                 delay_steps: int = 1, cmd_timeout: float = 0.02, lockstep_timeout: float = 1.0,
+                 fade_rate: float = math.radians(30.0), contract: mrsteer_dbc.Contract | None = None,
+                 expect_controller: bool = True) -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}")
+        self.bus, self.sc, self.mode, self.ts = bus, sc, mode, ts
+        self.delay_steps = delay_steps
+        self.contract = c = contract or mrsteer_dbc.load()
+        self.scene = scn.ScenarioState(sc)
+        self.plant = DiscretePlant(self.scene.params(), ts)
+        self.limit = c.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1]
+        self.cmd_id = c.frame_id("MRS_AuxSteerCmd")
+        self.bench_id = c.frame_id("MRS_BenchInject")
+        self.cmd_rx = mrsteer_dbc.E2EReceiver()
+        self.bench_rx = mrsteer_dbc.E2EReceiver()
+        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in (self.cmd_id, self.bench_id)])
+        self.counters = {name: mrsteer_dbc.AliveCounter() for name in ("MRS_DriverSteer", "MRS_YawRate",
+                                                                          "MRS_VehicleSpeed")}
+        self.every = {name: max(1, int(round((c.cycle_time_s(name) or ts) / ts))) for name in self.counters}
+        self.cmd_timeout_steps = max(1, int(math.ceil(cmd_timeout / ts)))
+        self.lockstep_timeout = lockstep_timeout
+        self.expect_controller = expect_controller
+        self.fade_step = fade_rate * ts
+        self.stats = PlantStats()
+        self.pipeline: collections.deque[float] = collections.deque([0.0] * delay_steps)
+        self.latest_cmd = 0.0
+        self.cmd_age = 0
+        self.applied = 0.0
+        self.bench_m_z: float | None = None
+        self._running = True
+        self.record_trace = False
+
+    def stop(self, *_: Any) -> None:
+        self._running = False
+
+    # ---------------------------------------------------------------- receive
+
+    def _receive(self, msg: can.Message, await_counter: int | None) -> bool:
+        """Handle one frame; True if it is the valid command answering ``await_counter``."""
+        if msg.is_extended_id or msg.is_error_frame:
+            return False
+        decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
+        if decoded is None:
+            return False
+        if msg.arbitration_id == self.bench_id:
+            if decoded.status is mrsteer_dbc.E2EStatus.OK and self.bench_rx.check(decoded.counter).accepted:
+                self.bench_m_z = decoded.signals["BenchInject_YawMoment"]
+                self.scene.mu = decoded.signals["BenchInject_Mu"]
+                self.plant.set_params(self.scene.params())
+                self.stats.bench_injections += 1
+            return False
+        status = decoded.status
+        if status is mrsteer_dbc.E2EStatus.OK:
+            status = self.cmd_rx.check(decoded.counter)
+        if not status.accepted:
+            self.stats.cmd_rejected += 1
+            return False
+        self.stats.cmd_accepted += 1
+        self.latest_cmd = decoded.signals["AuxSteerCmd_Angle"]
+        self.cmd_age = 0
+        if await_counter is None:
+            return False
+        if int(decoded.signals["AuxSteerCmd_MeasCounter"]) == await_counter:
+            return True
+        self.stats.cmd_unmatched += 1
+        return False
+
+    # ---------------------------------------------------------------- step
+
+    def _publish(self, k: int, driver: float, y: Any) -> int:
+        c = self.contract
+        sends = []
+        if k % self.every["MRS_DriverSteer"] == 0:
+            sends.append(("MRS_DriverSteer", {"DriverSteer_Angle": driver}))
+        if k % self.every["MRS_VehicleSpeed"] == 0:
+            sends.append(("MRS_VehicleSpeed", {"VehicleSpeed_Speed": self.scene.v}))
+        yaw_counter = -1
+        if k % self.every["MRS_YawRate"] == 0:
+            sends.append(("MRS_YawRate", {"YawRate_YawRate": float(y[0]),
+                                          "YawRate_LatAccel": max(-30.0, min(30.0, float(y[2])))}))
+        for name, values in sends:
+            counter = self.counters[name].next()
+            # strict=False: a real sensor saturates its range; the controller range-checks.
+            data = c.encode(name, values, counter, strict=False)
+            self.bus.send(can.Message(arbitration_id=c.frame_id(name), data=data, is_extended_id=False))
+            self.stats.tx_frames += 1
+            if name == "MRS_YawRate":
+                yaw_counter = counter
+        return yaw_counter
+
+    def _actuator(self, command: float | None) -> float:
+        """What the auxiliary actuator applies this step: the command (clamped to its range) while
+        commands are fresh, otherwise a bounded-rate fade to zero."""
+        if command is not None and self.cmd_age <= self.cmd_timeout_steps:
+            return max(-self.limit, min(self.limit, command))
+        if self.cmd_age == self.cmd_timeout_steps + 1:
+            self.stats.actuator_timeouts += 1
+        a = self.applied
+        return a - self.fade_step if a > self.fade_step else a + self.fade_step if a < -self.fade_step else 0.0
+
+    def step(self, k: int) -> None:
+        t = k * self.ts
+        if self.scene.advance_to(t):
+            self.plant.set_params(self.scene.params())
+        m_z = self.bench_m_z if self.bench_m_z is not None else self.scene.m_z
+        r_now = float(self.plant.x[1])
+        driver = self.scene.driver_angle(t, r_now, self.ts)
+        if self.mode == "lockstep":
+            applied_cmd = self.pipeline.popleft() if self.delay_steps else None
+        else:
+            applied_cmd = None
+        # Outputs at this step use the front-wheel angle being applied over it.
+        pending = applied_cmd if self.mode == "lockstep" else self.latest_cmd
+        self.applied = self._actuator(pending)
+        y = self.plant.outputs(driver + self.applied, m_z)
+        yaw_counter = self._publish(k, driver, y)
+
+        if self.mode == "lockstep":
+            answer = self._await_command(yaw_counter)
+            if self.delay_steps:
+                self.pipeline.append(answer)
+            else:
+                self.applied = self._actuator(answer)
+        else:
+            while (msg := self.bus.recv(0.0)) is not None:
+                self._receive(msg, None)
+        self.cmd_age += 1
+        if self.record_trace:
+            self.stats.trace.append((t, driver, self.applied, m_z, self.scene.mu, self.scene.v,
+                                     float(y[0]), float(y[1]), float(y[2])))
+        self.plant.advance(driver + self.applied, m_z)
+        self.stats.steps += 1
+
+    def _await_command(self, yaw_counter: int) -> float | None:
+        if not self.expect_controller:
+            return None
+        if yaw_counter < 0:
+            return self.latest_cmd if self.cmd_age <= self.cmd_timeout_steps else None
+        deadline = time.monotonic() + self.lockstep_timeout
+        while self._running:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            msg = self.bus.recv(left)
+            if msg is None:
+                break
+            if self._receive(msg, yaw_counter):
+                return self.latest_cmd
+        self.stats.lockstep_timeouts += 1
+        return None
+
+    def run(self) -> PlantStats:
+        n = int(round(self.sc.duration / self.ts)) + 1
+        start = time.monotonic()
+        deadline = start
+        for k in range(n):
+            if not self._running:
+                break
+            if self.mode == "realtime":
+                now = time.monotonic()
+                if now < deadline:
+                    time.sleep(deadline - now)
+                elif now - deadline > self.ts:
+                    self.stats.overruns += 1
+                deadline += self.ts
+            self.step(k)
+        self.stats.wall_time_s = time.monotonic() - start
+        return self.stats
+
+    def write_trace(self, path: Path) -> None:
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(self.TRACE_COLUMNS)
+            for row in self.stats.trace:
+                w.writerow([f"{x:.9g}" for x in row])
+
+
+def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
+    p = Parser(prog=prog, description="Run the simulated car (single-track model, sensors, auxiliary actuator) "
+               "on a CAN bus, playing a scenario.")
+    p.add_argument("--interface", help="python-can interface (default: python-can config, else SocketCAN vcan0 "
+                   "if present, else the mrsteer fallback bus)")
+    p.add_argument("--channel", help="channel for the interface")
+    p.add_argument("--scenario", default="paper-fig9",
+                   help=f"built-in ({', '.join(scn.BUILTINS)}) or a TOML file (default paper-fig9)")
+    p.add_argument("--mode", choices=MODES, default="realtime",
+                   help="realtime: free-running on the wall clock (default); lockstep: advance when the "
+                   "controller has answered")
+    p.add_argument("--rate-hz", type=float, default=1000.0, help="plant step rate in Hz (default 1000)")
+    p.add_argument("--delay-steps", type=int, default=1,
+                   help="lockstep: steps between a measurement and the application of its command (default 1)")
+    p.add_argument("--v", type=float, help="override the scenario's speed, m/s")
+    p.add_argument("--mu", type=float, help="override the scenario's friction")
+    p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
+    p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
+    p.add_argument("--cmd-timeout", type=float, default=0.02, metavar="S",
+                   help="no valid command for this long: the actuator fades to zero (default 0.02)")
+    p.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
+                   help="lockstep: longest wait for the controller's answer (default 1)")
+    p.add_argument("--no-controller", action="store_true",
+                   help="lockstep without a controller on the bus: do not wait for commands")
+    p.add_argument("--stats-out", type=Path, metavar="FILE", help="write plant statistics as JSON here")
+    p.add_argument("--trace-out", type=Path, metavar="FILE", help="write the true states as CSV here")
+    return p
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    if not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
+        parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
+    if not 0 <= args.delay_steps <= 100:
+        parser.error("--delay-steps must be in [0, 100]")
+    for name in ("cmd_timeout", "lockstep_timeout"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            parser.error(f"--{name.replace('_', '-')} must be positive")
+    try:
+        sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass)
+    except scn.ScenarioError as exc:
+        parser.error(str(exc))
+    try:
+        bus = open_bus(args.interface, args.channel)
+    except BusOpenError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    node = PlantNode(bus, sc, args.mode, 1.0 / args.rate_hz, args.delay_steps, args.cmd_timeout,
+                     args.lockstep_timeout, expect_controller=not args.no_controller)
+    node.record_trace = args.trace_out is not None
+    signal.signal(signal.SIGTERM, node.stop)
+    signal.signal(signal.SIGINT, node.stop)
+    print(f"{prog}: {sc.name} ({sc.duration:g} s, {args.mode}) on {bus.channel_info}", file=sys.stderr, flush=True)
+    code = 0
+    try:
+        node.run()
+    except can.CanError as exc:
+        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        bus.shutdown()
+        if args.stats_out is not None:
+            args.stats_out.write_text(json.dumps(node.stats.summary(), indent=2))
+        if args.trace_out is not None:
+            node.write_trace(args.trace_out)
+    return code
