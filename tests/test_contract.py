@@ -1,0 +1,153 @@
+"""The DBC bus contract and its E2E protection."""
+
+from __future__ import annotations
+
+import random
+
+import cantools
+import pytest
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from mrsteer_dbc import E2EReceiver, E2EStatus
+
+
+def _crc8_j1850_bitwise(data: bytes) -> int:
+    """Independent CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, final XOR 0xFF."""
+    crc = 0xFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+
+
+@pytest.fixture(scope="module")
+def contract() -> mrsteer_dbc.Contract:
+    return mrsteer_dbc.load()
+
+
+def test_dbc_loads_strictly_with_cantools() -> None:
+    db = cantools.database.load_file(str(mrsteer_dbc.DBC_PATH), strict=True)
+    names = {m.name for m in db.messages}
+    assert {"MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed", "MRS_AuxSteerCmd", "MRS_CtrlStatus",
+            "MRS_BenchInject"} <= names
+    assert {n.name for n in db.nodes} == {"VEHICLE", "MRCTRL", "BENCH"}
+    for m in db.messages:
+        assert m.cycle_time, f"{m.name} has no GenMsgCycleTime"
+        for s in m.signals:
+            assert s.minimum is not None and s.maximum is not None, f"{s.name} has no range"
+
+
+def test_every_safety_relevant_message_is_e2e_protected(contract: mrsteer_dbc.Contract) -> None:
+    for name in ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed", "MRS_AuxSteerCmd", "MRS_BenchInject"):
+        cfg = contract.e2e(name)
+        assert cfg is not None and cfg.crc_byte == 0
+    ids = [contract.e2e(n).data_id for n in ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed",
+                                            "MRS_AuxSteerCmd", "MRS_BenchInject")]
+    assert len(set(ids)) == len(ids)  # a frame cannot masquerade as another
+
+
+@pytest.mark.parametrize("data,expected", [(b"123456789", 0x4B), (b"\x00\x00\x00\x00", 0x59),
+                                           (b"\xF2\x01\x83", 0x37), (b"\xFF\xFF\xFF\xFF", 0x74)])
+def test_crc8_known_vectors(data: bytes, expected: int) -> None:
+    # AUTOSAR CRC library check values for CRC-8/SAE-J1850.
+    assert mrsteer_dbc.crc8_sae_j1850(data) == expected
+    assert _crc8_j1850_bitwise(data) == expected
+
+
+def test_e2e_crc_covers_data_id_and_payload(contract: mrsteer_dbc.Contract) -> None:
+    data = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1234, "YawRate_LatAccel": -2.5}, counter=7)
+    did = contract.e2e("MRS_YawRate").data_id
+    assert data[0] == _crc8_j1850_bitwise(bytes((did & 0xFF, did >> 8)) + data[1:])
+    assert data[1] & 0x0F == 7
+
+
+def test_round_trip_every_protected_message(contract: mrsteer_dbc.Contract) -> None:
+    rng = random.Random(3)
+    for name in ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed", "MRS_AuxSteerCmd", "MRS_BenchInject"):
+        msg = contract.message(name)
+        for _ in range(50):
+            values = {}
+            for s in msg.signals:
+                if s.name.endswith(("_CRC", "_Counter")):
+                    continue
+                lo, hi = s.minimum, s.maximum
+                values[s.name] = round(rng.uniform(lo, hi) / s.scale) * s.scale if s.scale != 1 else rng.randint(
+                    int(lo), int(hi))
+                values[s.name] = min(max(values[s.name], lo), hi)
+            counter = rng.randrange(15)
+            d = contract.decode(msg.frame_id, contract.encode(name, values, counter))
+            assert d.status is E2EStatus.OK and d.counter == counter
+            for k, v in values.items():
+                assert d.signals[k] == pytest.approx(v, abs=msg.get_signal_by_name(k).scale)
+
+
+def test_corruption_is_detected(contract: mrsteer_dbc.Contract) -> None:
+    fid = contract.frame_id("MRS_YawRate")
+    good = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.05, "YawRate_LatAccel": 1.0}, counter=3)
+    for byte in range(len(good)):
+        for bit in range(8):
+            bad = bytearray(good)
+            bad[byte] ^= 1 << bit
+            assert contract.decode(fid, bytes(bad)).status is E2EStatus.BAD_CRC  # every single-bit error
+    assert contract.decode(fid, good[:-1]).status is E2EStatus.BAD_LENGTH
+    assert contract.decode(fid, good + b"\x00").status is E2EStatus.BAD_LENGTH
+    # A valid frame of another message cannot pass as this one: the data ID differs.
+    other = contract.encode("MRS_DriverSteer", {"DriverSteer_Angle": 0.01}, counter=3)
+    assert contract.decode(fid, other + b"\x00\x00").status is E2EStatus.BAD_CRC
+    assert contract.decode(0x7FF, good) is None
+
+
+def test_out_of_range_and_bad_counter_are_rejected(contract: mrsteer_dbc.Contract) -> None:
+    fid = contract.frame_id("MRS_YawRate")
+    hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 5.0, "YawRate_LatAccel": 0.0}, counter=1, strict=False)
+    assert contract.decode(fid, hot).status is E2EStatus.OUT_OF_RANGE
+    # Counter 15 is never sent in profile 1; forge one with a correct CRC.
+    data = bytearray(contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.0, "YawRate_LatAccel": 0.0}, counter=1))
+    data[1] = (data[1] & 0xF0) | 0x0F
+    data[0] = contract.e2e_crc("MRS_YawRate", bytes(data))
+    assert contract.decode(fid, bytes(data)).status is E2EStatus.BAD_COUNTER
+
+
+def test_receiver_counter_sequence() -> None:
+    rx = E2EReceiver(max_delta=3)
+    assert rx.check(5) is E2EStatus.INITIAL
+    assert rx.check(6) is E2EStatus.OK
+    assert rx.check(6) is E2EStatus.REPEATED
+    assert rx.check(8) is E2EStatus.OK_SOME_LOST
+    assert rx.check(14) is E2EStatus.WRONG_SEQUENCE  # jump of 6
+    assert rx.check(0) is E2EStatus.OK  # wraps 14 -> 0 (modulo 15), re-synchronised
+    assert rx.check(13) is E2EStatus.WRONG_SEQUENCE  # a replayed old frame
+    assert all(s.accepted for s in (E2EStatus.OK, E2EStatus.OK_SOME_LOST, E2EStatus.INITIAL))
+    assert not any(s.accepted for s in (E2EStatus.REPEATED, E2EStatus.WRONG_SEQUENCE, E2EStatus.BAD_CRC))
+
+
+def test_alive_counter_wraps_at_fifteen() -> None:
+    c = mrsteer_dbc.AliveCounter()
+    assert [c.next() for _ in range(17)] == list(range(15)) + [0, 1]
+
+
+def test_firmware_ranges_agree_with_the_dbc(contract: mrsteer_dbc.Contract) -> None:
+    d = mr.ControllerConfig()
+    assert contract.signal_range("MRS_DriverSteer", "DriverSteer_Angle") == (-d.driver_angle_max, d.driver_angle_max)
+    assert contract.signal_range("MRS_YawRate", "YawRate_YawRate") == (-d.yaw_rate_max, d.yaw_rate_max)
+    assert contract.signal_range("MRS_VehicleSpeed", "VehicleSpeed_Speed")[1] == d.speed_max
+    lo, hi = contract.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")
+    assert hi >= d.aux_limit and hi - d.aux_limit < 1e-3 and lo == -hi
+
+
+def test_status_and_state_values_match_the_firmware(contract: mrsteer_dbc.Contract) -> None:
+    choices = contract.message("MRS_AuxSteerCmd").get_signal_by_name("AuxSteerCmd_State").choices
+    assert {int(k): str(v) for k, v in choices.items()} == {
+        mr.STATUS_INACTIVE: "INACTIVE", mr.STATUS_ACTIVE: "ACTIVE", mr.STATUS_SATURATED: "SATURATED",
+        mr.STATUS_FAULT: "FAULT"}
+
+
+def test_a_broken_dbc_is_a_clear_error(tmp_path) -> None:
+    bad = tmp_path / "bad.dbc"
+    bad.write_text("BO_ this is not a dbc")
+    with pytest.raises(mrsteer_dbc.ContractError, match="cannot load DBC"):
+        mrsteer_dbc.Contract(bad)
+    with pytest.raises(mrsteer_dbc.ContractError, match="not found"):
+        mrsteer_dbc.Contract(tmp_path / "missing.dbc")

@@ -1,0 +1,162 @@
+"""The controller process's cycle, driven by hand on python-can's in-process virtual bus."""
+
+from __future__ import annotations
+
+import math
+
+import can
+import pytest
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py import runtime as rt
+
+C = mrsteer_dbc.load()
+FADE = mr.ControllerConfig().fade_rate * 1e-3
+
+
+class Rig:
+    """A controller node plus a sensor node and a listener on one virtual channel."""
+
+    def __init__(self, channel: str) -> None:
+        self.ctl_bus = can.Bus(interface="virtual", channel=channel)
+        self.sensors = can.Bus(interface="virtual", channel=channel)
+        self.node = rt.ControllerNode(self.ctl_bus, rt.RuntimeConfig(rate_hz=1000.0))
+        self.counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+        self.k = 0
+
+    def send(self, name: str, values: dict, *, counter: int | None = None, corrupt: bool = False,
+             strict: bool = True) -> None:
+        data = bytearray(C.encode(name, values, self.counters[name].next() if counter is None else counter,
+                                  strict=strict))
+        if corrupt:
+            data[-1] ^= 0x40
+        self.sensors.send(can.Message(arbitration_id=C.frame_id(name), data=bytes(data), is_extended_id=False))
+
+    def cycle(self, yaw: float | None = 0.0, steer: float | None = 0.0, speed: float | None = 20.0,
+              **kw) -> tuple[float, dict]:
+        if steer is not None:
+            self.send(rt.MSG_STEER, {"DriverSteer_Angle": steer})
+        if speed is not None and self.k % 10 == 0:
+            self.send(rt.MSG_SPEED, {"VehicleSpeed_Speed": speed})
+        if yaw is not None:
+            self.send(rt.MSG_YAW, {"YawRate_YawRate": yaw, "YawRate_LatAccel": 0.0}, **kw)
+        self.k += 1
+        self.node.drain()
+        self.node.control()
+        cmd = None
+        while (m := self.sensors.recv(0.0)) is not None:
+            if m.arbitration_id == C.frame_id(rt.MSG_CMD):
+                cmd = C.decode(m.arbitration_id, bytes(m.data))
+        assert cmd is not None and cmd.status is mrsteer_dbc.E2EStatus.OK
+        return cmd.signals["AuxSteerCmd_Angle"], cmd.signals
+
+    def close(self) -> None:
+        self.ctl_bus.shutdown()
+        self.sensors.shutdown()
+
+
+@pytest.fixture
+def rig(channel: str):
+    r = Rig(channel)
+    yield r
+    r.close()
+
+
+def test_healthy_inputs_give_an_active_command_answering_the_yaw_frame(rig: Rig) -> None:
+    for _ in range(20):
+        u, sig = rig.cycle(yaw=0.02)
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
+    assert u < 0  # counter-steers a positive yaw rate
+    assert sig["AuxSteerCmd_MeasCounter"] == rig.counters[rt.MSG_YAW].value
+    assert rig.node.cause == 0
+
+
+def test_silenced_yaw_sensor_faults_fades_and_recovers_without_jump(rig: Rig) -> None:
+    for _ in range(300):
+        u, _ = rig.cycle(yaw=0.05)
+    assert abs(u) > math.radians(1.0)
+    states, outs = [], [u]
+    for _ in range(700):  # the yaw-rate sensor goes quiet (a 3 deg command fades in 0.5 s)
+        u, sig = rig.cycle(yaw=None)
+        states.append(sig["AuxSteerCmd_State"])
+        outs.append(u)
+    limit = rig.node._yaw.limit
+    assert limit == 10  # 10 of its own 1 ms cycles
+    assert all(s == mr.STATUS_ACTIVE for s in states[:limit])
+    assert all(s == mr.STATUS_FAULT for s in states[limit + 1:])
+    assert rig.node.cause & rt.CAUSE_YAW_MISSING
+    assert outs[-1] == 0.0
+    steps = [abs(b - a) for a, b in zip(outs[limit:], outs[limit + 1:])]
+    assert max(steps) <= FADE + 2e-6  # bounded fade (plus the DBC's 1e-6 rad resolution)
+    prev = outs[-1]
+    for _ in range(600):  # back again
+        u, sig = rig.cycle(yaw=0.05)
+        assert abs(u - prev) <= FADE + 2e-6
+        prev = u
+    assert sig["AuxSteerCmd_State"] in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED) and rig.node.cause == 0
+
+
+def test_corrupted_frames_are_rejected_and_fault_after_three(rig: Rig) -> None:
+    for _ in range(20):
+        rig.cycle(yaw=0.01)
+    for i in range(3):
+        _, sig = rig.cycle(yaw=0.01, corrupt=True)
+    assert rig.node.stats.rx_rejected == 3
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT and rig.node.cause & rt.CAUSE_E2E
+    for _ in range(5):
+        _, sig = rig.cycle(yaw=0.01)
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
+
+
+def test_repeated_counter_is_stale_and_rejected(rig: Rig) -> None:
+    for _ in range(5):
+        rig.cycle(yaw=0.01)
+    stuck = rig.counters[rt.MSG_YAW].value
+    for _ in range(3):
+        rig.cycle(yaw=0.3, counter=stuck)  # a frozen sender repeating itself
+    assert rig.node.stats.rx_rejected == 3
+    assert rig.node._yaw.value == pytest.approx(0.01)  # the stale value was never used
+
+
+def test_out_of_range_value_is_rejected_with_range_cause(rig: Rig) -> None:
+    for _ in range(5):
+        rig.cycle(yaw=0.01)
+    for _ in range(3):
+        _, sig = rig.cycle(yaw=4.0, strict=False)
+    assert rig.node.stats.rx_rejected == 3 and rig.node.cause & rt.CAUSE_RANGE
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT
+
+
+def test_other_traffic_is_ignored(rig: Rig) -> None:
+    for fid in (0x7FF, 0x123, C.frame_id(rt.MSG_CMD)):
+        rig.sensors.send(can.Message(arbitration_id=fid, data=b"\x00" * 8, is_extended_id=False))
+    _, sig = rig.cycle(yaw=0.0)
+    assert rig.node.stats.rx_rejected == 0
+
+
+def test_status_message_reports_state_cause_and_counts(rig: Rig) -> None:
+    statuses: list[dict] = []
+    for i in range(250):
+        rig.cycle(yaw=None if i > 120 else 0.0)
+    for _ in range(100):  # one more status period, catching its frame
+        rig.send(rt.MSG_STEER, {"DriverSteer_Angle": 0.0})
+        rig.node.drain()
+        rig.node.control()
+        while (m := rig.sensors.recv(0.0)) is not None:
+            if m.arbitration_id == C.frame_id(rt.MSG_STATUS):
+                statuses.append(C.decode(m.arbitration_id, bytes(m.data)).signals)
+    assert statuses, "a status frame every 100 ms"
+    s = statuses[-1]
+    assert s["CtrlStatus_State"] == mr.STATUS_FAULT
+    assert int(s["CtrlStatus_Cause"]) & rt.CAUSE_YAW_MISSING
+
+
+def test_final_command_is_zero_and_inactive(rig: Rig) -> None:
+    for _ in range(50):
+        rig.cycle(yaw=0.05)
+    rig.node.finish()
+    m = rig.sensors.recv(1.0)
+    d = C.decode(m.arbitration_id, bytes(m.data))
+    assert d.name == rt.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
+    assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE
