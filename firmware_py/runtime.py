@@ -52,6 +52,7 @@ CAUSE_E2E = 0x08
 CAUSE_RANGE = 0x10
 CAUSE_LOW_SPEED = 0x20
 
+MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
 DEFAULT_RATE_HZ = 1000.0
 TRIGGERS = ("clock", "sensors")
 
@@ -157,6 +158,7 @@ class ControllerNode:
         self._max_lateness = 0.0
         self._running = True
         self._was_fault = False
+        self._answers = MEAS_NONE
 
     # ---------------------------------------------------------------- receive
 
@@ -203,6 +205,8 @@ class ControllerNode:
                 cause |= inp.missing_cause if inp.rejects < self.cfg.e2e_fail_max else inp.bad_cause
             values.append(inp.value if ok else math.nan)
             inp.age += 1
+        # Which measurement this command answers; NONE when no valid yaw rate went into it.
+        self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2])
         if self.state.fault_flags and not cause:
             cause |= CAUSE_RANGE
@@ -221,7 +225,7 @@ class ControllerNode:
 
     def _send_command(self, u: float, state: int) -> None:
         data = self.contract.encode(MSG_CMD, {"AuxSteerCmd_State": state, "AuxSteerCmd_Angle": u,
-                                              "AuxSteerCmd_MeasCounter": self._yaw.last_counter},
+                                              "AuxSteerCmd_MeasCounter": self._answers},
                                     self.cmd_counter.next())
         self.bus.send(can.Message(arbitration_id=self.cmd_id, data=data, is_extended_id=False))
         self.stats.tx_frames += 1

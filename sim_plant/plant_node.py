@@ -5,14 +5,15 @@ Each plant step (period ``ts``):
 1. apply the scenario events due (and any ``MRS_BenchInject`` received), re-discretising the
    model if speed or friction changed;
 2. the driver model sets the driver's front-wheel angle;
-3. publish the sensor messages due at this step (each at its DBC cycle time, never faster than
+3. the actuator takes the newest valid auxiliary command: only frames that pass length, CRC,
+   alive-counter and range checks count; with no valid command for ``cmd_timeout`` it fades
+   to zero at a bounded rate;
+4. publish the sensor messages due at this step (each at its DBC cycle time, never faster than
    the plant step): driver angle, speed, then yaw rate last, so a controller triggered by the
    yaw-rate frame sees a complete set;
-4. receive auxiliary commands: only frames that pass length, CRC, alive-counter and range
-   checks count; with no valid command for ``cmd_timeout`` the actuator fades to zero;
 5. advance the exactly discretised model with front-wheel angle = driver angle + actuator.
 
-``lockstep`` mode waits in step 4 for the command that answers this step's yaw-rate frame
+``lockstep`` mode waits after step 4 for the command that answers this step's yaw-rate frame
 (``AuxSteerCmd_MeasCounter``), up to ``lockstep_timeout``, and applies it ``delay_steps``
 steps later: a bus run is then the offline ``sim --ts T --delay-steps N`` exactly, up to the
 DBC's signal resolution.  ``realtime`` mode runs on absolute deadlines of the monotonic clock
@@ -175,11 +176,13 @@ class PlantNode:
         r_now = float(self.plant.x[1])
         driver = self.scene.driver_angle(t, r_now, self.ts)
         if self.mode == "lockstep":
-            applied_cmd = self.pipeline.popleft() if self.delay_steps else None
+            pending = self.pipeline.popleft() if self.delay_steps else None
         else:
-            applied_cmd = None
+            # Commands that arrived while we slept take effect over this step.
+            while (msg := self.bus.recv(0.0)) is not None:
+                self._receive(msg, None)
+            pending = self.latest_cmd
         # Outputs at this step use the front-wheel angle being applied over it.
-        pending = applied_cmd if self.mode == "lockstep" else self.latest_cmd
         self.applied = self._actuator(pending)
         y = self.plant.outputs(driver + self.applied, m_z)
         yaw_counter = self._publish(k, driver, y)
@@ -190,9 +193,6 @@ class PlantNode:
                 self.pipeline.append(answer)
             else:
                 self.applied = self._actuator(answer)
-        else:
-            while (msg := self.bus.recv(0.0)) is not None:
-                self._receive(msg, None)
         self.cmd_age += 1
         if self.record_trace:
             self.stats.trace.append((t, driver, self.applied, m_z, self.scene.mu, self.scene.v,
