@@ -1,10 +1,11 @@
-# Quick start: `make demo` runs the main job, `make test` runs the test suite.
+# Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite.
+# `make paper` regenerates the paper's figures.
 # Both create .venv (Python >= 3.10) and install the project into it when needed.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test venv clean
+.PHONY: demo paper test venv clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,6 +16,9 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
+	$(VENV)/bin/mrsteer hil demo --out out/hil-demo
+
+paper: $(STAMP)
 	$(VENV)/bin/mrsteer sim paper --out out/paper
 
 test: $(STAMP)

@@ -312,14 +312,14 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: HilConfi
     in_run = [c for c in cmds if t0 <= c["t_s"] <= t_end + 1.0 / cfg.rate_hz]
     aux = np.array([c["AuxSteerCmd_Angle"] for c in (answered if cfg.mode == "lockstep" else in_run)] or [0.0])
     r = np.array([y["YawRate_YawRate"] for y in yaw])
-    lat = np.array(latencies) if latencies else np.array([math.nan])
+    lat = np.array(latencies)
     ts = 1.0 / cfg.rate_hz
     if cfg.mode == "lockstep":
         delay = cfg.delay_steps
     else:
         # Measurement to application: the command's latency plus up to one plant step before the
         # actuator picks it up.
-        delay = max(1, int(math.ceil(float(np.nanmedian(lat)) / ts))) if latencies else 1
+        delay = max(1, int(math.ceil(float(np.median(lat)) / ts))) if latencies else 1
     params = VehicleParams(v=sc.v, mu=sc.mu, mass=sc.mass)
     if cfg.controller == "none":
         stable = True
@@ -342,8 +342,9 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: HilConfi
         "m_z": next((e.value for e in sc.events if e.kind == "yaw_moment"), 0.0),
         "controller": cfg.controller, "k": cfg.k, "tau": cfg.tau, "tau_n": cfg.tau_n,
         "duration": sc.duration,
-        "latency_p50_s": float(np.nanmedian(lat)),
-        "latency_p99_s": float(np.nanpercentile(lat, 99)) if latencies else math.nan,
+        # Measurement frame to the command answering it (None without a controller).
+        "latency_p50_s": float(np.median(lat)) if latencies else None,
+        "latency_p99_s": float(np.percentile(lat, 99)) if latencies else None,
         "commands_answering_measurements": len(answered),
         "measurements": len(yaw),
     }
