@@ -1,0 +1,76 @@
+"""The plant's actuator accepts only valid, fresh commands; stepping on a virtual bus."""
+
+from __future__ import annotations
+
+import math
+
+import can
+import pytest
+
+import mrsteer_dbc
+from sim_plant import scenario as scn
+from sim_plant.plant_node import PlantNode
+
+C = mrsteer_dbc.load()
+CMD = C.frame_id("MRS_AuxSteerCmd")
+
+
+@pytest.fixture
+def rig(channel: str):
+    plant_bus = can.Bus(interface="virtual", channel=channel)
+    ctl = can.Bus(interface="virtual", channel=channel)
+    node = PlantNode(plant_bus, scn.load("paper-fig9"), mode="realtime", ts=1e-3)
+    yield node, ctl
+    plant_bus.shutdown()
+    ctl.shutdown()
+
+
+def _cmd(ctl: can.BusABC, angle: float, counter: int, corrupt: bool = False) -> None:
+    data = bytearray(C.encode("MRS_AuxSteerCmd", {"AuxSteerCmd_State": 1, "AuxSteerCmd_Angle": angle,
+                                                  "AuxSteerCmd_MeasCounter": 15}, counter))
+    if corrupt:
+        data[3] ^= 0x01
+    ctl.send(can.Message(arbitration_id=CMD, data=bytes(data), is_extended_id=False))
+
+
+def test_valid_commands_are_applied_bad_ones_ignored(rig) -> None:
+    node, ctl = rig
+    _cmd(ctl, 0.02, 0)
+    node.step(0)
+    assert node.applied == pytest.approx(0.02)
+    _cmd(ctl, -0.04, 1, corrupt=True)  # bad CRC
+    _cmd(ctl, -0.04, 0)  # counter 0 again: stale
+    node.step(1)
+    assert node.applied == pytest.approx(0.02)
+    assert node.stats.cmd_rejected == 2
+    _cmd(ctl, 0.03, 1)
+    node.step(2)
+    assert node.applied == pytest.approx(0.03)
+
+
+def test_spoofed_out_of_range_command_is_refused(rig) -> None:
+    node, ctl = rig
+    data = C.encode("MRS_AuxSteerCmd", {"AuxSteerCmd_State": 1, "AuxSteerCmd_Angle": 0.5,
+                                        "AuxSteerCmd_MeasCounter": 15}, 0, strict=False)
+    ctl.send(can.Message(arbitration_id=CMD, data=data, is_extended_id=False))
+    node.step(0)
+    assert node.applied == 0.0 and node.stats.cmd_rejected == 1
+
+
+def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
+    node, ctl = rig
+    for k in range(5):
+        _cmd(ctl, 0.05, k)
+        node.step(k)
+    assert node.applied == pytest.approx(0.05)
+    applied = []
+    for k in range(5, 200):  # the controller goes quiet
+        node.step(k)
+        applied.append(node.applied)
+    timeout = node.cmd_timeout_steps
+    assert applied[timeout - 2] == pytest.approx(0.05)  # held while still fresh
+    fade = math.radians(30.0) * 1e-3
+    diffs = [a - b for a, b in zip(applied, applied[1:])]
+    assert max(diffs) <= fade + 1e-12  # bounded rate, no jump
+    assert applied[-1] == 0.0
+    assert node.stats.actuator_timeouts == 1
