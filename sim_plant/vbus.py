@@ -118,9 +118,27 @@ class FallbackBus(BusABC):
         except ValueError as exc:
             raise CanInitializationError(str(exc)) from None
         self.channel_info = f"mrsteer fallback bus {self.channel} ({self._path})"
+        self._early: collections.deque[bytes] = collections.deque()
         self._sock = self._connect(autostart, connect_timeout)
-        self._send_raw(_OPTIONS.pack(b"O", int(bool(receive_own_messages))))
+        self._handshake(receive_own_messages, connect_timeout)
         super().__init__(channel=self.channel, can_filters=can_filters, **kwargs)
+
+    def _handshake(self, receive_own: bool, timeout: float) -> None:
+        """Send our options and wait for the broker's ack: once it arrives the broker has us on
+        its list, so every frame anyone sends from now on reaches us (as with a bound socket)."""
+        self._send_raw(_OPTIONS.pack(b"O", int(bool(receive_own))))
+        self._sock.settimeout(timeout)
+        try:
+            while True:
+                packet = self._sock.recv(_MAX_PACKET)
+                if not packet:
+                    raise CanInitializationError("fallback bus: the broker closed the connection")
+                if packet == b"A":
+                    return
+                self._early.append(packet)  # a frame fanned out to us before the ack
+        except socket.timeout:
+            self._sock.close()
+            raise CanInitializationError(f"fallback bus: no answer from the broker on {self._path}") from None
 
     def _connect(self, autostart: bool, timeout: float) -> socket.socket:
         deadline = time.monotonic() + timeout
@@ -160,6 +178,8 @@ class FallbackBus(BusABC):
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         if self._is_shutdown:
             raise CanOperationError("fallback bus: receive on a closed bus")
+        if self._early:
+            return _unpack_frame(self._early.popleft(), self.channel), False
         self._sock.settimeout(timeout)
         try:
             packet = self._sock.recv(_MAX_PACKET)
@@ -355,6 +375,8 @@ class Broker:
                 client.filters = [_FILTER.unpack_from(body, i * _FILTER.size) for i in range(n)] or None
             elif kind == b"O" and len(packet) == _OPTIONS.size:
                 client.own = bool(_OPTIONS.unpack(packet)[1])
+                client.queue.append(b"A")  # the handshake's ack, in order with any frames queued
+                self._flush(client)
 
     def _fan_out(self, sender: _Client, packet: bytes) -> None:
         self.frames += 1

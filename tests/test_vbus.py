@@ -169,3 +169,17 @@ def test_socket_is_private_to_this_user(broker, channel: str) -> None:
     s = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     s.connect(str(path))  # reachable only through the file system: no network address at all
     s.close()
+
+
+def test_a_client_gets_every_frame_sent_after_it_opened(broker, channel: str) -> None:
+    # As with a bound SocketCAN socket: once the constructor returns, nothing is missed, even
+    # when several clients join at once and a frame follows immediately.
+    tx = _bus(channel)
+    for round_ in range(10):
+        rxs = [_bus(channel) for _ in range(8)]
+        tx.send(can.Message(arbitration_id=round_, data=b"n", is_extended_id=False))
+        for rx in rxs:
+            m = rx.recv(2.0)
+            assert m is not None and m.arbitration_id == round_
+            rx.shutdown()
+    tx.shutdown()
