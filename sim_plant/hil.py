@@ -124,7 +124,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
                 "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
                 "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
                 "--stats-out", str(work / "controller.json")], work, env))
-            time.sleep(0.3)  # let it open the bus and set its filters before the first frame
+            _wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
                      "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
                      "--stats-out", str(work / "plant.json")]
@@ -181,7 +181,7 @@ def _tail(p: _Proc) -> str:
     return f" (last words: {lines[-1]})" if lines else ""
 
 
-def _wait_ready(p: _Proc, timeout: float = 10.0) -> None:
+def _wait_ready(p: _Proc, timeout: float = 120.0) -> None:
     assert p.popen.stdout is not None
     os.set_blocking(p.popen.stdout.fileno(), False)
     deadline = time.monotonic() + timeout
@@ -193,6 +193,19 @@ def _wait_ready(p: _Proc, timeout: float = 10.0) -> None:
         buf += chunk
         if b"ready" in buf:
             return
+        time.sleep(0.02)
+    raise HilError(f"{p.name} did not become ready")
+
+
+def _wait_stderr(p: _Proc, marker: str, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if p.popen.poll() is not None:
+            raise HilError(f"{p.name} exited with status {p.popen.returncode} before it was ready{_tail(p)}")
+        p.stderr.flush()
+        with open(p.stderr.name, "rb") as f:
+            if marker.encode() in f.read():
+                return
         time.sleep(0.02)
     raise HilError(f"{p.name} did not become ready")
 
