@@ -55,6 +55,7 @@ class PlantStats:
     lockstep_timeouts: int = 0
     actuator_timeouts: int = 0
     bench_injections: int = 0
+    rx_ignored: int = 0  # frames of other IDs (queued before the kernel filter was installed)
     overruns: int = 0
     wall_time_s: float = 0.0
     trace: list[tuple[float, ...]] = field(default_factory=list)
@@ -107,7 +108,11 @@ class PlantNode:
 
     def _receive(self, msg: can.Message, await_counter: int | None) -> bool:
         """Handle one frame; True if it is the valid command answering ``await_counter``."""
-        if msg.is_extended_id or msg.is_error_frame:
+        # The receive filter is not enough on its own: SocketCAN queues frames of every ID
+        # between opening the socket and installing the filter.
+        if (msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame
+                or msg.arbitration_id not in (self.cmd_id, self.bench_id)):
+            self.stats.rx_ignored += 1
             return False
         decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
         if decoded is None:

@@ -74,3 +74,13 @@ def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
     assert max(diffs) <= fade + 1e-12  # bounded rate, no jump
     assert applied[-1] == 0.0
     assert node.stats.actuator_timeouts == 1
+
+
+def test_frames_of_other_ids_are_ignored_even_if_they_pass_the_filter(rig) -> None:
+    # SocketCAN queues every ID between opening the socket and installing the filter; the
+    # controller's status frame (no E2E counter) once crashed the plant on real vcan0.
+    node, _ = rig
+    status = C.encode("MRS_CtrlStatus", {s.name: 0 for s in C.message("MRS_CtrlStatus").signals})
+    msg = can.Message(arbitration_id=C.frame_id("MRS_CtrlStatus"), data=status, is_extended_id=False)
+    assert node._receive(msg, 0) is False
+    assert node.stats.rx_ignored == 1 and node.stats.cmd_accepted == node.stats.cmd_rejected == 0
