@@ -114,9 +114,18 @@ class Contract:
     def e2e(self, name: str) -> E2EConfig | None:
         return self._e2e[name]
 
-    def cycle_time_s(self, name: str) -> float | None:
+    def cycle_time_s(self, name: str, control_period: float | None = None) -> float | None:
+        """The message's cycle in s; a control-loop message runs at ``control_period`` if given."""
+        if control_period is not None and self.is_control_loop(name):
+            return control_period
         ms = self._by_name[name].cycle_time
         return ms / 1000.0 if ms else None
+
+    def is_control_loop(self, name: str) -> bool:
+        """Sent once per control period (DBC attribute MRS_ControlLoop = 1)."""
+        msg = self._by_name[name]
+        attr = (msg.dbc.attributes if msg.dbc is not None else {}).get("MRS_ControlLoop")
+        return attr is not None and int(attr.value) == 1
 
     def signal_range(self, name: str, signal: str) -> tuple[float, float]:
         sig = self._by_name[name].get_signal_by_name(signal)

@@ -64,20 +64,28 @@ NOMINAL_C_R = 96000.0
 
 #: tau_n of eq. (18), chosen to reproduce the paper's numbers (docs/paper-reproduction.md).
 DEFAULT_TAU_N = 0.02
+#: Longest command delay the nominal model can hold (size of the state's ring buffer).
+MAX_MODEL_DELAY = 8
+#: The paper's continuous-time tuning of eq. (22), section 4.
+PAPER_K = 10.0
+PAPER_TAU = 0.006
 
 
 @dataclass(frozen=True)
 class ControllerConfig:
     """Calibration of the model regulator. Angles in rad (front wheel), times in s."""
 
+    # Shipped calibration: `mrsteer design tune --ts 0.002 --delay-steps 1` (K 43.57, tau
+    # 21.25 ms), rounded; GM >= 6 dB and PM >= 45 deg over the envelope (docs/design.md).
     q_form: str = Q_LIMITED
-    k: float = 10.0  # eq. (22) limited-integrator gain K
-    tau: float = 0.006  # eq. (22) time constant tau, s
+    k: float = 43.0  # eq. (22) limited-integrator gain K
+    tau: float = 0.0212  # eq. (22) time constant tau, s
     tau_n: float = DEFAULT_TAU_N  # eq. (18) desired-model time constant, s
-    ts: float = 0.001  # fixed step, s
+    ts: float = 0.002  # fixed step, s: 500 Hz keeps a 500 kbit/s bus under 40 % worst-case load
     method: str = METHOD_TUSTIN
     aux_limit: float = math.radians(3.0)  # actuator range, +- rad of wheel angle
     rate_limit: float = 0.0  # max |d u/dt| in rad/s; 0 disables
+    model_delay_steps: int = 1  # whole samples from command to effect, modelled in w (0: none)
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 on fault/inactive, and on recovery
     speed_active_min: float = 3.0  # m/s; below this the controller is inactive
     speed_max: float = 70.0  # m/s; above this the speed input is invalid
@@ -101,6 +109,7 @@ class Coefficients:
     g_r1: float
     q0: float  # d.c. gain of Q
     inv_one_minus_g_w0: float  # 1 / (1 - g_w0), algebraic loop of the Tustin form
+    model_delay: int  # M: w uses the command issued M steps ago (0: this step's)
     wheelbase: float  # 1/K_n(v) = wheelbase / v + k_us * v   (eq. 15 inverted)
     k_us: float
     u_max: float
@@ -116,11 +125,13 @@ class Coefficients:
 class State:
     """Preallocated controller state. ``needs_init`` forces a bumpless re-start."""
 
-    __slots__ = ("z", "u_prev", "needs_init", "recovering", "status", "fault_flags")
+    __slots__ = ("z", "u_prev", "u_hist", "hist_idx", "needs_init", "recovering", "status", "fault_flags")
 
     def __init__(self) -> None:
         self.z = 0.0
         self.u_prev = 0.0
+        self.u_hist = [0.0] * MAX_MODEL_DELAY  # ring buffer of the last M commands (C: float[8])
+        self.hist_idx = 0
         self.needs_init = True
         self.recovering = False
         self.status = STATUS_INACTIVE
@@ -164,6 +175,7 @@ def configure(cfg: ControllerConfig) -> Coefficients:
         g_r1=q0 * br1,
         q0=q0,
         inv_one_minus_g_w0=1.0 / (1.0 - g_w0),
+        model_delay=cfg.model_delay_steps,
         wheelbase=wheelbase,
         k_us=k_us,
         u_max=cfg.aux_limit,
@@ -191,6 +203,9 @@ def _validate(cfg: ControllerConfig) -> None:
     for name in positive:
         if getattr(cfg, name) <= 0.0:
             raise ValueError(f"{name} must be positive, got {getattr(cfg, name)}")
+    if not (isinstance(cfg.model_delay_steps, int) and 0 <= cfg.model_delay_steps <= MAX_MODEL_DELAY):
+        raise ValueError(f"model_delay_steps must be a whole number in 0..{MAX_MODEL_DELAY}, "
+                         f"got {cfg.model_delay_steps!r}")
     if cfg.rate_limit < 0.0:
         raise ValueError(f"rate_limit must be >= 0 (0 disables), got {cfg.rate_limit}")
     if cfg.speed_active_min >= cfg.speed_max:
@@ -201,6 +216,9 @@ def reset(s: State) -> None:
     """Back to power-on: command 0, state re-initialised on the next valid step."""
     s.z = 0.0
     s.u_prev = 0.0
+    for i in range(MAX_MODEL_DELAY):
+        s.u_hist[i] = 0.0
+    s.hist_idx = 0
     s.needs_init = True
     s.recovering = False
     s.status = STATUS_INACTIVE
@@ -246,6 +264,9 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
         # so a restart does not excite the large high-frequency gain on rho.
         w0 = delta_driver + s.u_prev
         s.z = c.q0 * (w0 - rho) - (c.g_w0 * w0 - c.g_r0 * rho)
+        for i in range(c.model_delay):
+            s.u_hist[i] = s.u_prev
+        s.hist_idx = 0
         s.needs_init = False
         s.recovering = True
 
@@ -262,18 +283,35 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     if hi > c.u_max:
         hi = c.u_max
 
-    # y = p + g_w0 * u_a with u_a = clamp(y, lo, hi): since 0 <= g_w0 < 1 the unique solution
-    # is u_a = clamp(p / (1 - g_w0), lo, hi).
-    p = c.g_w0 * delta_driver - c.g_r0 * rho + s.z
-    y_free = p * c.inv_one_minus_g_w0
-    u = y_free
-    if u < lo:
-        u = lo
-    elif u > hi:
-        u = hi
-    y = p + c.g_w0 * u
+    if c.model_delay == 0:
+        # y = p + g_w0 * u_a with u_a = clamp(y, lo, hi): since 0 <= g_w0 < 1 the unique
+        # solution is u_a = clamp(p / (1 - g_w0), lo, hi).
+        p = c.g_w0 * delta_driver - c.g_r0 * rho + s.z
+        u = p * c.inv_one_minus_g_w0
+        if u < lo:
+            u = lo
+        elif u > hi:
+            u = hi
+        y = p + c.g_w0 * u
+        w = delta_driver + u
+    else:
+        # The yaw rate measured now answers the command issued M steps ago: compare it
+        # with that one, not with the command being computed (no algebraic loop either).
+        i = s.hist_idx
+        w = delta_driver + s.u_hist[i]
+        y = c.g_w0 * w - c.g_r0 * rho + s.z
+        u = y
+        if u < lo:
+            u = lo
+        elif u > hi:
+            u = hi
+        s.u_hist[i] = u
+        i += 1
+        if i >= c.model_delay:
+            i = 0
+        s.hist_idx = i
 
-    s.z = c.g_w1 * (delta_driver + u) - c.g_r1 * rho + c.a * y
+    s.z = c.g_w1 * w - c.g_r1 * rho + c.a * y
     if s.recovering and lo_slew < u < hi_slew:
         s.recovering = False  # the slew no longer binds: caught up with the control law
     s.u_prev = u

@@ -12,7 +12,8 @@ Each cycle, in this order (the scheduling contract a port must keep):
 
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
-plant, where simulated time is set by the plant).  Freshness is counted in controller cycles
+plant, where simulated time is set by the plant; with no yaw-rate frame for
+``SENSORS_WATCHDOG_S`` of wall time it runs a cycle anyway).  Freshness is counted in controller cycles
 either way.  SIGINT/SIGTERM end the loop after the current cycle with a final zero command
 marked inactive, and exit status 0.
 """
@@ -53,7 +54,8 @@ CAUSE_RANGE = 0x10
 CAUSE_LOW_SPEED = 0x20
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
-DEFAULT_RATE_HZ = 1000.0
+DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
+SENSORS_WATCHDOG_S = 1.0  # sensors trigger: wall time without a yaw-rate frame before a cycle runs anyway
 TRIGGERS = ("clock", "sensors")
 
 
@@ -133,7 +135,7 @@ class ControllerNode:
         self.state = mr.State()
 
         def limit(name: str) -> int:
-            cycle = c.cycle_time_s(name) or period
+            cycle = c.cycle_time_s(name, period) or period
             return max(1, int(math.ceil(config.timeout_cycles * cycle / period)))
 
         self.inputs = {
@@ -287,9 +289,11 @@ class ControllerNode:
                 break
 
     def _run_on_sensors(self, end: float | None) -> None:
-        # One cycle per accepted yaw-rate frame; if none comes for the yaw input's timeout,
-        # run a cycle anyway so that the fault path (fade to zero) still executes.
-        wait = self._yaw.limit * self.period
+        # One cycle per accepted yaw-rate frame; if none comes for a while, run a cycle anyway
+        # so that the fault path (fade to zero) still executes.  Simulated time is the plant's
+        # here: a plant that is merely slow (an emulated CPU, a debugger) must not look like
+        # lost input, so the wait is at least SENSORS_WATCHDOG_S of wall time.
+        wait = max(self._yaw.limit * self.period, SENSORS_WATCHDOG_S)
         while self._running:
             got = False
             msg = self.bus.recv(wait)
@@ -317,7 +321,7 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
                    "if present, else the mrsteer fallback bus)")
     p.add_argument("--channel", help="channel for the interface (default vcan0 / mrsteer0)")
     p.add_argument("--rate-hz", type=float, default=DEFAULT_RATE_HZ,
-                   help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}: the paper's tuning needs about 1 kHz)")
+                   help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains were tuned for)")
     p.add_argument("--trigger", choices=TRIGGERS, default="clock",
                    help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
     p.add_argument("--timeout-cycles", type=int, default=10,
@@ -328,6 +332,9 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--tau", type=float, default=d.tau, help=f"eq. (22) time constant in s (default {d.tau:g})")
     p.add_argument("--tau-n", type=float, default=d.tau_n, help=f"eq. (18) time constant in s (default {d.tau_n:g})")
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method)
+    p.add_argument("--model-delay", type=int, default=d.model_delay_steps, metavar="M",
+                   help=f"command-to-effect delay in cycles modelled by the controller, 0..{mr.MAX_MODEL_DELAY} "
+                   f"(default {d.model_delay_steps})")
     p.add_argument("--rate-limit", type=float, default=0.0, metavar="RAD_S",
                    help="command rate limit in rad/s (default 0: off)")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
@@ -347,7 +354,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error("--duration must be positive")
     try:
         ctrl = mr.ControllerConfig(q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
-                                   method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz)
+                                   method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz,
+                                   model_delay_steps=args.model_delay)
         mr.configure(ctrl)
     except ValueError as exc:
         parser.error(str(exc))

@@ -275,31 +275,55 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace
     return Trace(t, r_hist, beta_hist, out[2], aux_hist, saturated, stable)
 
 
-def discrete_loop_poles(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int) -> np.ndarray:
-    """Poles of the sampled loop (ZOH plant, firmware law unsaturated, N samples of delay).
+def discrete_loop_poles(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
+                        loop_gain: complex = 1.0) -> np.ndarray:
+    """Poles of the sampled loop (ZOH plant, firmware law unsaturated, N samples of delay)."""
+    return np.linalg.eigvals(discrete_loop_matrix(params, coeffs, delay_steps, loop_gain)[0])
 
-    State: [beta, r, z, d_1 .. d_N] with d_i the command computed i samples ago.
-    The law at speed v (constant): u = (z - g_r0 rho) / (1 - g_w0) for delta_d = 0,
-    z+ = g_w1 u - g_r1 rho + a u, rho = r / K_n(v).
+
+def discrete_loop_matrix(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
+                         loop_gain: complex = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(F, g): the sampled loop x+ = F x + g M_z, delta_d = 0, the firmware law unsaturated.
+
+    State: [beta, r, z, q_1 .. q_D] with q_i the command computed i samples ago and
+    D = max(N, M), M the firmware's modelled delay.  At speed v (constant), delta_d = 0:
+    M = 0: u = (z - g_r0 rho) / (1 - g_w0), w = u;   M >= 1: u = z - g_r0 rho + g_w0 q_M, w = q_M;
+    z+ = g_w1 w - g_r1 rho + a u, rho = r / K_n(v); the plant gets q_N (u itself when N = 0).
+    ``loop_gain`` multiplies the command on its way into the plant (a real or complex
+    perturbation of the loop, for checking margins).
     """
     ss = state_space(params)
     phi, gamma = zoh_discretize(ss.A, ss.B, coeffs.ts)
     ikn = coeffs.wheelbase / params.v + coeffs.k_us * params.v
-    g = coeffs.inv_one_minus_g_w0
-    u_row = np.zeros(3 + delay_steps)  # u[k] as a function of the state
-    u_row[1] = -coeffs.g_r0 * ikn * g
-    u_row[2] = g
-    n = 3 + delay_steps
-    F = np.zeros((n, n))
-    F[:2, :2] = phi
-    if delay_steps == 0:
-        F[:2, :] += np.outer(gamma[:, 0], u_row)
+    m = coeffs.model_delay
+    depth = max(delay_steps, m)
+    n = 3 + depth
+    u_row = np.zeros(n)  # u[k] as a function of the state
+    w_row = np.zeros(n)  # w[k] (the command the law compares the yaw rate with)
+    if m == 0:
+        g = coeffs.inv_one_minus_g_w0
+        u_row[1] = -coeffs.g_r0 * ikn * g
+        u_row[2] = g
+        w_row[:] = u_row
     else:
-        F[:2, 2 + delay_steps] = gamma[:, 0]  # the oldest queued command is applied now
+        u_row[1] = -coeffs.g_r0 * ikn
+        u_row[2] = 1.0
+        u_row[2 + m] = coeffs.g_w0
+        w_row[2 + m] = 1.0
+    F = np.zeros((n, n), dtype=complex if isinstance(loop_gain, complex) else float)
+    F[:2, :2] = phi
+    b = gamma[:, 0] * loop_gain
+    if delay_steps == 0:
+        F[:2, :] += np.outer(b, u_row)
+    else:
+        F[:2, 2 + delay_steps] += b  # the command queued N samples ago is applied now
+    if depth > 0:
         F[3, :] = u_row  # newest queue slot gets this sample's command
-        for i in range(1, delay_steps):
+        for i in range(1, depth):
             F[3 + i, 2 + i] = 1.0
-    z_row = (coeffs.g_w1 + coeffs.a) * u_row
+    z_row = coeffs.g_w1 * w_row + coeffs.a * u_row
     z_row[1] -= coeffs.g_r1 * ikn
     F[2, :] = z_row
-    return np.linalg.eigvals(F)
+    g = np.zeros(n)
+    g[:2] = gamma[:, 1]
+    return F, g

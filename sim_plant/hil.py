@@ -44,20 +44,24 @@ class HilError(RuntimeError):
     """A HIL run failed; the message says which process and how."""
 
 
+_DEFAULT = mr.ControllerConfig()
+
+
 @dataclass(frozen=True)
 class HilConfig:
     scenario: str = "paper-fig9"
     mode: str = "lockstep"
-    rate_hz: float = 1000.0
+    rate_hz: float = 1.0 / _DEFAULT.ts
     interface: str | None = None
     channel: str | None = None
     v: float | None = None
     mu: float | None = None
     mz: float | None = None
     controller: str = mr.Q_LIMITED  # or "none"
-    k: float = 10.0
-    tau: float = 0.006
-    tau_n: float = mr.DEFAULT_TAU_N
+    k: float = _DEFAULT.k
+    tau: float = _DEFAULT.tau
+    tau_n: float = _DEFAULT.tau_n
+    model_delay: int = _DEFAULT.model_delay_steps
     delay_steps: int = 1
     out: Path = Path("out/hil")
 
@@ -92,7 +96,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         raise ValueError(f"mode must be one of {', '.join(MODES)}")
     sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz)
     ctrl = mr.ControllerConfig(q_form=cfg.controller if cfg.controller != "none" else mr.Q_LIMITED, k=cfg.k,
-                               tau=cfg.tau, tau_n=cfg.tau_n, ts=1.0 / cfg.rate_hz)
+                               tau=cfg.tau, tau_n=cfg.tau_n, ts=1.0 / cfg.rate_hz, model_delay_steps=cfg.model_delay)
     mr.configure(ctrl)  # reject an impossible calibration before starting anything
     if cfg.out.exists() and not cfg.out.is_dir():
         raise ValueError(f"--out {cfg.out} exists and is not a directory")
@@ -123,6 +127,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
                 sys.executable, "-m", "firmware_py", *bus_args, "--rate-hz", repr(cfg.rate_hz),
                 "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
                 "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
+                "--model-delay", str(cfg.model_delay),
                 "--stats-out", str(work / "controller.json")], work, env))
             _wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
@@ -354,6 +359,7 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: HilConfi
         "v": sc.v, "mu": sc.mu, "mass": sc.mass,
         "m_z": next((e.value for e in sc.events if e.kind == "yaw_moment"), 0.0),
         "controller": cfg.controller, "k": cfg.k, "tau": cfg.tau, "tau_n": cfg.tau_n,
+        "model_delay_steps": cfg.model_delay,
         "duration": sc.duration,
         # Measurement frame to the command answering it (None without a controller).
         "latency_p50_s": float(np.median(lat)) if latencies else None,

@@ -37,6 +37,7 @@ from typing import Any, Sequence
 import can
 
 import mrsteer_dbc
+from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
 from firmware_py.cli_support import Parser
 from sim_plant import scenario as scn
@@ -44,6 +45,8 @@ from sim_plant.vehicle import DiscretePlant
 
 MODES = ("realtime", "lockstep")
 
+
+DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the controller's default rate
 
 @dataclass
 class PlantStats:
@@ -87,7 +90,7 @@ class PlantNode:
         bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in (self.cmd_id, self.bench_id)])
         self.counters = {name: mrsteer_dbc.AliveCounter() for name in ("MRS_DriverSteer", "MRS_YawRate",
                                                                           "MRS_VehicleSpeed")}
-        self.every = {name: max(1, int(round((c.cycle_time_s(name) or ts) / ts))) for name in self.counters}
+        self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in self.counters}
         self.cmd_timeout_steps = max(1, int(math.ceil(cmd_timeout / ts)))
         self.lockstep_timeout = lockstep_timeout
         self.expect_controller = expect_controller
@@ -260,7 +263,8 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=MODES, default="realtime",
                    help="realtime: free-running on the wall clock (default); lockstep: advance when the "
                    "controller has answered")
-    p.add_argument("--rate-hz", type=float, default=1000.0, help="plant step rate in Hz (default 1000)")
+    p.add_argument("--rate-hz", type=float, default=DEFAULT_RATE_HZ,
+                   help=f"plant step rate in Hz (default {DEFAULT_RATE_HZ:g}, the controller's default)")
     p.add_argument("--delay-steps", type=int, default=1,
                    help="lockstep: steps between a measurement and the application of its command (default 1)")
     p.add_argument("--v", type=float, help="override the scenario's speed, m/s")

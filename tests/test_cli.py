@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from firmware_py import model_regulator as mr
 from mrsteer_cli.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,13 +78,16 @@ def test_disturbance_json_contract(capsys: pytest.CaptureFixture[str]) -> None:
     # Limited integrator on dry road: d.c. loop gain K, so delta_mr settles at
     # K/(1+K) times the steer that cancels M_z: M_z (c_f + c_r) / (c_f c_r L) (section 3 data).
     full = 4000 * 180000 / (84000 * 96000 * 2.57)
-    assert r["final_aux_steer_deg"] == pytest.approx(-(10 / 11) * full * 57.29577951308232, rel=1e-3)
+    k = mr.ControllerConfig().k
+    assert r["k"] == k
+    assert r["final_aux_steer_deg"] == pytest.approx(-(k / (1 + k)) * full * 57.29577951308232, rel=1e-3)
 
 
 def test_disturbance_discrete_with_delay(capsys: pytest.CaptureFixture[str]) -> None:
-    cont = _json(capsys, "sim", "disturbance", "--mz", "3000", "--v", "30", "--mu", "0.9")
+    paper = ("--k", "10", "--tau", "0.006", "--model-delay", "0")  # the continuous design, run at 1 kHz
+    cont = _json(capsys, "sim", "disturbance", "--mz", "3000", "--v", "30", "--mu", "0.9", *paper)
     disc = _json(capsys, "sim", "disturbance", "--mz", "3000", "--v", "30", "--mu", "0.9", "--ts", "0.001",
-                 "--delay-steps", "1")
+                 "--delay-steps", "1", *paper)
     assert disc["delay_steps"] == 1 and disc["ts"] == 0.001
     assert disc["stable"] is True
     assert disc["final_yaw_rate_rad_s"] == pytest.approx(cont["final_yaw_rate_rad_s"], rel=0.01)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -9,6 +11,7 @@ from scipy import signal
 from conftest import polyadd, polymul
 from firmware_py import model_regulator as mr
 from sim_plant import experiments
+from sim_plant.paper import PAPER_CONFIG
 from sim_plant.closed_loop import Experiment, simulate_continuous
 from sim_plant.vehicle import VehicleParams, disturbance_tf, steering_tf
 
@@ -75,7 +78,7 @@ CASES = [(13.0, 0.85, 1296.0), (27.0, 0.6, 1500.0), (45.0, 1.0, 1750.0), (8.0, 0
 def test_yaw_moment_step_matches_eq8(form: str, v: float, mu: float, mass: float) -> None:
     p = VehicleParams(v=v, mu=mu, mass=mass)
     m_z = 300.0  # small enough to stay linear everywhere
-    tr = simulate_continuous(Experiment(p, form, mr.ControllerConfig(q_form=form), m_z=m_z, duration=1.5))
+    tr = simulate_continuous(Experiment(p, form, replace(PAPER_CONFIG, q_form=form), m_z=m_z, duration=1.5))
     assert not tr.saturated
     _, r_mz, _, dmr_mz = _closed_loop_tfs(p, form, mr.DEFAULT_TAU_N)
     t = tr.t[::10]
@@ -89,7 +92,7 @@ def test_yaw_moment_step_matches_eq8(form: str, v: float, mu: float, mass: float
 @pytest.mark.parametrize("v,mu,mass", CASES[:2])
 def test_driver_step_matches_eq8(form: str, v: float, mu: float, mass: float) -> None:
     p = VehicleParams(v=v, mu=mu, mass=mass)
-    exp = Experiment(p, form, mr.ControllerConfig(q_form=form), delta_driver=0.004, duration=1.0)
+    exp = Experiment(p, form, replace(PAPER_CONFIG, q_form=form), delta_driver=0.004, duration=1.0)
     tr = simulate_continuous(exp)
     r_dd, _, dmr_dd, _ = _closed_loop_tfs(p, form, mr.DEFAULT_TAU_N)
     t = tr.t[::10]
@@ -100,7 +103,7 @@ def test_driver_step_matches_eq8(form: str, v: float, mu: float, mass: float) ->
 def test_model_following_on_dry_road_is_the_desired_first_order_model() -> None:
     # Standard Q: y/u_n -> G_n at low frequency; the steering step response follows eq. (18).
     p = VehicleParams(v=20.0)
-    tr = simulate_continuous(experiments.steer(p, "standard", mr.ControllerConfig(), 1.0, saturate=False))
+    tr = simulate_continuous(experiments.steer(p, "standard", PAPER_CONFIG, 1.0, saturate=False))
     desired = 1.0 - np.exp(-tr.t / mr.DEFAULT_TAU_N)
     # Within Q's bandwidth the loop follows G_n; in the first milliseconds the plant's own
     # high-frequency gain (b1/a2 of eq. 14) still shows, as eq. (8) predicts when Q -> 0.
@@ -112,7 +115,7 @@ def test_model_following_on_dry_road_is_the_desired_first_order_model() -> None:
 def test_limited_integrator_leaves_a_steady_error_the_standard_one_does_not() -> None:
     # Paper, section 4.1: with (22) a steady-state error remains; with (17) it is zero.
     p = VehicleParams(v=20.0)
-    cfg = mr.ControllerConfig()
+    cfg = PAPER_CONFIG
     lim = simulate_continuous(experiments.disturbance(p, 2000.0, "limited", cfg, 3.0))
     std = simulate_continuous(experiments.disturbance(p, 2000.0, "standard", cfg, 3.0))
     none = simulate_continuous(experiments.disturbance(p, 2000.0, "none", cfg, 3.0))
@@ -125,7 +128,7 @@ def test_saturation_events_are_located_exactly() -> None:
     # Above the threshold the reference must clamp at exactly 3 deg and agree with the firmware
     # at a tiny step, which saturates the same way.
     p = VehicleParams(v=20.0, mu=1.0)
-    exp = experiments.disturbance(p, 9000.0, "limited", mr.ControllerConfig(), 1.0)
+    exp = experiments.disturbance(p, 9000.0, "limited", PAPER_CONFIG, 1.0)
     ref = simulate_continuous(exp)
     assert ref.saturated
     assert np.max(np.abs(ref.aux)) == pytest.approx(np.radians(3.0), rel=1e-12)

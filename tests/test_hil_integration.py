@@ -49,8 +49,9 @@ def lockstep_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, Path]:
 
 def test_lockstep_matches_the_offline_firmware_simulation(lockstep_run: tuple[dict, Path]) -> None:
     hil, _ = lockstep_run
-    assert hil["rate_hz"] == 1000 and hil["delay_steps"] == 1 and hil["mode"] == "lockstep"
-    offline = _offline("--mz", "3000", "--v", "27", "--mu", "0.9", "--ts", "0.001", "--delay-steps", "1")
+    assert hil["rate_hz"] == rt.DEFAULT_RATE_HZ and hil["delay_steps"] == 1 and hil["mode"] == "lockstep"
+    offline = _offline("--mz", "3000", "--v", "27", "--mu", "0.9", "--ts", repr(1.0 / rt.DEFAULT_RATE_HZ),
+                       "--delay-steps", "1")
     _close(hil, offline, rel=0.01)
     assert hil["saturated"] == offline["saturated"] and hil["stable"] == offline["stable"]
     assert hil["commands_answering_measurements"] == hil["measurements"]  # every step answered

@@ -16,6 +16,7 @@ from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
 from firmware_py.cli_support import EXIT_USAGE, Parser
+from mrsteer_cli import design_cli
 from sim_plant import experiments
 from sim_plant.closed_loop import CONTROLLERS
 from sim_plant.vehicle import MAX_MU, PAPER_MASS, VehicleParams
@@ -85,6 +86,9 @@ def _add_controller(p: argparse.ArgumentParser, choices: Sequence[str] = CONTROL
                    help="0 (default): continuous reference; T > 0: the firmware at step T with the exact ZOH plant")
     p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
                    help="samples between measurement and applied command when --ts > 0 (default 1)")
+    p.add_argument("--model-delay", type=_count, default=d.model_delay_steps, metavar="M",
+                   help=f"command delay the firmware models when --ts > 0, 0..{mr.MAX_MODEL_DELAY} "
+                   f"(default {d.model_delay_steps})")
     p.add_argument("--duration", type=_number("duration", 0.0, MAX_DURATION, lo_open=True), default=3.0,
                    metavar="S", help="simulated time in s (default 3)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -134,6 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("args", nargs=argparse.REMAINDER)
         p.set_defaults(handler=_delegate(name))
 
+    design_cli.add_parsers(sub, _number, _count, Parser)
+
     hil = sub.add_parser("hil", help="hardware-in-the-loop runs: plant, controller and logger on one bus",
                          description="Hardware-in-the-loop runs on SocketCAN vcan0 or the fallback bus.")
     hil_sub = hil.add_subparsers(dest="hil_command", required=True, parser_class=Parser)
@@ -157,6 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"time constant tau in s (default {d.tau:g})")
     p.add_argument("--tau-n", type=_number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
                    help=f"desired-model time constant in s (default {d.tau_n:g})")
+    p.add_argument("--model-delay", type=_count, default=d.model_delay_steps, metavar="M",
+                   help=f"command delay the controller models, 0..{mr.MAX_MODEL_DELAY} (default {d.model_delay_steps})")
     p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -175,8 +183,9 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
     p.add_argument("--channel", help="channel for the interface")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, comparable with `sim --ts` (default); realtime: wall clock")
-    p.add_argument("--rate-hz", type=_number("rate", 1.0, 5000.0), default=1000.0,
-                   help="controller and plant rate in Hz (default 1000)")
+    rate = 1.0 / mr.ControllerConfig().ts
+    p.add_argument("--rate-hz", type=_number("rate", 1.0, 5000.0), default=rate,
+                   help=f"controller and plant rate in Hz (default {rate:g}, the rate the default gains are tuned for)")
     p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
                    help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")
 
@@ -211,7 +220,8 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 
     out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
     cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, controller=args.controller,
-                      k=args.k, tau=args.tau, tau_n=args.tau_n, delay_steps=args.delay_steps, out=out)
+                      k=args.k, tau=args.tau, tau_n=args.tau_n, model_delay=args.model_delay,
+                      delay_steps=args.delay_steps, out=out)
     try:
         result = hil.run(cfg, progress=_say)
     except hil.HilError as exc:
@@ -264,7 +274,8 @@ Logs, decoded signals, plots and summaries: {args.out}/with-controller and {args
 
 
 def _config(args: argparse.Namespace) -> mr.ControllerConfig:
-    cfg = replace(mr.ControllerConfig(), k=args.k, tau=args.tau, tau_n=args.tau_n, method=args.method)
+    cfg = replace(mr.ControllerConfig(), k=args.k, tau=args.tau, tau_n=args.tau_n, method=args.method,
+                  model_delay_steps=args.model_delay)
     if args.ts > 0.0:
         cfg = replace(cfg, ts=args.ts)
     mr.configure(cfg)  # reject an impossible calibration before simulating
@@ -278,7 +289,8 @@ def _params(args: argparse.Namespace) -> VehicleParams:
 def _echo(args: argparse.Namespace) -> dict[str, object]:
     return {"v": args.v, "mu": args.mu, "mass": args.mass, "controller": args.controller, "k": args.k,
             "tau": args.tau, "tau_n": args.tau_n, "ts": args.ts, "method": args.method,
-            "delay_steps": args.delay_steps if args.ts > 0 else 0, "duration": args.duration}
+            "delay_steps": args.delay_steps if args.ts > 0 else 0,
+            "model_delay_steps": args.model_delay if args.ts > 0 else 0, "duration": args.duration}
 
 
 def _emit(args: argparse.Namespace, result: dict[str, object], title: str) -> None:

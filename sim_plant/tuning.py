@@ -1,0 +1,199 @@
+"""Choosing K, tau and tau_n of the discrete limited-integrator regulator (issue 5).
+
+Objective: the disturbance rejection the paper measures (Figure 10): the peak yaw rate after a
+4000 Nm yaw-moment step at 10 m/s on dry road, driver's wheel held, simulated with the
+firmware's own step() at the given rate and loop delay (``simulate_discrete``; saturation
+included).  Smaller is better.
+
+Constraints: gain margin >= 6 dB and phase margin >= 45 deg at every point of the operating
+envelope, with a stable closed loop (``sim_plant.margins``).
+
+Both controller structures are searched: the plain law (the yaw rate compared with the command
+being computed) and the one that models the known loop delay in the nominal model (compared
+with the command issued N steps ago, ``model_delay_steps``), as discrete disturbance observers
+commonly do.
+
+Search: (1) a screen of a log-spaced (K, tau, tau_n) grid on a coarse envelope, with the loop
+frequency response of all points evaluated at once and crossovers read off a dense frequency
+grid; (2) the feasible candidates ranked by the objective; (3) a coordinate refinement of the
+best along K and tau with the exact margins on the coarse envelope; (4) the winner checked with
+the exact margins on the full envelope (and the next candidate taken if it fails there).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Callable
+
+import numpy as np
+
+from firmware_py import model_regulator as mr
+from sim_plant.closed_loop import Experiment, simulate_discrete
+from sim_plant.margins import (Envelope, EnvelopeMargins, LoopResponse, Margins, envelope_margins, law_response,
+                               point_margins)
+from sim_plant.vehicle import VehicleParams
+
+GM_MIN_DB = 6.0
+PM_MIN_DEG = 45.0
+OBJECTIVE_POINT = VehicleParams(v=10.0, mu=1.0)  # Figure 10's operating point
+OBJECTIVE_MZ = 4000.0  # Nm, the paper's disturbance step
+OBJECTIVE_DURATION = 1.5  # s: the peak comes well inside the driver's reaction time
+
+# Search box.  K above 50 (q0 = K/(1+K) > 0.98) would make the limited integrator a plain one,
+# and the low-frequency action would no longer fade for the driver (the point of eq. 22).
+K_BOUNDS = (0.5, 50.0)
+TAU_BOUNDS = (0.001, 1.0)
+K_GRID = tuple(float(x) for x in np.geomspace(*K_BOUNDS, 24))
+TAU_GRID = tuple(float(x) for x in np.geomspace(0.002, 0.5, 25))
+TAU_N_GRID = (0.005, 0.01, 0.02, 0.05, 0.1)
+
+SCREEN_ENVELOPE = Envelope(speeds=(5.0, 10.0, 20.0, 35.0, 50.0), frictions=(0.1, 0.3, 0.6, 1.0),
+                           masses=(1296.0, 1800.0))
+
+Progress = Callable[[str, int, int], None]
+
+
+def objective(config: mr.ControllerConfig, delay_steps: int) -> float:
+    """Peak |yaw rate| (rad/s) after the 4000 Nm step at 10 m/s on dry road."""
+    exp = Experiment(OBJECTIVE_POINT, config.q_form, config, m_z=OBJECTIVE_MZ, duration=OBJECTIVE_DURATION)
+    tr = simulate_discrete(exp, config.ts, delay_steps)
+    if not tr.stable:
+        return math.inf
+    return float(np.max(np.abs(tr.yaw_rate)))
+
+
+class _Screen:
+    """Vectorised margin screen: plant responses of the coarse envelope, computed once."""
+
+    def __init__(self, base: mr.ControllerConfig, delay_steps: int, envelope: Envelope, n_freq: int = 1500) -> None:
+        self.ts = base.ts
+        w_nyq = math.pi / base.ts
+        self.w = np.concatenate([np.geomspace(1e-2, w_nyq, n_freq, endpoint=False), [w_nyq]])
+        self.z = np.exp(1j * self.w * base.ts)
+        coeffs = mr.configure(base)
+        self.plant = np.array([LoopResponse(p, coeffs, delay_steps).plant_path(self.w) for p in envelope.points()])
+
+    def passes(self, config: mr.ControllerConfig) -> bool:
+        L = self.plant * law_response(mr.configure(config), self.z)[None, :]
+        mag = np.abs(L)
+        # Every phase crossover (Im L changes sign where Re L < 0) below -6 dB ...
+        flip = np.signbit(L.imag[:, :-1]) != np.signbit(L.imag[:, 1:])
+        neg = (L.real[:, :-1] < 0.0) | (L.real[:, 1:] < 0.0)
+        peak = np.maximum(mag[:, :-1], mag[:, 1:])
+        if np.any(flip & neg & (peak > 10.0 ** (-GM_MIN_DB / 20.0))):
+            return False
+        if np.any((L[:, -1].real < 0.0) & (mag[:, -1] > 10.0 ** (-GM_MIN_DB / 20.0))):
+            return False
+        # ... and every gain crossover with 45 deg of phase to spare.
+        cross = (mag[:, :-1] >= 1.0) != (mag[:, 1:] >= 1.0)
+        pm = 180.0 - np.abs(np.degrees(np.angle(L)))
+        worst_pm = np.minimum(pm[:, :-1], pm[:, 1:])
+        return not np.any(cross & (worst_pm < PM_MIN_DEG))
+
+
+def _meets(m: EnvelopeMargins) -> bool:
+    w = m.worst()
+    gm_ok = w["gain_margin_db"] is None or w["gain_margin_db"] >= GM_MIN_DB
+    pm_ok = w["phase_margin_deg"] is None or w["phase_margin_deg"] >= PM_MIN_DEG
+    # Every phase crossover, not only the nearest to 0 dB, must have the margin: a negative
+    # reported margin (gain reduction) fails gm_ok above.
+    return m.stable and gm_ok and pm_ok
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    config: mr.ControllerConfig
+    delay_steps: int
+    objective_peak_yaw_rate: float
+    margins: EnvelopeMargins
+    screened: int
+    feasible: int
+
+    def as_dict(self) -> dict[str, Any]:
+        c = self.config
+        w = self.margins.worst()
+        return {
+            "ts": c.ts, "rate_hz": 1.0 / c.ts, "delay_steps": self.delay_steps, "controller": c.q_form,
+            "k": c.k, "tau": c.tau, "tau_n": c.tau_n, "model_delay_steps": c.model_delay_steps,
+            "objective": {"peak_yaw_rate_rad_s": self.objective_peak_yaw_rate, "m_z_nm": OBJECTIVE_MZ,
+                          "v": OBJECTIVE_POINT.v, "mu": OBJECTIVE_POINT.mu},
+            "constraints": {"gain_margin_db_min": GM_MIN_DB, "phase_margin_deg_min": PM_MIN_DEG},
+            "stable": self.margins.stable, "worst": w,
+            "search": {"screened": self.screened, "feasible": self.feasible},
+        }
+
+
+def tune(ts: float, delay_steps: int, envelope: Envelope = Envelope(), q_form: str = mr.Q_LIMITED,
+         base: mr.ControllerConfig | None = None, progress: Progress | None = None) -> TuneResult:
+    """Best-rejecting (K, tau, tau_n) that keeps the margins over ``envelope``."""
+    say = progress or (lambda *_: None)
+    cfg0 = replace(base or mr.ControllerConfig(), ts=ts, q_form=q_form)
+    mr.configure(cfg0)
+    screen = _Screen(cfg0, delay_steps, SCREEN_ENVELOPE)
+
+    # The firmware may model the loop delay (w compares the yaw rate with the command issued
+    # N steps ago) or not: both structures are searched.
+    delays = sorted({0, min(delay_steps, mr.MAX_MODEL_DELAY)})
+    candidates = [replace(cfg0, k=k, tau=t, tau_n=tn, model_delay_steps=m)
+                  for m in delays for tn in TAU_N_GRID for k in K_GRID for t in TAU_GRID]
+    feasible = []
+    for i, c in enumerate(candidates):
+        if screen.passes(c):
+            feasible.append(c)
+        if i % 200 == 0 or i == len(candidates) - 1:
+            say("screen", i + 1, len(candidates))
+    if not feasible:
+        raise ValueError(f"no (K, tau, tau_n) on the search grid meets GM >= {GM_MIN_DB:g} dB and "
+                         f"PM >= {PM_MIN_DEG:g} deg at ts = {ts:g} s with {delay_steps} samples of delay")
+    scored = []
+    for i, c in enumerate(feasible):
+        scored.append((objective(c, delay_steps), i, c))
+        if i % 50 == 0 or i == len(feasible) - 1:
+            say("rank", i + 1, len(feasible))
+    scored.sort()
+
+    # Refine the best candidate with exact margins on the coarse envelope plus every point
+    # where a refined design has failed on the full envelope so far (an active set).
+    critical = SCREEN_ENVELOPE.points()
+    for attempt in range(6):
+        score, _, c = scored[0]
+        best, best_score = _refine(c, score, delay_steps, critical, say)
+        full = envelope_margins(best, delay_steps, envelope,
+                                progress=lambda d, n: say("verify", d, n) if d % 50 == 0 or d == n else None)
+        if _meets(full):
+            return TuneResult(best, delay_steps, best_score, full, len(candidates), len(feasible))
+        critical += [envelope.points()[i] for i, p in enumerate(full.points) if not _point_meets(p)]
+    raise ValueError("the refined design kept failing on the full envelope; use a coarser envelope grid")
+
+
+def _point_meets(m: Margins) -> bool:
+    return (m.stable and (m.gain_margin_db is None or m.gain_margin_db >= GM_MIN_DB)
+            and (m.phase_margin_deg is None or m.phase_margin_deg >= PM_MIN_DEG))
+
+
+def _meets_at(config: mr.ControllerConfig, delay_steps: int, points: list[VehicleParams]) -> bool:
+    return all(_point_meets(point_margins(p, config, delay_steps)) for p in points)
+
+
+def _refine(c: mr.ControllerConfig, score: float, delay_steps: int, points: list[VehicleParams],
+            say: Callable[..., None]) -> tuple[mr.ControllerConfig, float]:
+    """Coordinate search in log K and log tau with exact margins at ``points``."""
+    step = 0.25  # in log space: the screening grid's spacing is about 0.2
+    rounds = 0
+    while step > 0.01 and rounds < 60:
+        rounds += 1
+        improved = False
+        for dk, dt in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1), (-1, 1)):
+            trial = replace(c, k=min(max(c.k * math.exp(dk * step), K_BOUNDS[0]), K_BOUNDS[1]),
+                            tau=min(max(c.tau * math.exp(dt * step), TAU_BOUNDS[0]), TAU_BOUNDS[1]))
+            if (trial.k, trial.tau) == (c.k, c.tau):
+                continue
+            s = objective(trial, delay_steps)
+            if s < score and _meets_at(trial, delay_steps, points):
+                c, score, improved = trial, s, True
+                break
+        if not improved:
+            step /= 2.0
+        say("refine", rounds, 60)
+    return c, score

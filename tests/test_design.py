@@ -1,0 +1,164 @@
+"""Design checks (issue 5): margins, tuning and bus load against independent constructions."""
+
+from __future__ import annotations
+
+import cmath
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from mrsteer_cli.cli import main
+from mrsteer_dbc.busload import bus_load, frame_bits, max_rate_hz
+from sim_plant import margins as M
+from sim_plant import tuning as T
+from sim_plant.closed_loop import discrete_loop_poles
+from sim_plant.vehicle import VehicleParams
+
+SMALL = M.Envelope(speeds=(5.0, 20.0, 50.0), frictions=(0.3, 1.0), masses=(1296.0, 1800.0))
+
+
+def _radius(p: VehicleParams, cfg: mr.ControllerConfig, n: int, gain: complex = 1.0) -> float:
+    return float(np.max(np.abs(discrete_loop_poles(p, mr.configure(cfg), n, gain))))
+
+
+@pytest.mark.parametrize("model_delay", [0, 1, 2])
+@pytest.mark.parametrize("delay", [0, 1, 3])
+def test_loop_transfer_function_and_state_matrix_agree(model_delay: int, delay: int) -> None:
+    # Every closed-loop pole of the state matrix is a zero of 1 + L(z): two independent forms.
+    cfg = replace(mr.ControllerConfig(), k=5.0, tau=0.05, ts=0.005, model_delay_steps=model_delay)
+    p = VehicleParams(v=20.0, mu=0.6)
+    loop = M.LoopResponse(p, mr.configure(cfg), delay)
+    for z in discrete_loop_poles(p, mr.configure(cfg), delay):
+        if abs(z) > 1e-9:
+            assert abs(1.0 + loop.at_z(z)) < 1e-6 * max(1.0, abs(loop.at_z(z)))
+
+
+@pytest.mark.parametrize("cfg,delay", [
+    (M.paper_config(0.0005), 1),
+    (replace(mr.ControllerConfig(), k=4.0, tau=0.1, tau_n=0.05, ts=0.005), 1),
+    (replace(mr.ControllerConfig(), k=20.0, tau=0.02, ts=0.002, model_delay_steps=1), 1),
+    (replace(mr.ControllerConfig(), k=3.0, tau=0.05, ts=0.01), 2),
+])
+def test_margins_are_where_the_perturbed_loop_reaches_the_stability_limit(cfg: mr.ControllerConfig,
+                                                                            delay: int) -> None:
+    p = VehicleParams(v=5.0, mu=1.0)
+    m = M.point_margins(p, cfg, delay)
+    assert m.stable
+    # Gain margin: the loop scaled by it has a pole on the unit circle; a little less stays inside.
+    g = 10.0 ** (m.gain_margin_db / 20.0)
+    assert _radius(p, cfg, delay, g) == pytest.approx(1.0, abs=1e-7)
+    assert _radius(p, cfg, delay, g * 0.99) < 1.0
+    # Phase margin: L turned by PM (one way or the other) touches -1 on the unit circle.
+    turned = [_radius(p, cfg, delay, cmath.exp(s * 1j * math.radians(m.phase_margin_deg))) for s in (1, -1)]
+    assert min(abs(r - 1.0) for r in turned) < 1e-7
+    # Delay margin: a pure delay of that length is a clockwise turn by w_c * delay.
+    w_c = 2.0 * math.pi * m.delay_crossover_hz
+    assert _radius(p, cfg, delay, cmath.exp(-1j * w_c * m.delay_margin_s)) == pytest.approx(1.0, abs=1e-7)
+    assert m.delay_margin_samples == pytest.approx(m.delay_margin_s / cfg.ts)
+
+
+def test_paper_tuning_holds_at_1khz_with_one_sample_of_delay_but_not_at_500hz() -> None:
+    fast = M.envelope_margins(M.paper_config(0.001), 1, SMALL)
+    slow = M.envelope_margins(M.paper_config(0.002), 1, SMALL)
+    assert fast.stable and 0.0 < fast.worst()["gain_margin_db"] < 1.0  # stable, but barely
+    assert not slow.stable and slow.worst()["max_pole_radius"] > 1.0
+
+
+def test_worst_case_names_its_operating_point() -> None:
+    res = M.envelope_margins(M.paper_config(0.001), 1, SMALL)
+    w = res.worst()
+    at = w["where"]["gain_margin_db"]
+    point = next(p for p in res.points if (p.v, p.mu, p.mass) == (at["v"], at["mu"], at["mass"]))
+    assert point.gain_margin_db == w["gain_margin_db"] == min(p.gain_margin_db for p in res.points)
+    assert len(res.points) == len(SMALL)
+
+
+def test_shipped_default_keeps_its_margins_over_the_whole_default_envelope() -> None:
+    res = M.envelope_margins(mr.ControllerConfig(), 1)
+    w = res.worst()
+    assert res.stable
+    assert w["gain_margin_db"] >= T.GM_MIN_DB - 1e-6
+    assert w["phase_margin_deg"] >= T.PM_MIN_DEG - 1e-6
+
+
+def test_tuning_beats_every_feasible_point_of_a_plain_grid_search() -> None:
+    ts, delay = 0.01, 1
+    env = SMALL
+    res = T.tune(ts, delay, env)
+    assert res.margins.stable
+    assert res.margins.worst()["gain_margin_db"] >= T.GM_MIN_DB
+    assert res.margins.worst()["phase_margin_deg"] >= T.PM_MIN_DEG
+    # An independent plain grid search with exact margins on the same envelope.
+    best = math.inf
+    for k in (1.0, 2.0, 4.0, 8.0, 16.0):
+        for tau in (0.01, 0.03, 0.1, 0.3):
+            for m in (0, 1):
+                cfg = replace(mr.ControllerConfig(), ts=ts, k=k, tau=tau, tau_n=0.02, model_delay_steps=m)
+                em = M.envelope_margins(cfg, delay, env)
+                w = em.worst()
+                if em.stable and w["gain_margin_db"] >= 6.0 and w["phase_margin_deg"] >= 45.0:
+                    best = min(best, T.objective(cfg, delay))
+    assert best < math.inf
+    assert res.objective_peak_yaw_rate <= best + 1e-12
+
+
+def test_frame_bits_match_the_can_frame_format() -> None:
+    # 8 data bytes: 111 bits bare, 135 with worst-case stuffing (Davis et al. 2007).
+    assert frame_bits(8, False) == 111 and frame_bits(8, True) == 135
+    assert frame_bits(0, False) == 47 and frame_bits(0, True) == 55
+    with pytest.raises(ValueError):
+        frame_bits(9, True)
+
+
+def test_bus_load_is_the_sum_of_frames_over_cycle_times() -> None:
+    c = mrsteer_dbc.load()
+    load = bus_load(c, 500_000, 100.0)
+    expected = 0.0
+    for msg in c.db.messages:
+        cycle = 0.01 if c.is_control_loop(msg.name) else msg.cycle_time / 1000.0
+        expected += (47 + 8 * msg.length + (34 + 8 * msg.length - 1) // 4) / cycle
+    assert load.load_percent_worst == pytest.approx(100.0 * expected / 500_000)
+    assert load.load_percent_nominal < load.load_percent_worst
+
+
+def test_default_configuration_stays_under_40_percent_worst_case_at_500k() -> None:
+    c = mrsteer_dbc.load()
+    default = bus_load(c, 500_000)
+    assert default.rate_hz == pytest.approx(1.0 / mr.ControllerConfig().ts)
+    assert default.load_percent_worst < 40.0
+    limit = max_rate_hz(c, 500_000, 40.0)
+    assert bus_load(c, 500_000, limit).load_percent_worst == pytest.approx(40.0)
+    assert default.rate_hz <= limit
+
+
+def test_design_cli_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["design", "margins", "--ts", "0.001", "--delay-steps", "1", "--k", "10", "--tau", "0.006",
+                 "--model-delay", "0", "--v-grid", "5:50:2", "--mu-grid", "1", "--mass-grid", "1296", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stable"] is True and len(out["points"]) == 2
+    assert set(out["worst"]) >= {"max_pole_radius", "gain_margin_db", "phase_margin_deg", "where"}
+    assert main(["design", "busload", "--bitrate", "500000", "--rate-hz", "1000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["load_percent_worst"] > 40.0  # 1 kHz does not fit the budget
+    assert {m["name"] for m in out["messages"]} >= {"MRS_YawRate", "MRS_AuxSteerCmd"}
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["design", "margins", "--v-grid", "5:50"], "speed grid must be"),
+    (["design", "margins", "--mu-grid", "0:1:3"], "friction grid must satisfy"),
+    (["design", "margins", "--model-delay", "9"], "model_delay_steps"),
+    (["design", "busload", "--bitrate", "0"], "bitrate must be"),
+])
+def test_design_cli_rejects_bad_input_with_one_line(argv: list[str], needle: str,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err

@@ -1,0 +1,206 @@
+"""``mrsteer design margins|tune|busload``: offline design checks (issue 5)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable
+
+from firmware_py import model_regulator as mr
+from sim_plant.vehicle import MAX_MU
+
+GRID_HELP = "LO:HI:N (N evenly spaced values, ends included) or a single value"
+
+
+def _grid(kind: str, lo_limit: float, hi_limit: float) -> Callable[[str], tuple[float, ...]]:
+    """argparse type for an envelope axis, ``LO:HI:N`` or one value."""
+
+    def parse(text: str) -> tuple[float, ...]:
+        from sim_plant.margins import linspace_grid
+
+        parts = text.split(":")
+        try:
+            if len(parts) == 1:
+                lo = hi = float(parts[0])
+                n = 1
+            elif len(parts) == 3:
+                lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
+            else:
+                raise ValueError
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{kind} grid must be {GRID_HELP}, got {text!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo_limit <= lo <= hi <= hi_limit):
+            raise argparse.ArgumentTypeError(f"{kind} grid must satisfy {lo_limit:g} <= LO <= HI <= {hi_limit:g}, "
+                                             f"got {text!r}")
+        if not 1 <= n <= 200:
+            raise argparse.ArgumentTypeError(f"{kind} grid needs 1..200 points, got {n}")
+        return linspace_grid(lo, hi, n)
+
+    return parse
+
+
+def _add_envelope(p: argparse.ArgumentParser) -> None:
+    from sim_plant import margins as M
+
+    for flag, kind, (lo, hi, n), limits in (
+            ("--v-grid", "speed", M.DEFAULT_SPEEDS, (3.0, 70.0)),
+            ("--mu-grid", "friction", M.DEFAULT_FRICTIONS, (0.01, MAX_MU)),
+            ("--mass-grid", "mass", M.DEFAULT_MASSES, (300.0, 10000.0))):
+        p.add_argument(flag, type=_grid(kind, *limits), default=None, metavar="LO:HI:N",
+                       help=f"{kind} values of the envelope, {GRID_HELP} (default {lo:g}:{hi:g}:{n})")
+
+
+def _envelope(args: argparse.Namespace) -> Any:
+    from sim_plant.margins import Envelope
+
+    d = Envelope()
+    return Envelope(args.v_grid or d.speeds, args.mu_grid or d.frictions, args.mass_grid or d.masses)
+
+
+def add_parsers(sub: Any, number: Callable[..., Callable[[str], float]], count: Callable[[str], int],
+                parser_class: type) -> None:
+    design = sub.add_parser("design", help="stability margins, tuning and bus load (offline design)",
+                            description="Offline design checks of the discrete controller on a real bus.")
+    dsub = design.add_subparsers(dest="design_command", required=True, parser_class=parser_class)
+    d = mr.ControllerConfig()
+
+    p = dsub.add_parser("margins", help="pole radius, gain/phase/delay margins over the operating envelope",
+                        description="Closed-loop pole radius and gain, phase and delay margins of the sampled "
+                        "loop (exact ZOH plant, the firmware's own discretised controller, N samples of delay) "
+                        "at every point of an operating envelope, and the worst case.")
+    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True), default=d.ts, metavar="S",
+                   help=f"controller step in s (default {d.ts:g}, the shipped default)")
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
+                   help="samples from measurement to applied command (default 1)")
+    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
+                   help=f"limited (eq. 22) or standard (eq. 17) model regulator (default {d.q_form})")
+    p.add_argument("--k", type=number("K", 0.0, 1e6, lo_open=True), default=d.k, help=f"gain K (default {d.k:g})")
+    p.add_argument("--tau", type=number("tau", 0.0, 10.0, lo_open=True), default=d.tau,
+                   help=f"time constant tau in s (default {d.tau:g})")
+    p.add_argument("--tau-n", type=number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
+                   help=f"desired-model time constant in s (default {d.tau_n:g})")
+    p.add_argument("--model-delay", type=count, default=d.model_delay_steps, metavar="M",
+                   help=f"command delay modelled inside the controller, 0..{mr.MAX_MODEL_DELAY} "
+                   f"(default {d.model_delay_steps})")
+    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
+                   help=f"discretisation (default {d.method})")
+    _add_envelope(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object (stable, worst, points)")
+    p.set_defaults(handler=_cmd_margins)
+
+    p = dsub.add_parser("tune", help="choose K, tau, tau_n for the strongest rejection with GM >= 6 dB, PM >= 45 deg",
+                        description="Search K, tau and tau_n (and whether to model the loop delay) for the lowest "
+                        "peak yaw rate after a 4000 Nm yaw-moment step at 10 m/s on dry road, keeping gain margin "
+                        ">= 6 dB and phase margin >= 45 deg over the whole envelope.")
+    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True), default=d.ts, metavar="S",
+                   help=f"controller step in s (default {d.ts:g})")
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
+                   help="samples from measurement to applied command (default 1)")
+    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
+                   help=f"model regulator form (default {d.q_form})")
+    _add_envelope(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_tune)
+
+    p = dsub.add_parser("busload", help="CAN bus load of the DBC's frames (nominal and worst-case stuffing)",
+                        description="Bus load of every cyclic frame of the DBC; the control-loop frames at the "
+                        "control rate.")
+    p.add_argument("--bitrate", type=number("bitrate", 10e3, 1e6), required=True, metavar="BPS",
+                   help="bit rate in bit/s, e.g. 500000")
+    p.add_argument("--rate-hz", type=number("rate", 0.0, 10000.0, lo_open=True), default=None, metavar="HZ",
+                   help="control rate (default: the DBC's cycle time of the control-loop frames)")
+    p.add_argument("--dbc", type=Path, default=None, help="DBC file (default: the packaged dbc/mrsteer.dbc)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_cmd_busload)
+
+
+def _progress(label: str) -> Callable[..., None]:
+    last = [-1]
+
+    def show(*args: Any) -> None:
+        stage, done, total = args if len(args) == 3 else (label, *args)
+        pct = int(100 * done / total)
+        if pct // 10 != last[0] // 10 or done == total:
+            last[0] = pct
+            print(f"{stage}: {done}/{total}", file=sys.stderr, flush=True)
+
+    return show
+
+
+def _fmt(x: float | None, spec: str) -> str:
+    return "inf" if x is None else format(x, spec)
+
+
+def _margins_table(result: dict[str, Any]) -> str:
+    w = result["worst"]
+    lines = [f"{result['controller']} model regulator K={result['k']:g} tau={result['tau']:g} s "
+             f"tau_n={result['tau_n']:g} s, Ts={result['ts']:g} s, {result['delay_steps']} sample(s) of delay, "
+             f"model delay {result['model_delay_steps']}",
+             f"{len(result['points'])} operating points: {'STABLE' if result['stable'] else 'UNSTABLE'} everywhere"
+             if result["stable"] else
+             f"{len(result['points'])} operating points: UNSTABLE at "
+             f"{sum(not p['stable'] for p in result['points'])} of them",
+             f"{'worst':<22}{'value':>12}   at v [m/s], mu, mass [kg]"]
+    for key, spec in (("max_pole_radius", ".5f"), ("gain_margin_db", ".2f"), ("phase_margin_deg", ".1f"),
+                      ("delay_margin_s", ".5f")):
+        where = w["where"].get(key)
+        at = f"{where['v']:g}, {where['mu']:g}, {where['mass']:g}" if where else "-"
+        lines.append(f"{key:<22}{_fmt(w[key], spec):>12}   {at}")
+    return "\n".join(lines)
+
+
+def _cmd_margins(args: argparse.Namespace) -> int:
+    from sim_plant.margins import envelope_margins
+
+    cfg = replace(mr.ControllerConfig(), q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
+                  ts=args.ts, method=args.method, model_delay_steps=args.model_delay)
+    env = _envelope(args)
+    res = envelope_margins(cfg, args.delay_steps, env, progress=_progress("margins")).as_dict()
+    print(json.dumps(res, indent=2) if args.json else _margins_table(res))
+    return 0
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from sim_plant.tuning import tune
+
+    res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
+               progress=_progress("tune")).as_dict()
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    o = res["objective"]
+    print(f"tuned for Ts={res['ts']:g} s ({res['rate_hz']:g} Hz), {res['delay_steps']} sample(s) of delay:\n"
+          f"  K = {res['k']:.4g}   tau = {res['tau']:.4g} s   tau_n = {res['tau_n']:g} s   "
+          f"model delay = {res['model_delay_steps']}\n"
+          f"  peak yaw rate after {o['m_z_nm']:g} Nm at {o['v']:g} m/s, mu {o['mu']:g}: "
+          f"{o['peak_yaw_rate_rad_s']:.5f} rad/s\n"
+          f"  worst gain margin {_fmt(res['worst']['gain_margin_db'], '.2f')} dB, worst phase margin "
+          f"{_fmt(res['worst']['phase_margin_deg'], '.1f')} deg, worst pole radius "
+          f"{res['worst']['max_pole_radius']:.5f} ({res['search']['feasible']} of {res['search']['screened']} "
+          "grid candidates feasible)")
+    return 0
+
+
+def _cmd_busload(args: argparse.Namespace) -> int:
+    import mrsteer_dbc
+    from mrsteer_dbc.busload import bus_load, max_rate_hz
+
+    contract = mrsteer_dbc.load(args.dbc)
+    load = bus_load(contract, args.bitrate, args.rate_hz)
+    res = load.as_dict()
+    res["max_rate_hz_at_40_percent_worst"] = max_rate_hz(contract, args.bitrate, 40.0)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    print(f"{args.bitrate / 1000:g} kbit/s, control loop at {load.rate_hz:g} Hz")
+    print(f"{'message':<20}{'id':>6}{'bytes':>6}{'cycle ms':>10}{'bits':>6}{'worst':>6}{'load %':>8}{'worst %':>9}")
+    for m in load.messages:
+        print(f"{m.name:<20}{m.frame_id:>#6x}{m.length:>6}{m.cycle_s * 1e3:>10.3g}{m.bits_nominal:>6}"
+              f"{m.bits_worst:>6}{m.load_percent_nominal:>8.2f}{m.load_percent_worst:>9.2f}")
+    print(f"{'total':<54}{load.load_percent_nominal:>8.2f}{load.load_percent_worst:>9.2f}")
+    print(f"highest control rate under 40 % worst-case load: {res['max_rate_hz_at_40_percent_worst']:.0f} Hz")
+    return 0
