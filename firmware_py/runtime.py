@@ -25,6 +25,7 @@ import array
 import gc
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -89,6 +90,47 @@ class _Input:
         self.bad_cause = 0
 
 
+class LatenessHistogram:
+    """Cycle-start lateness in fixed 1 us bins up to 50 ms, preallocated: a run of any length
+    costs no memory (a C port keeps the same uint32 array)."""
+
+    BIN_S = 1e-6
+    BINS = 50_000
+
+    def __init__(self) -> None:
+        self.counts = array.array("I", bytes(4 * (self.BINS + 1)))  # the last bin is overflow
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, late: float) -> None:
+        i = int(late / self.BIN_S) if late > 0.0 else 0
+        self.counts[i if i < self.BINS else self.BINS] += 1
+        self.n += 1
+        if late > self.max:
+            self.max = late
+
+    def percentile(self, q: float) -> float:
+        """Upper edge of the bin holding the q-quantile (the max if it lies in the overflow)."""
+        if self.n == 0:
+            return 0.0
+        rank = min(self.n, max(1, math.ceil(q * self.n)))
+        seen = 0
+        for i, c in enumerate(self.counts):
+            seen += c
+            if seen >= rank:
+                return self.max if i == self.BINS else min((i + 1) * self.BIN_S, self.max)
+        return self.max
+
+
+def _rss_kb() -> int:
+    """Resident set size now, in KiB (Linux /proc; 0 where unavailable)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") // 1024)
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
 @dataclass
 class LoopStats:
     cycles: int = 0
@@ -99,19 +141,20 @@ class LoopStats:
     rx_ignored: int = 0
     tx_frames: int = 0
     faults_entered: int = 0
-    lateness: array.array = field(default_factory=lambda: array.array("d"))
+    lateness: LatenessHistogram = field(default_factory=LatenessHistogram)
+    rss_kb_loop_start: int = 0
+    rss_kb_loop_end: int = 0
+    platform: dict[str, Any] = field(default_factory=dict)  # what real-time features were applied
 
     def summary(self) -> dict[str, Any]:
-        lat = sorted(self.lateness)
-
-        def pct(p: float) -> float:
-            return lat[min(len(lat) - 1, int(p * len(lat)))] if lat else 0.0
-
+        lat = self.lateness
         return {
             "cycles": self.cycles, "overruns": self.overruns, "missed_cycles": self.missed_cycles,
             "rx_frames": self.rx_frames, "rx_rejected": self.rx_rejected, "rx_ignored": self.rx_ignored,
             "tx_frames": self.tx_frames, "faults_entered": self.faults_entered,
-            "lateness_p50_s": pct(0.5), "lateness_p99_s": pct(0.99), "lateness_max_s": lat[-1] if lat else 0.0,
+            "lateness_p50_s": lat.percentile(0.5), "lateness_p99_s": lat.percentile(0.99), "lateness_max_s": lat.max,
+            "rss_kb_loop_start": self.rss_kb_loop_start, "rss_kb_loop_end": self.rss_kb_loop_end,
+            "rss_kb_growth": self.rss_kb_loop_end - self.rss_kb_loop_start, **self.platform,
         }
 
 
@@ -254,12 +297,17 @@ class ControllerNode:
         end = None if self.cfg.duration is None else time.monotonic() + self.cfg.duration
         gc.collect()
         gc.freeze()  # keep start-up objects out of the collector's way during the loop
+        gc.disable()  # the loop makes no reference cycles: reference counting frees everything
+        self.stats.platform["gc_disabled_in_loop"] = True
+        self.stats.rss_kb_loop_start = _rss_kb()
         try:
             if self.cfg.trigger == "sensors":
                 self._run_on_sensors(end)
             else:
                 self._run_on_clock(end)
         finally:
+            self.stats.rss_kb_loop_end = _rss_kb()
+            gc.enable()
             gc.unfreeze()
         self.finish()
 
@@ -273,7 +321,7 @@ class ControllerNode:
                 time.sleep(deadline - now)
                 now = time.monotonic()
             late = now - deadline
-            lateness.append(late)
+            lateness.add(late)
             if late > self._max_lateness:
                 self._max_lateness = late
             if late >= period:
@@ -340,7 +388,30 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
     p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
                    help="write loop statistics as JSON here on exit")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="P",
+                   help="run under SCHED_FIFO at priority P (1..99) where permitted; 0 (default) leaves the "
+                   "scheduler alone; what was applied is reported in --stats-out")
+    p.add_argument("--cpu", type=int, default=None, metavar="N",
+                   help="pin the process to CPU N where permitted (reported in --stats-out)")
     return p
+
+
+def apply_platform(rt_priority: int, cpu: int | None) -> dict[str, Any]:
+    """Real-time priority and CPU pinning, where the OS permits them; says what happened."""
+    out: dict[str, Any] = {"rt_priority": 0, "cpu_affinity": sorted(os.sched_getaffinity(0))}
+    if rt_priority:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+            out["rt_priority"] = rt_priority
+        except (OSError, AttributeError) as exc:
+            out["rt_priority_denied"] = str(exc)
+    if cpu is not None:
+        try:
+            os.sched_setaffinity(0, {cpu})
+        except (OSError, ValueError) as exc:
+            out["cpu_denied"] = str(exc)
+        out["cpu_affinity"] = sorted(os.sched_getaffinity(0))
+    return out
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
@@ -352,6 +423,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error("--timeout-cycles must be at least 1")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be positive")
+    if not 0 <= args.rt_priority <= 99:
+        parser.error(f"--rt-priority must be in 0..99, got {args.rt_priority}")
+    if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
+        parser.error(f"--cpu must be in 0..{(os.cpu_count() or 1) - 1}, got {args.cpu}")
     try:
         ctrl = mr.ControllerConfig(q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
                                    method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz,
@@ -367,6 +442,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     node = ControllerNode(bus, cfg)
+    node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
     signal.signal(signal.SIGTERM, node.stop)
     signal.signal(signal.SIGINT, node.stop)
     print(f"{prog}: running at {args.rate_hz:g} Hz ({args.trigger} trigger) on {bus.channel_info}",

@@ -6,6 +6,8 @@ import random
 
 import cantools
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
@@ -151,3 +153,10 @@ def test_a_broken_dbc_is_a_clear_error(tmp_path) -> None:
         mrsteer_dbc.Contract(bad)
     with pytest.raises(mrsteer_dbc.ContractError, match="not found"):
         mrsteer_dbc.Contract(tmp_path / "missing.dbc")
+
+
+@given(st.binary(max_size=16))
+def test_table_crc_equals_crccheck(data: bytes) -> None:
+    from crccheck.crc import Crc8SaeJ1850
+
+    assert mrsteer_dbc.crc8_sae_j1850(data) == Crc8SaeJ1850.calc(data)

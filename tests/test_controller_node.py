@@ -160,3 +160,19 @@ def test_final_command_is_zero_and_inactive(rig: Rig) -> None:
     d = C.decode(m.arbitration_id, bytes(m.data))
     assert d.name == rt.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
     assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE
+
+
+def test_lateness_histogram_percentiles_and_constant_memory() -> None:
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    values = np.concatenate([rng.exponential(80e-6, 20_000), [0.0, -1e-6, 0.2]])  # negative: early; 0.2: overflow
+    h = rt.LatenessHistogram()
+    size = len(h.counts)
+    for v in values:
+        h.add(float(v))
+    assert len(h.counts) == size and h.n == len(values)
+    assert h.max == 0.2 and h.percentile(1.0) == 0.2
+    for q in (0.5, 0.9, 0.99):
+        exact = float(np.sort(np.maximum(values, 0.0))[int(np.ceil(q * len(values))) - 1])
+        assert exact <= h.percentile(q) <= exact + h.BIN_S
