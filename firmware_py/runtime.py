@@ -56,7 +56,12 @@ CAUSE_LOW_SPEED = 0x20
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
-SENSORS_WATCHDOG_S = 1.0  # sensors trigger: wall time without a yaw-rate frame before a cycle runs anyway
+SENSORS_WATCHDOG_S = 1.0
+DEFAULT_SYNC_OFFSET = 50e-6  # s after the yaw-rate frame's arrival that the cycle aims to start
+SYNC_GAIN = 0.1  # fraction of the phase error corrected per cycle
+SYNC_MAX_SLEW = 0.02  # largest correction per cycle, as a fraction of the period
+SYNC_POLL_S = 20e-6  # polling step inside that window
+SYNC_WINDOW = 0.25  # how long a cycle waits for a late yaw-rate frame, as a fraction of the period  # sensors trigger: wall time without a yaw-rate frame before a cycle runs anyway
 TRIGGERS = ("clock", "sensors")
 
 
@@ -67,6 +72,9 @@ class RuntimeConfig:
     e2e_fail_max: int = 3  # consecutive rejected frames of one input that fault it at once
     max_counter_delta: int = 3
     trigger: str = "clock"
+    # Clock trigger: phase-lock the cycle start to this long after the yaw-rate frames'
+    # arrival, so a measurement waits ~this long for its command (None: free-running grid).
+    sync_offset: float | None = DEFAULT_SYNC_OFFSET
     duration: float | None = None  # s; None runs until a signal
     controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
 
@@ -158,6 +166,19 @@ class LoopStats:
         }
 
 
+def phase_correction(arrival: float, cycle_start: float, period: float, offset: float) -> float:
+    """Shift of the next deadline that moves cycle starts toward ``arrival + offset``.
+
+    The error is wrapped into half a period either way (the grid may lock onto the nearest
+    frame), a fraction SYNC_GAIN of it is corrected, at most SYNC_MAX_SLEW of a period per
+    cycle, so sensor jitter cannot drag the loop around.
+    """
+    err = arrival + offset - cycle_start
+    err -= period * round(err / period)
+    limit = SYNC_MAX_SLEW * period
+    return max(-limit, min(limit, SYNC_GAIN * err))
+
+
 class ControllerNode:
     """One controller on one bus.  ``cycle()`` is the periodic body; ``run()`` the loop."""
 
@@ -204,6 +225,7 @@ class ControllerNode:
         self._running = True
         self._was_fault = False
         self._answers = MEAS_NONE
+        self._yaw_stamp = 0.0  # bus timestamp (epoch s) of the newest accepted yaw-rate frame
 
     # ---------------------------------------------------------------- receive
 
@@ -227,7 +249,10 @@ class ControllerNode:
         inp.value = decoded.signals[inp.signal]
         inp.last_counter = decoded.counter
         inp.age = 0
-        return msg.arbitration_id == self.yaw_id
+        if msg.arbitration_id == self.yaw_id:
+            self._yaw_stamp = msg.timestamp or 0.0
+            return True
+        return False
 
     def drain(self) -> bool:
         got_yaw = False
@@ -315,6 +340,9 @@ class ControllerNode:
         period = self.period
         deadline = time.monotonic()
         lateness = self.stats.lateness
+        sync = self.cfg.sync_offset
+        window = SYNC_WINDOW * period
+        epoch_to_mono = time.monotonic() - time.time()
         while self._running:
             now = time.monotonic()
             if now < deadline:
@@ -330,9 +358,22 @@ class ControllerNode:
                 self.stats.overruns += 1
                 self.stats.missed_cycles += missed
                 deadline += missed * period
-            self.drain()
+            got_yaw = self.drain()
+            if sync is not None and not got_yaw:
+                # This period's frame is late: give it a bounded window rather than answer it a
+                # whole period later.
+                # Polled in short sleeps: socket timeouts round up to whole milliseconds.
+                until = now + window
+                while not got_yaw and (left := until - time.monotonic()) > 0.0:
+                    msg = self.bus.recv(0.0)
+                    if msg is None:
+                        time.sleep(min(left, SYNC_POLL_S))
+                    else:
+                        got_yaw = self._receive(msg)
             self.control()
             deadline += period
+            if sync is not None and got_yaw and self._yaw_stamp > 0.0:
+                deadline += phase_correction(self._yaw_stamp + epoch_to_mono, now, period, sync)
             if end is not None and now >= end:
                 break
 
@@ -372,6 +413,10 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
                    help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains were tuned for)")
     p.add_argument("--trigger", choices=TRIGGERS, default="clock",
                    help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
+    p.add_argument("--sync-offset-us", type=float, default=DEFAULT_SYNC_OFFSET * 1e6, metavar="US",
+                   help="clock trigger: start each cycle this long after the yaw-rate frame arrives, by "
+                   f"phase-locking the loop to the frames (default {DEFAULT_SYNC_OFFSET * 1e6:g})")
+    p.add_argument("--no-sync", action="store_true", help="clock trigger: free-running grid, no phase lock")
     p.add_argument("--timeout-cycles", type=int, default=10,
                    help="an input missing for more than this many of its own cycle times is a fault (default 10)")
     p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
@@ -434,7 +479,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         mr.configure(ctrl)
     except ValueError as exc:
         parser.error(str(exc))
+    if not (math.isfinite(args.sync_offset_us) and 0.0 <= args.sync_offset_us * 1e-6 < 1.0 / args.rate_hz):
+        parser.error(f"--sync-offset-us must be in [0, one period), got {args.sync_offset_us}")
     cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
+                        sync_offset=None if args.no_sync else args.sync_offset_us * 1e-6,
                         duration=args.duration, controller=ctrl)
     try:
         bus = open_bus(args.interface, args.channel)

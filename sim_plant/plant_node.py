@@ -271,6 +271,7 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mu", type=float, help="override the scenario's friction")
     p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
+    p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
     p.add_argument("--cmd-timeout", type=float, default=0.02, metavar="S",
                    help="no valid command for this long: the actuator fades to zero (default 0.02)")
     p.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
@@ -294,7 +295,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         if not (math.isfinite(value) and value > 0):
             parser.error(f"--{name.replace('_', '-')} must be positive")
     try:
-        sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass)
+        sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass,
+                                                   duration=args.duration)
     except scn.ScenarioError as exc:
         parser.error(str(exc))
     try:

@@ -78,9 +78,12 @@ class Scenario:
     description: str = ""
 
     def with_overrides(self, v: float | None = None, mu: float | None = None, mz: float | None = None,
-                       mass: float | None = None, reaction_time: float | None = None) -> "Scenario":
+                       mass: float | None = None, reaction_time: float | None = None,
+                       duration: float | None = None) -> "Scenario":
         """The same scenario at another operating point; ``mz`` replaces every yaw-moment step."""
         sc = self
+        if duration is not None:
+            sc = replace(sc, duration=duration)
         if v is not None:
             sc = replace(sc, v=v)
         if mu is not None:

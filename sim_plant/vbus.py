@@ -10,7 +10,8 @@ machine only.  Semantics follow SocketCAN:
   ``receive_own_messages=True``; then it gets them at their place in the total order;
 * receive filters (``can_filters``/``set_filters``) are applied in the broker like kernel
   filters, so filtered-out traffic never reaches the client process;
-* every received ``can.Message`` carries its receive timestamp (``time.time()``);
+* every received ``can.Message`` carries the time the broker put it on the bus
+  (``time.time()``), as SocketCAN stamps a frame when the kernel receives it;
 * a slow client's queue is bounded (like a socket receive buffer): when it overflows the
   broker drops that client's frames and counts them, it never stalls the others;
 * every failure reaches the user as a ``can.CanError`` subclass; when the broker dies the next
@@ -43,6 +44,7 @@ from can import BusABC, CanInitializationError, CanOperationError, Message
 DEFAULT_CHANNEL = "mrsteer0"
 INTERFACE_NAME = "mrsteer"
 _FRAME = struct.Struct("<cBdIBB")  # type b"F", flags, timestamp, arbitration id, dlc, data length
+_STAMP = struct.Struct("<d")  # the timestamp field of _FRAME, at offset 2
 _FILTER = struct.Struct("<IIb")  # can_id, can_mask, extended (-1: either)
 _OPTIONS = struct.Struct("<cB")  # type b"O", receive_own
 _MAX_PACKET = _FRAME.size + 64
@@ -87,9 +89,9 @@ def _pack_frame(msg: Message, flags_extra: int = 0) -> bytes:
 
 
 def _unpack_frame(packet: bytes, channel: str) -> Message:
-    _, flags, _, arb, dlc, n = _FRAME.unpack_from(packet)
+    _, flags, stamp, arb, dlc, n = _FRAME.unpack_from(packet)
     return Message(
-        timestamp=time.time(),
+        timestamp=stamp,
         arbitration_id=arb,
         is_extended_id=bool(flags & F_EXTENDED),
         is_remote_frame=bool(flags & F_REMOTE),
@@ -381,6 +383,7 @@ class Broker:
     def _fan_out(self, sender: _Client, packet: bytes) -> None:
         self.frames += 1
         _, flags, _, arb, _, _ = _FRAME.unpack_from(packet)
+        packet = packet[:2] + _STAMP.pack(time.time()) + packet[2 + _STAMP.size:]  # on the bus now
         extended = bool(flags & F_EXTENDED)
         own_packet = None
         for client in list(self._clients.values()):

@@ -114,6 +114,12 @@ def test_frames_carry_receive_timestamps_and_payloads(broker, channel: str) -> N
     assert before <= a.timestamp <= time.time()
     assert a.arbitration_id == 0x1ABCDEF and a.is_extended_id and bytes(a.data) == bytes(range(8))
     assert b.is_fd and b.bitrate_switch and len(b.data) == 64
+    # The stamp is when the frame was on the bus, not when the receiver got round to reading it.
+    sent = time.time()
+    tx.send(can.Message(arbitration_id=0x13, data=b"\x01", is_extended_id=False))
+    time.sleep(0.3)
+    late = rx.recv(5.0)
+    assert late is not None and sent <= late.timestamp <= sent + 0.2 < time.time()
     tx.shutdown()
     rx.shutdown()
 

@@ -133,7 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name, text in (("controller", "run the controller process on a CAN bus (same as python -m firmware_py)"),
                        ("plant", "run the simulated car on a CAN bus (same as python -m sim_plant)"),
-                       ("bus", "run the fallback CAN bus broker (for machines without vcan)")):
+                       ("bus", "run the fallback CAN bus broker (for machines without vcan)"),
+                       ("bench", "benchmarks with same-run baselines (mrsteer bench --help)")):
         p = sub.add_parser(name, help=text, add_help=False, description=text)
         p.add_argument("args", nargs=argparse.REMAINDER)
         p.set_defaults(handler=_delegate(name))
@@ -196,6 +197,8 @@ def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
             from firmware_py.runtime import main as target
         elif name == "plant":
             from sim_plant.plant_node import main as target
+        elif name == "bench":
+            from mrsteer_bench.run import main as target
         else:
             from sim_plant.vbus import main as target
         return target(args.args, prog=f"mrsteer {name}")
@@ -355,7 +358,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     return 0
 
 
-DELEGATED = ("controller", "plant", "bus")
+DELEGATED = ("controller", "plant", "bus", "bench")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

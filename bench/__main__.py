@@ -1,0 +1,5 @@
+import sys
+
+from mrsteer_bench.run import main
+
+sys.exit(main())

@@ -1,0 +1,127 @@
+"""Loop timing, latency and memory of the controller process on the fallback bus, with the
+plant running in real time: the product as users run it, measured from outside."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+import mrsteer_dbc
+from firmware_py import runtime as rt
+
+READY_TIMEOUT_S = 60.0
+
+
+class _LatencyProbe:
+    """A bus client that pairs each yaw-rate frame with the command answering it
+    (AuxSteerCmd_MeasCounter) and keeps the time between their arrivals."""
+
+    def __init__(self, channel: str) -> None:
+        c = mrsteer_dbc.load()
+        self.yaw_id, self.cmd_id = c.frame_id(rt.MSG_YAW), c.frame_id(rt.MSG_CMD)
+        self.contract = c
+        self.bus = can.Bus(interface="mrsteer", channel=channel,
+                           can_filters=[{"can_id": i, "can_mask": 0x7FF, "extended": False}
+                                        for i in (self.yaw_id, self.cmd_id)])
+        self.latencies: list[float] = []
+        self._yaw_at: dict[int, float] = {}
+        self._run = True
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        clock = time.perf_counter
+        while self._run:
+            msg = self.bus.recv(0.1)
+            if msg is None:
+                continue
+            now = clock()
+            d = self.contract.decode(msg.arbitration_id, bytes(msg.data))
+            if d is None or not d.status.accepted:
+                continue
+            if msg.arbitration_id == self.yaw_id:
+                self._yaw_at[d.counter] = now
+            else:
+                meas = int(d.signals["AuxSteerCmd_MeasCounter"])
+                t = self._yaw_at.pop(meas, None)
+                if t is not None and now - t < 0.1:
+                    self.latencies.append(now - t)
+
+    def stop(self) -> list[float]:
+        self._run = False
+        self.thread.join(5)
+        self.bus.shutdown()
+        return self.latencies
+
+
+def _spawn(argv: list[str], err: Path) -> subprocess.Popen:
+    return subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err.open("w"))
+
+
+def _wait_for(path: Path, needle: str, proc: subprocess.Popen) -> None:
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while needle not in (path.read_text() if path.exists() else ""):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"benchmark process did not start: {path.read_text()[-500:]}")
+        time.sleep(0.05)
+
+
+def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, Any]:
+    """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus."""
+    py = sys.executable
+    with tempfile.TemporaryDirectory(prefix="mrsteer-bench-") as tmp:
+        work = Path(tmp)
+        env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
+        procs: list[subprocess.Popen] = []
+        try:
+            broker = _spawn([py, "-m", "sim_plant.vbus", "--channel", env_channel], work / "bus.err")
+            procs.append(broker)
+            _wait_for(work / "bus.err", "serving", broker)
+            ncpu = os.cpu_count() or 1
+            pin_args = ["--cpu", str(ncpu - 1)] if pin and ncpu > 1 else []
+            ctl = _spawn([py, "-m", "firmware_py", "--interface", "mrsteer", "--channel", env_channel,
+                          "--rate-hz", repr(rate_hz), "--duration", repr(seconds), "--rt-priority", "50",
+                          *pin_args, "--stats-out", str(work / "ctl.json")], work / "ctl.err")
+            procs.append(ctl)
+            _wait_for(work / "ctl.err", "running at", ctl)
+            probe = _LatencyProbe(env_channel)
+            plant = _spawn([py, "-m", "sim_plant", "--interface", "mrsteer", "--channel", env_channel,
+                            "--mode", "realtime", "--rate-hz", repr(rate_hz), "--scenario", "paper-fig9",
+                            "--duration", repr(seconds + 2.0)], work / "plant.err")
+            procs.append(plant)
+            if ctl.wait(seconds + 120) != 0:
+                raise RuntimeError(f"controller failed: {(work / 'ctl.err').read_text()[-500:]}")
+            lat = probe.stop()
+            stats = json.loads((work / "ctl.json").read_text())
+        finally:
+            for p in reversed(procs):
+                if p.poll() is None:
+                    p.send_signal(signal.SIGTERM)
+                    try:
+                        p.wait(10)
+                    except subprocess.TimeoutExpired:
+                        p.kill()
+    cycles = max(1, stats["cycles"] + stats["missed_cycles"])
+    arr = np.array(lat) if lat else np.array([np.nan])
+    return {
+        "rate_hz": rate_hz, "seconds": seconds, "cycles": stats["cycles"],
+        "lateness_p50_us": 1e6 * stats["lateness_p50_s"], "lateness_p99_us": 1e6 * stats["lateness_p99_s"],
+        "lateness_max_us": 1e6 * stats["lateness_max_s"], "missed_cycles": stats["missed_cycles"],
+        "missed_percent": 100.0 * stats["missed_cycles"] / cycles,
+        "latency_p50_us": float(1e6 * np.median(arr)), "latency_p99_us": float(1e6 * np.percentile(arr, 99)),
+        "latency_samples": len(lat),
+        "rss_kb": stats["rss_kb_loop_end"], "rss_growth_kb": stats["rss_kb_growth"],
+        "rt_priority": stats.get("rt_priority"), "rt_priority_denied": stats.get("rt_priority_denied"),
+        "cpu_affinity": stats.get("cpu_affinity"), "gc_disabled_in_loop": stats.get("gc_disabled_in_loop"),
+    }
