@@ -38,7 +38,7 @@ import can
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser
+from firmware_py.cli_support import Parser, model_delay_help, resolve_model_delay
 
 MSG_STEER = "MRS_DriverSteer"
 MSG_YAW = "MRS_YawRate"
@@ -425,9 +425,8 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--tau", type=float, default=d.tau, help=f"eq. (22) time constant in s (default {d.tau:g})")
     p.add_argument("--tau-n", type=float, default=d.tau_n, help=f"eq. (18) time constant in s (default {d.tau_n:g})")
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method)
-    p.add_argument("--model-delay", type=int, default=d.model_delay_steps, metavar="M",
-                   help=f"command-to-effect delay in cycles modelled by the controller, 0..{mr.MAX_MODEL_DELAY} "
-                   f"(default {d.model_delay_steps})")
+    p.add_argument("--model-delay", type=int, default=None, metavar="M",
+                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
     p.add_argument("--rate-limit", type=float, default=0.0, metavar="RAD_S",
                    help="command rate limit in rad/s (default 0: off)")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
@@ -462,6 +461,7 @@ def apply_platform(rt_priority: int, cpu: int | None) -> dict[str, Any]:
 def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
+    resolve_model_delay(args)
     if not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
         parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
     if args.timeout_cycles < 1:

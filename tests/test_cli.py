@@ -152,3 +152,10 @@ def test_out_that_is_a_file_is_refused_without_writing(tmp_path: Path) -> None:
 def test_every_command_has_help(cmd: list[str]) -> None:
     proc = _run(*cmd, "--help")
     assert proc.returncode == 0 and "usage:" in proc.stdout
+
+
+def test_model_delay_defaults_follow_the_gains(capsys: pytest.CaptureFixture[str]) -> None:
+    base = ("sim", "disturbance", "--mz", "1000", "--v", "20", "--mu", "1", "--ts", "0.002")
+    assert _json(capsys, *base)["model_delay_steps"] == mr.ControllerConfig().model_delay_steps == 1
+    assert _json(capsys, *base, "--k", "10", "--tau", "0.006")["model_delay_steps"] == 0  # the paper's law
+    assert _json(capsys, *base, "--k", "10", "--tau", "0.006", "--model-delay", "1")["model_delay_steps"] == 1

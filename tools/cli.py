@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import EXIT_USAGE, Parser
+from firmware_py.cli_support import EXIT_USAGE, Parser, model_delay_help, resolve_model_delay
 from mrsteer_cli import design_cli
 from sim_plant import experiments
 from sim_plant.closed_loop import CONTROLLERS
@@ -86,9 +86,8 @@ def _add_controller(p: argparse.ArgumentParser, choices: Sequence[str] = CONTROL
                    help="0 (default): continuous reference; T > 0: the firmware at step T with the exact ZOH plant")
     p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
                    help="samples between measurement and applied command when --ts > 0 (default 1)")
-    p.add_argument("--model-delay", type=_count, default=d.model_delay_steps, metavar="M",
-                   help=f"command delay the firmware models when --ts > 0, 0..{mr.MAX_MODEL_DELAY} "
-                   f"(default {d.model_delay_steps})")
+    p.add_argument("--model-delay", type=_count, default=None, metavar="M",
+                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
     p.add_argument("--duration", type=_number("duration", 0.0, MAX_DURATION, lo_open=True), default=3.0,
                    metavar="S", help="simulated time in s (default 3)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -164,8 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"time constant tau in s (default {d.tau:g})")
     p.add_argument("--tau-n", type=_number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
                    help=f"desired-model time constant in s (default {d.tau_n:g})")
-    p.add_argument("--model-delay", type=_count, default=d.model_delay_steps, metavar="M",
-                   help=f"command delay the controller models, 0..{mr.MAX_MODEL_DELAY} (default {d.model_delay_steps})")
+    p.add_argument("--model-delay", type=_count, default=None, metavar="M",
+                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
     p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -368,6 +367,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _delegate(argv[0])(argparse.Namespace(args=argv[1:]))
     parser = build_parser()
     args = parser.parse_args(argv)
+    resolve_model_delay(args)
     try:
         return args.handler(args)
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
+from firmware_py.cli_support import model_delay_help
 from sim_plant.vehicle import MAX_MU
 
 GRID_HELP = "LO:HI:N (N evenly spaced values, ends included) or a single value"
@@ -83,9 +84,8 @@ def add_parsers(sub: Any, number: Callable[..., Callable[[str], float]], count: 
                    help=f"time constant tau in s (default {d.tau:g})")
     p.add_argument("--tau-n", type=number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
                    help=f"desired-model time constant in s (default {d.tau_n:g})")
-    p.add_argument("--model-delay", type=count, default=d.model_delay_steps, metavar="M",
-                   help=f"command delay modelled inside the controller, 0..{mr.MAX_MODEL_DELAY} "
-                   f"(default {d.model_delay_steps})")
+    p.add_argument("--model-delay", type=count, default=None, metavar="M",
+                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
                    help=f"discretisation (default {d.method})")
     _add_envelope(p)
