@@ -140,6 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     design_cli.add_parsers(sub, _number, _count, Parser)
 
+    p = sub.add_parser("vectors", help="write golden test vectors for ports of the controller",
+                       description="Write, for several configurations and scenarios, every step's inputs, command "
+                       "and state as CSV, and each configuration's calibration and coefficients as key = value "
+                       "lines (see docs/porting.md). tests/vectors/ holds the checked-in set.")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created if needed)")
+    p.set_defaults(handler=_cmd_vectors)
+
     hil = sub.add_parser("hil", help="hardware-in-the-loop runs: plant, controller and logger on one bus",
                          description="Hardware-in-the-loop runs on SocketCAN vcan0 or the fallback bus.")
     hil_sub = hil.add_subparsers(dest="hil_command", required=True, parser_class=Parser)
@@ -354,6 +361,15 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     else:
         print(paper.format_table(run))
         print(f"\nwrote {len(written)} files to {args.out}/")
+    return 0
+
+
+def _cmd_vectors(args: argparse.Namespace) -> int:
+    from sim_plant import vectors
+
+    written = vectors.write_all(args.out, progress=_say)
+    print(f"wrote {len(vectors.CONFIGS)} configurations and {len(written)} vector files "
+          f"({sum(w.rows for w in written)} steps) to {args.out}/")
     return 0
 
 

@@ -1,0 +1,80 @@
+/*
+ * mrsteer limited-integrator model regulator: C99 reference port of firmware_py/model_regulator.py.
+ *
+ * Split as generated embedded code is: mrs_configure() computes every coefficient once from the
+ * calibration (the only place with divisions by calibration values, exp() or validation);
+ * mrs_init_state() sets the power-on state; mrs_step() is one control period of scalar
+ * arithmetic on the coefficient and state structs: no heap, no recursion, no library call.
+ *
+ * Build with -DMRS_FLOAT32 for single precision (mrs_real_t = float); the default is double.
+ * docs/porting.md is the guide; tests/vectors/ holds the golden vectors.
+ */
+#ifndef MRS_CONTROLLER_H
+#define MRS_CONTROLLER_H
+
+#include <stdint.h>
+
+#ifdef MRS_FLOAT32
+typedef float mrs_real_t;
+#else
+typedef double mrs_real_t;
+#endif
+
+#define MRS_MAX_MODEL_DELAY 8
+
+/* Status as sent on the bus (AuxSteerCmd_State). */
+#define MRS_STATUS_INACTIVE 0u
+#define MRS_STATUS_ACTIVE 1u
+#define MRS_STATUS_SATURATED 2u
+#define MRS_STATUS_FAULT 3u
+
+/* Fault flags: which input was invalid. */
+#define MRS_FAULT_DRIVER_ANGLE 0x01u
+#define MRS_FAULT_YAW_RATE 0x02u
+#define MRS_FAULT_SPEED 0x04u
+
+typedef enum { MRS_Q_LIMITED = 0, MRS_Q_STANDARD = 1 } mrs_q_form_t;
+typedef enum { MRS_TUSTIN = 0, MRS_ZOH = 1 } mrs_method_t;
+
+/* Calibration (ControllerConfig). Angles in rad of front-wheel angle, times in s. */
+typedef struct {
+    mrs_q_form_t q_form;
+    double k, tau, tau_n, ts;
+    mrs_method_t method;
+    double aux_limit, rate_limit, fade_rate;
+    int model_delay_steps;
+    double speed_active_min, speed_max, driver_angle_max, yaw_rate_max;
+    double nominal_l_f, nominal_l_r, nominal_mass, nominal_c_f, nominal_c_r;
+} mrs_config_t;
+
+/* Everything mrs_step() needs (Coefficients). */
+typedef struct {
+    mrs_real_t a, g_w0, g_w1, g_r0, g_r1, q0, inv_one_minus_g_w0;
+    int model_delay;
+    mrs_real_t wheelbase, k_us, u_max, du_max, fade_step;
+    mrs_real_t speed_active_min, speed_max, driver_angle_max, yaw_rate_max;
+} mrs_coeffs_t;
+
+/* Preallocated state (State). */
+typedef struct {
+    mrs_real_t z, u_prev;
+    mrs_real_t u_hist[MRS_MAX_MODEL_DELAY];
+    uint8_t hist_idx, needs_init, recovering, status, fault_flags;
+} mrs_state_t;
+
+/* The shipped calibration (500 Hz). */
+void mrs_default_config(mrs_config_t *cfg);
+
+/* Validate the calibration and fill the coefficients; 0 on success, -1 if it is invalid. */
+int mrs_configure(const mrs_config_t *cfg, mrs_coeffs_t *c);
+
+/* Power-on state: command 0, re-initialised on the first valid step. */
+void mrs_init_state(mrs_state_t *s);
+
+/* One control period: driver's front-wheel angle (rad), yaw rate (rad/s), speed (m/s) in;
+ * auxiliary front-wheel angle command (rad) out. s->status and s->fault_flags say what happened.
+ * Non-finite inputs are faults: they never reach the state or the output. */
+mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
+                    mrs_real_t speed);
+
+#endif

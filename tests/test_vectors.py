@@ -1,0 +1,67 @@
+"""Golden vectors: the Python firmware replays them exactly, and they are current."""
+
+from __future__ import annotations
+
+import csv
+import filecmp
+import math
+from pathlib import Path
+
+import pytest
+
+from firmware_py import model_regulator as mr
+from sim_plant import vectors
+
+VECTOR_DIR = Path(__file__).parent / "vectors"
+FILES = sorted(VECTOR_DIR.glob("*__*.csv"))
+
+
+def test_every_configuration_and_scenario_is_checked_in() -> None:
+    expected = {f"{c}__{s}.csv" for c in vectors.CONFIGS for s in vectors.SCENARIOS}
+    assert {p.name for p in FILES} == expected
+    assert {p.stem for p in VECTOR_DIR.glob("*.cfg")} == set(vectors.CONFIGS)
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_python_firmware_replays_the_vectors_exactly(path: Path) -> None:
+    cfg = vectors.read_config(VECTOR_DIR / f"{path.stem.split('__')[0]}.cfg")
+    c, s = mr.configure(cfg), mr.State()
+    with path.open() as f:
+        rows = list(csv.reader(f))
+    assert tuple(rows[0]) == vectors.COLUMNS
+    for row in rows[1:]:
+        u = mr.step(c, s, float(row[1]), float(row[2]), float(row[3]))
+        assert repr(u) == row[4], f"step {row[0]}"
+        assert vectors.state_row(s) == row[5:], f"state after step {row[0]}"
+    assert len(rows) > 100
+
+
+def test_coefficient_tables_match_configure() -> None:
+    for cfg_path in VECTOR_DIR.glob("*.cfg"):
+        cfg = vectors.read_config(cfg_path)
+        c = mr.configure(cfg)
+        table = dict(line.split(" = ") for line in cfg_path.read_text().splitlines() if line.startswith("c."))
+        for key, text in table.items():
+            value = getattr(c, key[2:])
+            assert (repr(float(value)) if isinstance(value, float) else str(value)) == text, (cfg_path.name, key)
+
+
+def test_vectors_cover_every_status_and_fault_flag() -> None:
+    statuses, flags = set(), set()
+    for path in FILES:
+        with path.open() as f:
+            for row in csv.DictReader(f):
+                statuses.add(int(row["status"]))
+                flags.add(int(row["fault_flags"]))
+                if not all(math.isfinite(float(row[k])) for k in ("delta_driver", "yaw_rate", "speed")):
+                    assert int(row["status"]) == mr.STATUS_FAULT
+    assert statuses == {mr.STATUS_INACTIVE, mr.STATUS_ACTIVE, mr.STATUS_SATURATED, mr.STATUS_FAULT}
+    assert {mr.FAULT_DRIVER_ANGLE, mr.FAULT_YAW_RATE, mr.FAULT_SPEED, mr.FAULT_YAW_RATE | mr.FAULT_SPEED} <= flags
+
+
+def test_checked_in_vectors_are_what_the_generator_writes(tmp_path: Path) -> None:
+    vectors.write_all(tmp_path)
+    names = sorted(p.name for p in VECTOR_DIR.iterdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == names
+    match, mismatch, errors = filecmp.cmpfiles(VECTOR_DIR, tmp_path, names, shallow=False)
+    assert mismatch == [] and errors == [], "run `mrsteer vectors --out tests/vectors` and commit"
