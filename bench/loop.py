@@ -77,6 +77,28 @@ def _wait_for(path: Path, needle: str, proc: subprocess.Popen) -> None:
         time.sleep(0.05)
 
 
+def bare_loop_lateness(rate_hz: float, seconds: float) -> dict[str, float]:
+    """The baseline: an empty absolute-deadline loop in this process, same rate, same clock.
+    What the machine's timer and scheduler alone cost, measured in the same run."""
+    period = 1.0 / rate_hz
+    late = []
+    clock = time.monotonic
+    deadline = clock()
+    end = deadline + seconds
+    while True:
+        now = clock()
+        if now < deadline:
+            time.sleep(deadline - now)
+            now = clock()
+        late.append(now - deadline)
+        deadline += period
+        if now >= end:
+            break
+    arr = np.array(late)
+    return {"p50_us": float(1e6 * np.median(arr)), "p99_us": float(1e6 * np.percentile(arr, 99)),
+            "max_us": float(1e6 * arr.max())}
+
+
 def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, Any]:
     """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus."""
     py = sys.executable
@@ -112,12 +134,16 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
                         p.wait(10)
                     except subprocess.TimeoutExpired:
                         p.kill()
+    base = bare_loop_lateness(rate_hz, min(seconds, 5.0))
     cycles = max(1, stats["cycles"] + stats["missed_cycles"])
     arr = np.array(lat) if lat else np.array([np.nan])
     return {
         "rate_hz": rate_hz, "seconds": seconds, "cycles": stats["cycles"],
         "lateness_p50_us": 1e6 * stats["lateness_p50_s"], "lateness_p99_us": 1e6 * stats["lateness_p99_s"],
         "lateness_max_us": 1e6 * stats["lateness_max_s"], "missed_cycles": stats["missed_cycles"],
+        "baseline_lateness_p50_us": base["p50_us"], "baseline_lateness_p99_us": base["p99_us"],
+        "baseline_lateness_max_us": base["max_us"],
+        "baseline_name": "empty absolute-deadline loop, same rate, bench process, no RT priority",
         "missed_percent": 100.0 * stats["missed_cycles"] / cycles,
         "latency_p50_us": float(1e6 * np.median(arr)), "latency_p99_us": float(1e6 * np.percentile(arr, 99)),
         "latency_samples": len(lat),

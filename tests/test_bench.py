@@ -63,4 +63,5 @@ def test_loop_benchmark_measures_a_live_controller() -> None:
     r = loop_timing(500.0, 1.5, pin=False)
     assert r["cycles"] > 300 and r["latency_samples"] > 100
     assert r["rss_kb"] > 0 and r["gc_disabled_in_loop"] is True
+    assert 0.0 <= r["baseline_lateness_p50_us"] <= r["baseline_lateness_p99_us"]
     assert 0.0 <= r["lateness_p50_us"] <= r["lateness_p99_us"] <= r["lateness_max_us"]

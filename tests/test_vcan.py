@@ -48,15 +48,15 @@ def _mrsteer(*args: str, timeout: float = 1800) -> subprocess.CompletedProcess[s
 
 
 class Candump:
-    """The real ``candump -L vcan0``, line-buffered into a file, ready when it has seen a probe."""
+    """The real ``candump [-L] vcan0``, line-buffered into a file, ready when it has seen a probe."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, log_format: bool = True) -> None:
         self.path = path
         self._out = path.open("w")
-        self.proc = subprocess.Popen(["stdbuf", "-oL", _tool("candump"), "-L", "vcan0"], stdout=self._out,
-                                     stderr=subprocess.PIPE)
+        self.proc = subprocess.Popen(["stdbuf", "-oL", _tool("candump"), *(["-L"] if log_format else []), "vcan0"],
+                                     stdout=self._out, stderr=subprocess.PIPE)
         deadline = time.monotonic() + 120
-        while "7FF#" not in path.read_text():
+        while not any(probe in path.read_text() for probe in ("7FF#", "7FF   [1]")):
             assert self.proc.poll() is None, self.proc.stderr.read()
             assert time.monotonic() < deadline, "candump never saw the probe frame"
             subprocess.run([_tool("cansend"), "vcan0", "7FF#00"], check=True)
@@ -71,12 +71,14 @@ class Candump:
 
 def test_lockstep_hil_on_vcan0_matches_offline_and_candump_decodes(tmp_path: Path) -> None:
     dump = Candump(tmp_path / "candump.log")
+    plain = Candump(tmp_path / "candump.txt", log_format=False)  # what `candump vcan0 | cantools decode` reads
     try:
         run = _mrsteer("hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200",
                        "--k", "3", "--tau", "0.05", "--v", "24", "--mu", "0.95", "--out", str(tmp_path / "hil"),
                        "--json")
     finally:
         text = dump.stop()
+        plain_text = plain.stop()
     assert run.returncode == 0, run.stderr
     hil = json.loads(run.stdout)
     off = _mrsteer("sim", "disturbance", "--mz", "4000", "--v", "24", "--mu", "0.95", "--ts", "0.005",
@@ -95,6 +97,12 @@ def test_lockstep_hil_on_vcan0_matches_offline_and_candump_decodes(tmp_path: Pat
     for name in ("MRS_YawRate(", "MRS_AuxSteerCmd(", "MRS_DriverSteer(", "MRS_VehicleSpeed("):
         assert name in dec.stdout
     assert "YawRate_YawRate" in dec.stdout and "AuxSteerCmd_State" in dec.stdout
+
+    # The README's pipe: plain `candump vcan0` output decodes too.
+    dec = subprocess.run([sys.executable, "-m", "cantools", "decode", str(ROOT / "dbc" / "mrsteer.dbc")],
+                         input=plain_text, capture_output=True, text=True, timeout=600)
+    assert dec.returncode == 0, dec.stderr
+    assert "MRS_YawRate(" in dec.stdout and "MRS_AuxSteerCmd(" in dec.stdout
 
 
 def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_path: Path) -> None:
