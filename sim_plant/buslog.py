@@ -6,7 +6,6 @@ Runs until SIGINT/SIGTERM, then drains what is still queued, flushes and reports
 
 from __future__ import annotations
 
-import argparse
 import json
 import signal
 import sys

@@ -23,7 +23,6 @@ Use it as ``can.Bus(interface="mrsteer", channel="mrsteer0")`` (registered throu
 
 from __future__ import annotations
 
-import argparse
 import collections
 import errno
 import fcntl

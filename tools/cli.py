@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import EXIT_USAGE, Parser, model_delay_help, resolve_model_delay
+from firmware_py.cli_support import EXIT_USAGE, Parser, resolve_model_delay
 from mrsteer_cli import design_cli
+from mrsteer_cli.cli_args import add_gains, count, number
 from sim_plant import experiments
 from sim_plant.closed_loop import CONTROLLERS
 from sim_plant.vehicle import MAX_MU, PAPER_MASS, VehicleParams
@@ -30,44 +31,12 @@ class UsageError(Exception):
     """Bad input from the user: reported as one line, exit status 2."""
 
 
-def _number(kind: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-            allow_zero: bool = False) -> Callable[[str], float]:
-    """argparse type: a finite float within [lo, hi] (or (lo, hi] with lo_open)."""
-
-    def parse(text: str) -> float:
-        try:
-            x = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{kind} must be a number, got {text!r}") from None
-        if not math.isfinite(x):
-            raise argparse.ArgumentTypeError(f"{kind} must be finite, got {text!r}")
-        if allow_zero and x == 0.0:
-            return x
-        below = (x <= lo) if lo_open else (x < lo) if lo is not None else False
-        if below or (hi is not None and x > hi):
-            left = "(" if lo_open else "["
-            raise argparse.ArgumentTypeError(f"{kind} must be in {left}{lo:g}, {hi:g}], got {text}")
-        return x
-
-    return parse
-
-
-def _count(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if not 0 <= n <= 100:
-        raise argparse.ArgumentTypeError(f"must be in [0, 100], got {n}")
-    return n
-
-
 def _add_operating_point(p: argparse.ArgumentParser, required: bool) -> None:
-    p.add_argument("--v", type=_number("speed v", *SPEED_RANGE), required=required, default=None if required else 20.0,
+    p.add_argument("--v", type=number("speed v", *SPEED_RANGE), required=required, default=None if required else 20.0,
                    metavar="MPS", help=f"speed in m/s, {SPEED_RANGE[0]:g}..{SPEED_RANGE[1]:g}")
-    p.add_argument("--mu", type=_number("friction mu", 0.0, MAX_MU, lo_open=True), required=required,
+    p.add_argument("--mu", type=number("friction mu", 0.0, MAX_MU, lo_open=True), required=required,
                    default=None if required else 1.0, metavar="MU", help=f"road friction, (0, {MAX_MU:g}]")
-    p.add_argument("--mass", type=_number("mass", *MASS_RANGE), default=PAPER_MASS, metavar="KG",
+    p.add_argument("--mass", type=number("mass", *MASS_RANGE), default=PAPER_MASS, metavar="KG",
                    help=f"vehicle mass in kg (default {PAPER_MASS:g}, the paper's)")
 
 
@@ -75,20 +44,14 @@ def _add_controller(p: argparse.ArgumentParser, choices: Sequence[str] = CONTROL
     d = mr.ControllerConfig()
     p.add_argument("--controller", choices=choices, default=mr.Q_LIMITED,
                    help="none, standard (eq. 17) or limited (eq. 22) model regulator (default limited)")
-    p.add_argument("--k", type=_number("K", 0.0, 1e6, lo_open=True), default=d.k, help=f"eq. (22) gain K (default {d.k:g})")
-    p.add_argument("--tau", type=_number("tau", 0.0, 10.0, lo_open=True), default=d.tau,
-                   help=f"eq. (22) time constant in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=_number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
-                   help=f"eq. (18) desired-model time constant in s (default {d.tau_n:g})")
+    add_gains(p)
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
                    help="discretisation of the firmware when --ts > 0 (default tustin)")
-    p.add_argument("--ts", type=_number("ts", 0.0, 0.1, lo_open=True, allow_zero=True), default=0.0, metavar="S",
+    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True, allow_zero=True), default=0.0, metavar="S",
                    help="0 (default): continuous reference; T > 0: the firmware at step T with the exact ZOH plant")
-    p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="samples between measurement and applied command when --ts > 0 (default 1)")
-    p.add_argument("--model-delay", type=_count, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
-    p.add_argument("--duration", type=_number("duration", 0.0, MAX_DURATION, lo_open=True), default=3.0,
+    p.add_argument("--duration", type=number("duration", 0.0, MAX_DURATION, lo_open=True), default=3.0,
                    metavar="S", help="simulated time in s (default 3)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
@@ -104,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sim_sub.add_parser("disturbance", help="yaw moment step with the driver's wheel held",
                            description="A step of yaw moment M_z at t = 0, driver's wheel held straight.")
-    p.add_argument("--mz", type=_number("M_z", -1e5, 1e5), required=True, metavar="NM", help="yaw moment step in Nm")
+    p.add_argument("--mz", type=number("M_z", -1e5, 1e5), required=True, metavar="NM", help="yaw moment step in Nm")
     _add_operating_point(p, required=True)
     _add_controller(p)
     p.set_defaults(handler=_cmd_disturbance)
@@ -138,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("args", nargs=argparse.REMAINDER)
         p.set_defaults(handler=_delegate(name))
 
-    design_cli.add_parsers(sub, _number, _count, Parser)
+    design_cli.add_parsers(sub, Parser)
 
     p = sub.add_parser("vectors", help="write golden test vectors for ports of the controller",
                        description="Write, for several configurations and scenarios, every step's inputs, command "
@@ -157,22 +120,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_hil_args(p)
     p.add_argument("--scenario", default="paper-fig9",
                    help="built-in (paper-fig8, paper-fig9, handover) or a TOML file (default paper-fig9)")
-    p.add_argument("--v", type=_number("speed v", *SPEED_RANGE), metavar="MPS", help="override the scenario's speed")
-    p.add_argument("--mu", type=_number("friction mu", 0.0, MAX_MU, lo_open=True), metavar="MU",
+    p.add_argument("--v", type=number("speed v", *SPEED_RANGE), metavar="MPS", help="override the scenario's speed")
+    p.add_argument("--mu", type=number("friction mu", 0.0, MAX_MU, lo_open=True), metavar="MU",
                    help="override the scenario's friction")
-    p.add_argument("--mz", type=_number("M_z", -20000.0, 20000.0), metavar="NM",
+    p.add_argument("--mz", type=number("M_z", -20000.0, 20000.0), metavar="NM",
                    help="override the scenario's yaw-moment steps")
     p.add_argument("--controller", choices=CONTROLLERS, default=mr.Q_LIMITED,
                    help="none, standard or limited (default limited)")
-    d = mr.ControllerConfig()
-    p.add_argument("--k", type=_number("K", 0.0, 1e6, lo_open=True), default=d.k, help=f"gain K (default {d.k:g})")
-    p.add_argument("--tau", type=_number("tau", 0.0, 10.0, lo_open=True), default=d.tau,
-                   help=f"time constant tau in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=_number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
-                   help=f"desired-model time constant in s (default {d.tau_n:g})")
-    p.add_argument("--model-delay", type=_count, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
-    p.add_argument("--delay-steps", type=_count, default=1, metavar="N",
+    add_gains(p)
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(handler=_cmd_hil_run)
@@ -191,7 +147,7 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, comparable with `sim --ts` (default); realtime: wall clock")
     rate = 1.0 / mr.ControllerConfig().ts
-    p.add_argument("--rate-hz", type=_number("rate", 1.0, 5000.0), default=rate,
+    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=rate,
                    help=f"controller and plant rate in Hz (default {rate:g}, the rate the default gains are tuned for)")
     p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
                    help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")

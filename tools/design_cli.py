@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import model_delay_help
+from mrsteer_cli.cli_args import add_gains, count, number
 from sim_plant.vehicle import MAX_MU
 
 GRID_HELP = "LO:HI:N (N evenly spaced values, ends included) or a single value"
@@ -62,8 +62,17 @@ def _envelope(args: argparse.Namespace) -> Any:
     return Envelope(args.v_grid or d.speeds, args.mu_grid or d.frictions, args.mass_grid or d.masses)
 
 
-def add_parsers(sub: Any, number: Callable[..., Callable[[str], float]], count: Callable[[str], int],
-                parser_class: type) -> None:
+def _add_loop(p: argparse.ArgumentParser, form_help: str) -> None:
+    d = mr.ControllerConfig()
+    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True), default=d.ts, metavar="S",
+                   help=f"controller step in s (default {d.ts:g}, the shipped default)")
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
+                   help="samples from measurement to applied command (default 1)")
+    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
+                   help=f"{form_help} (default {d.q_form})")
+
+
+def add_parsers(sub: Any, parser_class: type) -> None:
     design = sub.add_parser("design", help="stability margins, tuning and bus load (offline design)",
                             description="Offline design checks of the discrete controller on a real bus.")
     dsub = design.add_subparsers(dest="design_command", required=True, parser_class=parser_class)
@@ -73,19 +82,8 @@ def add_parsers(sub: Any, number: Callable[..., Callable[[str], float]], count: 
                         description="Closed-loop pole radius and gain, phase and delay margins of the sampled "
                         "loop (exact ZOH plant, the firmware's own discretised controller, N samples of delay) "
                         "at every point of an operating envelope, and the worst case.")
-    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True), default=d.ts, metavar="S",
-                   help=f"controller step in s (default {d.ts:g}, the shipped default)")
-    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
-                   help="samples from measurement to applied command (default 1)")
-    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
-                   help=f"limited (eq. 22) or standard (eq. 17) model regulator (default {d.q_form})")
-    p.add_argument("--k", type=number("K", 0.0, 1e6, lo_open=True), default=d.k, help=f"gain K (default {d.k:g})")
-    p.add_argument("--tau", type=number("tau", 0.0, 10.0, lo_open=True), default=d.tau,
-                   help=f"time constant tau in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
-                   help=f"desired-model time constant in s (default {d.tau_n:g})")
-    p.add_argument("--model-delay", type=count, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
+    _add_loop(p, "limited (eq. 22) or standard (eq. 17) model regulator")
+    add_gains(p)
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
                    help=f"discretisation (default {d.method})")
     _add_envelope(p)
@@ -96,12 +94,7 @@ def add_parsers(sub: Any, number: Callable[..., Callable[[str], float]], count: 
                         description="Search K, tau and tau_n (and whether to model the loop delay) for the lowest "
                         "peak yaw rate after a 4000 Nm yaw-moment step at 10 m/s on dry road, keeping gain margin "
                         ">= 6 dB and phase margin >= 45 deg over the whole envelope.")
-    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True), default=d.ts, metavar="S",
-                   help=f"controller step in s (default {d.ts:g})")
-    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
-                   help="samples from measurement to applied command (default 1)")
-    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
-                   help=f"model regulator form (default {d.q_form})")
+    _add_loop(p, "model regulator form")
     _add_envelope(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
