@@ -74,7 +74,7 @@ class PlantNode:
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = 0.02, lockstep_timeout: float = 1.0,
                  fade_rate: float = math.radians(30.0), contract: mrsteer_dbc.Contract | None = None,
-                 expect_controller: bool = True) -> None:
+                 expect_controller: bool = True, actuator_rate: float = 0.0) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}")
         self.bus, self.sc, self.mode, self.ts = bus, sc, mode, ts
@@ -95,11 +95,13 @@ class PlantNode:
         self.lockstep_timeout = lockstep_timeout
         self.expect_controller = expect_controller
         self.fade_step = fade_rate * ts
+        self.slew_step = actuator_rate * ts  # 0: the actuator follows the command at once
         self.stats = PlantStats()
         self.pipeline: collections.deque[float] = collections.deque([0.0] * delay_steps)
         self.latest_cmd = 0.0
         self.cmd_age = 0
         self.applied = 0.0
+        self._recovering = False  # slewing back to the command after a timeout fade
         self.bench_m_z: float | None = None
         self._running = True
         self.record_trace = False
@@ -168,12 +170,20 @@ class PlantNode:
 
     def _actuator(self, command: float | None) -> float:
         """What the auxiliary actuator applies this step: the command (clamped to its range) while
-        commands are fresh, otherwise a bounded-rate fade to zero."""
+        commands are fresh, otherwise a bounded-rate fade to zero.  After a fade it slews back to
+        the command at the same bounded rate rather than jump to it."""
+        a = self.applied
         if command is not None and self.cmd_age <= self.cmd_timeout_steps:
-            return max(-self.limit, min(self.limit, command))
+            target = max(-self.limit, min(self.limit, command))
+            if self.slew_step > 0.0:  # the actuator's own rate limit, whatever arrives
+                target = max(a - self.slew_step, min(a + self.slew_step, target))
+            if not self._recovering or abs(target - a) <= self.fade_step:
+                self._recovering = False
+                return target
+            return a + self.fade_step if target > a else a - self.fade_step
         if self.cmd_age == self.cmd_timeout_steps + 1:
             self.stats.actuator_timeouts += 1
-        a = self.applied
+        self._recovering = True
         return a - self.fade_step if a > self.fade_step else a + self.fade_step if a < -self.fade_step else 0.0
 
     def step(self, k: int) -> None:
@@ -272,6 +282,9 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
+    p.add_argument("--actuator-rate", type=float, default=0.0, metavar="RAD_S",
+                   help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
+                   "(default 0: follows the command at once)")
     p.add_argument("--cmd-timeout", type=float, default=0.02, metavar="S",
                    help="no valid command for this long: the actuator fades to zero (default 0.02)")
     p.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
@@ -290,6 +303,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
     if not 0 <= args.delay_steps <= 100:
         parser.error("--delay-steps must be in [0, 100]")
+    if not (math.isfinite(args.actuator_rate) and args.actuator_rate >= 0.0):
+        parser.error(f"--actuator-rate must be >= 0, got {args.actuator_rate}")
     for name in ("cmd_timeout", "lockstep_timeout"):
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
@@ -305,7 +320,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     node = PlantNode(bus, sc, args.mode, 1.0 / args.rate_hz, args.delay_steps, args.cmd_timeout,
-                     args.lockstep_timeout, expect_controller=not args.no_controller)
+                     args.lockstep_timeout, expect_controller=not args.no_controller,
+                     actuator_rate=args.actuator_rate)
     node.record_trace = args.trace_out is not None
     signal.signal(signal.SIGTERM, node.stop)
     signal.signal(signal.SIGINT, node.stop)

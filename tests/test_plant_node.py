@@ -74,6 +74,14 @@ def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
     assert max(diffs) <= fade + 1e-12  # bounded rate, no jump
     assert applied[-1] == 0.0
     assert node.stats.actuator_timeouts == 1
+    # Commands come back at 0.04 rad: the actuator slews there at the same rate, no jump.
+    back = []
+    for k in range(200, 300):
+        _cmd(ctl, 0.04, k % 15)
+        node.step(k)
+        back.append(node.applied)
+    steps = [b - a for a, b in zip([0.0] + back, back)]
+    assert max(steps) <= fade + 1e-12 and back[-1] == pytest.approx(0.04)
 
 
 def test_frames_of_other_ids_are_ignored_even_if_they_pass_the_filter(rig) -> None:

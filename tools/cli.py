@@ -96,7 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (("controller", "run the controller process on a CAN bus (same as python -m firmware_py)"),
                        ("plant", "run the simulated car on a CAN bus (same as python -m sim_plant)"),
                        ("bus", "run the fallback CAN bus broker (for machines without vcan)"),
-                       ("bench", "benchmarks with same-run baselines (mrsteer bench --help)")):
+                       ("bench", "benchmarks with same-run baselines (mrsteer bench --help)"),
+                       ("faults", "fault injection: the fault matrix and the fault bridge (mrsteer faults --help)")):
         p = sub.add_parser(name, help=text, add_help=False, description=text)
         p.add_argument("args", nargs=argparse.REMAINDER)
         p.set_defaults(handler=_delegate(name))
@@ -161,6 +162,8 @@ def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
             from sim_plant.plant_node import main as target
         elif name == "bench":
             from mrsteer_bench.run import main as target
+        elif name == "faults":
+            from sim_plant.faults import main as target
         else:
             from sim_plant.vbus import main as target
         return target(args.args, prog=f"mrsteer {name}")
@@ -329,7 +332,7 @@ def _cmd_vectors(args: argparse.Namespace) -> int:
     return 0
 
 
-DELEGATED = ("controller", "plant", "bus", "bench")
+DELEGATED = ("controller", "plant", "bus", "bench", "faults")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,311 @@
+"""Fault-injecting bridge between the vehicle's bus and the controller's bus.
+
+    python -m sim_plant.fault_bridge --vehicle CH_A --controller CH_B --fault JSON [--stats-out F]
+
+Every frame seen on one side is forwarded to the other, except where the fault says otherwise,
+inside its time window (seconds after the vehicle's first frame).  Frame contents are
+changed through the DBC (cantools) and the contract's E2E functions, never by bit position.
+
+Fault kinds (``kind``), applied to the frames of ``target`` (a message name, ``sensors`` for the
+three sensor messages, or ``commands`` for MRS_AuxSteerCmd):
+
+=================  ===================================================================
+drop               drop each frame with probability ``param`` (1: a burst, all of them)
+delay              hold each frame ``param`` seconds
+duplicate          forward each frame twice
+reorder            swap each pair of consecutive frames of a message
+corrupt_payload    flip one bit of the last payload byte (the CRC then fails)
+corrupt_crc        flip one bit of the CRC byte
+corrupt_counter    alive counter set to 15 (never sent), CRC made valid again
+wrong_length       drop the last byte
+replay             after each frame, also send the frame of the same message ``param`` frames
+                   earlier again (recorded traffic played back by an attacker)
+out_of_range       first physical signal set to ``param`` (outside the DBC range), E2E valid
+flood              also send frames of an unused ID (0x7F0) on the controller side, ``param`` per s
+spoof_command      also send forged MRS_AuxSteerCmd frames (angle ``param`` rad) on the vehicle
+                   side, re-using the counter of the last real command (a replay-style forgery)
+=================  ===================================================================
+"""
+
+from __future__ import annotations
+
+import collections
+import heapq
+import json
+import random
+import signal
+import sys
+import threading
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import can
+
+import mrsteer_dbc
+from firmware_py.cli_support import Parser
+
+KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
+         "wrong_length", "replay", "out_of_range", "flood", "spoof_command")
+SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
+COMMAND = "MRS_AuxSteerCmd"
+FLOOD_ID = 0x7F0
+
+
+@dataclass(frozen=True)
+class Fault:
+    kind: str = "none"
+    target: str = "MRS_YawRate"
+    start: float = 1.0
+    stop: float = 1.3
+    param: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(KINDS)}; got {self.kind!r}")
+        if not (0.0 <= self.start < self.stop):
+            raise ValueError(f"fault window must satisfy 0 <= start < stop, got {self.start}..{self.stop}")
+
+    def targets(self) -> tuple[str, ...]:
+        if self.target == "sensors":
+            return SENSORS
+        if self.target == "commands":
+            return (COMMAND,)
+        return (self.target,)
+
+
+@dataclass
+class BridgeStats:
+    forwarded_to_controller: int = 0
+    forwarded_to_vehicle: int = 0
+    seen_on_vehicle: int = 0
+    seen_on_controller: int = 0
+    injected_to_controller: int = 0
+    injected_to_vehicle: int = 0
+    affected: int = 0
+    first_affected: float | None = None  # epoch s
+    last_affected: float | None = None
+    t0: float | None = None  # epoch s of the vehicle's first frame: the fault window's origin
+
+
+class Bridge:
+    def __init__(self, vehicle: can.BusABC, controller: can.BusABC, fault: Fault, seed: int = 1) -> None:
+        self.vehicle, self.controller, self.fault = vehicle, controller, fault
+        self.contract = mrsteer_dbc.load()
+        self.ids = {self.contract.frame_id(n) for n in fault.targets()}
+        self.stats = BridgeStats()
+        self.rng = random.Random(seed)
+        self._running = True
+        self._lock = threading.Lock()
+        self._history: dict[int, collections.deque[tuple[float, bytes]]] = collections.defaultdict(collections.deque)
+        self._held: dict[int, can.Message] = {}
+        self._last_cmd: bytes | None = None
+
+    def stop(self, *_: Any) -> None:
+        self._running = False
+
+    # ------------------------------------------------------------------ fault logic
+
+    def _active(self, now: float) -> bool:
+        t0 = self.stats.t0
+        return t0 is not None and self.fault.start <= now - t0 < self.fault.stop
+
+    def _mark(self, now: float) -> None:
+        with self._lock:
+            self.stats.affected += 1
+            if self.stats.first_affected is None:
+                self.stats.first_affected = now
+            self.stats.last_affected = now
+
+    def _reencode(self, msg: can.Message, changes: dict[str, float]) -> bytes:
+        name = self.contract.name_of(msg.arbitration_id)
+        m = self.contract.message(name)
+        values = m.decode(bytes(msg.data), decode_choices=False)
+        values.update(changes)
+        data = bytearray(m.encode(values, strict=False))
+        e2e = self.contract.e2e(name)
+        if e2e is not None:
+            data[e2e.crc_byte] = self.contract.e2e_crc(name, bytes(data))
+        return bytes(data)
+
+    def _transform(self, msg: can.Message, now: float) -> list[tuple[float, can.Message]]:
+        """Frames to send for one received frame, each with its send time."""
+        f = self.fault
+        hist = self._history[msg.arbitration_id]
+        hist.append((now, bytes(msg.data)))
+        while len(hist) > 64:
+            hist.popleft()
+        if msg.arbitration_id not in self.ids or not self._active(now):
+            return [(now, msg)]
+        kind = f.kind
+        if kind in ("none", "flood", "spoof_command"):
+            return [(now, msg)]
+        self._mark(now)
+        data = bytearray(msg.data)
+        if kind == "drop":
+            return [] if self.rng.random() < f.param else [(now, msg)]
+        if kind == "delay":
+            return [(now + f.param, msg)]
+        if kind == "duplicate":
+            return [(now, msg), (now, _copy(msg, bytes(msg.data)))]
+        if kind == "reorder":
+            held = self._held.pop(msg.arbitration_id, None)
+            if held is None:
+                self._held[msg.arbitration_id] = msg
+                return []
+            return [(now, msg), (now, held)]
+        if kind == "corrupt_payload":
+            data[-1] ^= 0x01
+        elif kind == "corrupt_crc":
+            data[0] ^= 0x80
+        elif kind == "corrupt_counter":
+            e2e = self.contract.e2e(self.contract.name_of(msg.arbitration_id))
+            data = bytearray(self._reencode(msg, {e2e.counter_signal: 15}))
+        elif kind == "wrong_length":
+            data = data[:-1]
+        elif kind == "replay":
+            back = int(f.param)
+            if len(hist) <= back:
+                return [(now, msg)]
+            return [(now, msg), (now, _copy(msg, hist[-1 - back][1]))]
+        elif kind == "out_of_range":
+            m = self.contract.message(self.contract.name_of(msg.arbitration_id))
+            first = next(s for s in m.signals if not s.name.endswith(("_CRC", "_Counter")))
+            data = bytearray(self._reencode(msg, {first.name: f.param}))
+        return [(now, _copy(msg, bytes(data)))]
+
+    # ------------------------------------------------------------------ threads
+
+    def _pump(self, src: can.BusABC, dst: can.BusABC, to_controller: bool) -> None:
+        pending: list[tuple[float, int, can.Message]] = []
+        seq = 0
+        while self._running:
+            now = time.time()
+            while pending and pending[0][0] <= now:
+                self._send(dst, heapq.heappop(pending)[2], to_controller)
+            wait = 0.05 if not pending else max(0.0, min(0.05, pending[0][0] - now))
+            msg = src.recv(wait)
+            if msg is None:
+                continue
+            now = time.time()
+            with self._lock:
+                if to_controller:
+                    self.stats.seen_on_vehicle += 1
+                    if self.stats.t0 is None:
+                        self.stats.t0 = now  # the vehicle's first frame starts the fault clock
+                else:
+                    self.stats.seen_on_controller += 1
+                    if msg.arbitration_id == self.contract.frame_id(COMMAND):
+                        self._last_cmd = bytes(msg.data)
+            for when, out in self._transform(msg, now):
+                if when <= now:
+                    self._send(dst, out, to_controller)
+                else:
+                    seq += 1
+                    heapq.heappush(pending, (when, seq, out))
+        # Stopped: what is already queued for us was on the bus too; forward it unchanged.
+        while (msg := src.recv(0.05)) is not None:
+            with self._lock:
+                if to_controller:
+                    self.stats.seen_on_vehicle += 1
+                else:
+                    self.stats.seen_on_controller += 1
+            self._send(dst, msg, to_controller)
+        for _, _, out in sorted(pending):
+            self._send(dst, out, to_controller)
+
+    def _send(self, dst: can.BusABC, msg: can.Message, to_controller: bool, injected: bool = False) -> None:
+        dst.send(msg)
+        with self._lock:
+            if injected:
+                if to_controller:
+                    self.stats.injected_to_controller += 1
+                else:
+                    self.stats.injected_to_vehicle += 1
+            elif to_controller:
+                self.stats.forwarded_to_controller += 1
+            else:
+                self.stats.forwarded_to_vehicle += 1
+
+    def _inject(self) -> None:
+        """Extra traffic of the flood and spoof faults."""
+        f = self.fault
+        period = 1.0 / max(f.param, 1.0) if f.kind == "flood" else 0.001
+        cmd_id = self.contract.frame_id(COMMAND)
+        while self._running:
+            now = time.time()
+            if self._active(now):
+                if f.kind == "flood":
+                    self._send(self.controller, can.Message(arbitration_id=FLOOD_ID, data=bytes(8),
+                                                            is_extended_id=False), True, injected=True)
+                    self._mark(now)
+                elif f.kind == "spoof_command" and self._last_cmd is not None:
+                    forged = self._reencode(can.Message(arbitration_id=cmd_id, data=self._last_cmd),
+                                            {"AuxSteerCmd_Angle": f.param, "AuxSteerCmd_State": 1})
+                    self._send(self.vehicle, can.Message(arbitration_id=cmd_id, data=forged, is_extended_id=False),
+                               False, injected=True)
+                    self._mark(now)
+            time.sleep(period)
+
+    def run(self) -> BridgeStats:
+        threads = [threading.Thread(target=self._pump, args=(self.vehicle, self.controller, True), daemon=True),
+                   threading.Thread(target=self._pump, args=(self.controller, self.vehicle, False), daemon=True)]
+        if self.fault.kind in ("flood", "spoof_command"):
+            threads.append(threading.Thread(target=self._inject, daemon=True))
+        for t in threads:
+            t.start()
+        while self._running and all(t.is_alive() for t in threads):
+            time.sleep(0.05)
+        self._running = False
+        for t in threads:
+            t.join(5)
+        return self.stats
+
+
+def _copy(msg: can.Message, data: bytes) -> can.Message:
+    return can.Message(arbitration_id=msg.arbitration_id, data=data, is_extended_id=msg.is_extended_id)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge") -> int:
+    p = Parser(prog=prog, description="Forward frames between the vehicle's and the controller's bus, injecting "
+               "one fault in a time window (kinds: " + ", ".join(KINDS[1:]) + ").")
+    p.add_argument("--interface", default="mrsteer", help="python-can interface of both sides (default mrsteer)")
+    p.add_argument("--vehicle", required=True, help="channel of the vehicle side (plant)")
+    p.add_argument("--controller", required=True, help="channel of the controller side")
+    p.add_argument("--fault", default="{}", help='fault as JSON, e.g. \'{"kind": "drop", "target": "MRS_YawRate", '
+                   '"start": 1.0, "stop": 1.3, "param": 1.0}\'')
+    p.add_argument("--seed", type=int, default=1, help="random seed of probabilistic faults (default 1)")
+    p.add_argument("--stats-out", type=Path, help="write the bridge's counts as JSON here on exit")
+    args = p.parse_args(argv)
+    try:
+        spec = json.loads(args.fault)
+        if not isinstance(spec, dict):
+            raise ValueError("the fault must be a JSON object")
+        fault = Fault(**spec)
+    except (ValueError, TypeError) as exc:
+        p.error(f"--fault: {exc}")
+    if args.vehicle == args.controller:
+        p.error("--vehicle and --controller must be different channels")
+    try:
+        a = can.Bus(interface=args.interface, channel=args.vehicle)
+        b = can.Bus(interface=args.interface, channel=args.controller)
+    except (can.CanError, OSError, ValueError) as exc:
+        print(f"{prog}: error: cannot open the buses: {exc}", file=sys.stderr)
+        return 1
+    bridge = Bridge(a, b, fault, args.seed)
+    signal.signal(signal.SIGTERM, bridge.stop)
+    signal.signal(signal.SIGINT, bridge.stop)
+    print(f"{prog}: bridging {args.vehicle} <-> {args.controller}, fault {fault.kind}", file=sys.stderr, flush=True)
+    try:
+        stats = bridge.run()
+    finally:
+        a.shutdown()
+        b.shutdown()
+    if args.stats_out is not None:
+        args.stats_out.write_text(json.dumps(asdict(stats), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

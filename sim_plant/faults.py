@@ -1,0 +1,394 @@
+"""The fault matrix (``mrsteer faults run``): every fault on a live bus, judged from the traffic.
+
+Each row runs the plant (realtime, ``paper-fig9``: 4000 Nm at 0.5 s) and the controller as
+separate processes on two fallback buses joined by the fault bridge (``fault_bridge.py``), with
+a logger on each bus.  The bridge injects one fault in a window; the runner may kill or restart
+the controller.  Every row is then judged from what was logged and reported:
+
+* **safe** (every row): the applied angle (the plant's trace; the plant stands in for the
+  actuator ECU and limits its own slew to 60°/s whatever arrives) never exceeds the ±3° limit
+  nor that rate, so it never jumps; and the controller's own commands on the bus never step
+  by more than its rate limit (40°/s, set for these runs) from one cycle to the next;
+* **nothing lost** (every row): each logger logged every frame that was on its bus, counted by
+  the bridge, which sees every frame of both buses;
+* **alive** (every row but the kill rows): the controller ran to the end and exited cleanly;
+* row-specific: detection within the stated number of controller cycles (counted in commands
+  on the bus, not in wall time), the cause in ``MRS_CtrlStatus``, recovery after the fault,
+  rejected frames counted, the actuator's fade after a controller crash.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py import runtime as rt
+from sim_plant.fault_bridge import Fault
+from sim_plant.hil import HilError, _Proc, _spawn, _stop, _wait_for_socket, _wait_ready, _wait_stderr
+
+RATE_HZ = 1.0 / mr.ControllerConfig().ts
+RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
+PLANT_FADE = math.radians(30.0)  # rad/s, the actuator's fade (plant_node default)
+CMD_TIMEOUT = 0.02  # s, the actuator's command timeout (plant_node default)
+DURATION = 2.6  # s of scenario
+WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
+BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
+ACTUATOR_RATE = math.radians(60.0)  # rad/s, the actuator's own slew limit in these runs
+KILL_AT = 1.2
+RESTART_AT = 1.7
+TIMEOUT_CYCLES = rt.RuntimeConfig().timeout_cycles
+E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
+
+
+@dataclass(frozen=True)
+class Row:
+    name: str
+    fault: Fault
+    expected: str
+    detect_within: int | None = None  # controller cycles from the first affected frame to FAULT
+    cause: int = 0  # CtrlStatus_Cause bit expected while faulted
+    no_fault: bool = False  # the controller must stay ACTIVE/SATURATED throughout
+    reject_all: bool = False  # the controller rejects (at least) every affected frame
+    plant_rejects: bool = False  # the plant must reject the affected command frames
+    kill: bool = False
+    restart: bool = False
+
+
+def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
+    return Fault(kind, target, *WINDOW, param)
+
+
+ROWS = (
+    Row("baseline", _f("none"), "runs clean", no_fault=True),
+    Row("yaw-rate frames lost (burst)", _f("drop"), "FAULT within the timeout, fade, recover",
+        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING),
+    Row("sensor frames lost (20 % random)", _f("drop", "sensors", 0.2), "tolerated, no fault", no_fault=True),
+    Row("yaw-rate payload bit flipped", _f("corrupt_payload"), "rejected (CRC), FAULT after 3, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate CRC corrupted", _f("corrupt_crc"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate counter invalid (15)", _f("corrupt_counter"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("driver-angle frame too short", _f("wrong_length", "MRS_DriverSteer"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate frames replayed", _f("replay", param=1.0), "every replayed frame rejected, no fault",
+        no_fault=True, reject_all=True),
+    Row("yaw rate out of range (5 rad/s)", _f("out_of_range", param=5.0), "rejected (range), FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_RANGE, reject_all=True),
+    Row("sensor frames duplicated", _f("duplicate", "sensors"), "copies rejected as repeated, no fault",
+        no_fault=True, reject_all=True),
+    Row("yaw-rate frames reordered", _f("reorder"), "out-of-order frames rejected, no fault", no_fault=True),
+    Row("sensor frames delayed 4 ms", _f("delay", "sensors", 0.004), "tolerated, no fault", no_fault=True),
+    Row("bus flooded with another ID", _f("flood", param=5000.0), "filtered out, no fault, nothing lost",
+        no_fault=True),
+    Row("command frames lost (burst)", _f("drop", "commands"), "actuator times out, fades, slews back"),
+    Row("command CRC corrupted", _f("corrupt_crc", "commands"), "actuator rejects them", plant_rejects=True),
+    Row("controller killed", _f("none"), "actuator at zero within timeout + fade", kill=True),
+    Row("controller killed and restarted", _f("none"), "resumes without a jump", kill=True, restart=True),
+)
+
+
+@dataclass
+class RowResult:
+    name: str
+    expected: str
+    passed: bool
+    observed: str
+    worst_applied_deg: float
+    worst_step_deg: float
+    detection_cycles: int | None
+    failures: list[str] = field(default_factory=list)
+
+
+def _parse_log(path: Path) -> list[tuple[float, int, bytes]]:
+    frames = []
+    for line in path.read_text().splitlines():
+        stamp, _, body = line.split(" ", 2)
+        ident, _, data = body.partition("#")
+        frames.append((float(stamp.strip("()")), int(ident, 16), bytes.fromhex(data)))
+    return frames
+
+
+def _trace(path: Path) -> tuple[list[float], list[float]]:
+    """Plant time and applied angle of every plant step."""
+    t, applied = [], []
+    lines = path.read_text().splitlines()
+    head = lines[0].split(",")
+    ti, ai = head.index("t_s"), head.index("aux_applied_rad")
+    for line in lines[1:]:
+        cols = line.split(",")
+        t.append(float(cols[ti]))
+        applied.append(float(cols[ai]))
+    return t, applied
+
+
+def _gaps(frames: list[tuple[float, int, bytes]], ids: list[int], longer: float) -> list[tuple[float, float]]:
+    """Intervals in which a message of ``ids`` went quiet for longer than ``longer`` s."""
+    out = []
+    for fid in ids:
+        times = [t for t, f, _ in frames if f == fid]
+        out += [(a, b) for a, b in zip(times, times[1:]) if b - a > longer]
+    return out
+
+
+def run_row(row: Row, work: Path, say: Callable[[str], None]) -> RowResult:
+    py = sys.executable
+    env = dict(os.environ)
+    tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
+    ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"
+    procs: list[_Proc] = []
+    ctl_cmd = [py, "-m", "firmware_py", "--interface", "mrsteer", "--channel", ch_b, "--rate-hz", repr(RATE_HZ),
+               "--rate-limit", repr(RATE_LIMIT), "--stats-out", str(work / "controller.json")]
+    try:
+        for ch in (ch_a, ch_b):
+            procs.append(_spawn(f"broker {ch}", [py, "-m", "sim_plant.vbus", "--channel", ch], work, env))
+            _wait_for_socket(ch, procs[-1])
+        loggers = []
+        for side, ch in (("vehicle", ch_a), ("controller", ch_b)):
+            lg = _spawn(f"logger {side}", [py, "-m", "sim_plant.buslog", "--interface", "mrsteer", "--channel", ch,
+                                           "--out", str(work / f"{side}.log"), "--iface-name", side,
+                                           "--stats-out", str(work / f"logger-{side}.json")], work, env, stdout=True)
+            procs.append(lg)
+            loggers.append(lg)
+            _wait_ready(lg)
+        # The bridge first: it must see every frame the controller ever sends.
+        bridge = _spawn("bridge", [py, "-m", "sim_plant.fault_bridge", "--vehicle", ch_a, "--controller", ch_b,
+                                   "--fault", json.dumps(asdict(row.fault)), "--stats-out", str(work / "bridge.json")],
+                        work, env)
+        procs.append(bridge)
+        _wait_stderr(bridge, "bridging")
+        ctl = _spawn("controller", ctl_cmd, work, env)
+        procs.append(ctl)
+        _wait_stderr(ctl, "running at")
+        plant = _spawn("plant", [py, "-m", "sim_plant", "--interface", "mrsteer", "--channel", ch_a, "--mode",
+                                 "realtime", "--rate-hz", repr(RATE_HZ), "--actuator-rate", repr(ACTUATOR_RATE),
+                                 "--scenario", "paper-fig9", "--duration",
+                                 repr(DURATION), "--trace-out", str(work / "trace.csv"),
+                                 "--stats-out", str(work / "plant.json")], work, env)
+        procs.append(plant)
+        start = time.monotonic()
+        killed_at = restarted = None
+        while plant.popen.poll() is None:
+            now = time.monotonic() - start
+            if row.kill and killed_at is None and now >= KILL_AT:
+                ctl.popen.send_signal(signal.SIGKILL)
+                ctl.popen.wait()
+                killed_at = time.time()
+            if row.restart and killed_at is not None and restarted is None and now >= RESTART_AT:
+                ctl = _spawn("controller-2", ctl_cmd, work, env)
+                procs.append(ctl)
+                restarted = time.time()
+            if time.monotonic() - start > 120:
+                raise HilError("the plant did not finish in time")
+            time.sleep(0.01)
+        ctl_code = None
+        if ctl.popen.poll() is None:
+            _stop(ctl)
+            ctl_code = ctl.popen.returncode
+        for p in (bridge, *loggers):
+            _stop(p)
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+    return judge(row, work, ctl_code, killed_at, restarted)
+
+
+def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
+          restarted: float | None) -> RowResult:
+    c = mrsteer_dbc.load()
+    fails: list[str] = []
+    observed: list[str] = []
+    t, applied = _trace(work / "trace.csv")
+    ts = 1.0 / RATE_HZ
+    limit = mr.ControllerConfig().aux_limit
+    worst = max(abs(a) for a in applied)
+    steps = [abs(b - a) for a, b in zip(applied, applied[1:])]
+    worst_step = max(steps) if steps else 0.0
+    if worst > limit + BUS_RESOLUTION:  # the command travels rounded to the DBC's 1e-6 rad
+        fails.append(f"applied {math.degrees(worst):.3f} deg beyond the limit")
+    # The actuator (the plant, standing in for its ECU) limits its own slew to ACTUATOR_RATE
+    # whatever arrives; this checks that it does, step by step, faults and crashes included.
+    if worst_step > max(ACTUATOR_RATE, PLANT_FADE) * ts * (1 + 1e-9) + 1e-12:
+        fails.append(f"applied angle jumped {math.degrees(worst_step):.4f} deg in one step")
+
+    bridge = json.loads((work / "bridge.json").read_text())
+    plant = json.loads((work / "plant.json").read_text())
+    logged = {side: json.loads((work / f"logger-{side}.json").read_text())["frames"]
+              for side in ("vehicle", "controller")}
+    on_a = bridge["seen_on_vehicle"] + bridge["forwarded_to_vehicle"] + bridge["injected_to_vehicle"]
+    on_b = bridge["seen_on_controller"] + bridge["forwarded_to_controller"] + bridge["injected_to_controller"]
+    if logged["vehicle"] != on_a or logged["controller"] != on_b:
+        fails.append(f"logger lost frames: vehicle {logged['vehicle']}/{on_a}, controller {logged['controller']}/{on_b}")
+    if bridge["seen_on_vehicle"] != plant["tx_frames"]:
+        fails.append(f"bridge saw {bridge['seen_on_vehicle']} of the plant's {plant['tx_frames']} frames")
+    observed.append(f"logged {logged['vehicle']}+{logged['controller']} frames, none lost")
+
+    ctl_stats = json.loads((work / "controller.json").read_text()) if (work / "controller.json").exists() else None
+    if not row.kill:
+        if ctl_code != 0:
+            fails.append(f"controller exit status {ctl_code}")
+        if ctl_stats is None:
+            fails.append("controller wrote no statistics")
+
+    # Commands and status on the controller's bus.
+    frames = _parse_log(work / "controller.log")
+    cmd_id, status_id = c.frame_id(rt.MSG_CMD), c.frame_id(rt.MSG_STATUS)
+    cmds = [(ts_, c.decode(fid, data)) for ts_, fid, data in frames if fid == cmd_id]
+    cutoff = max(ts_ for ts_, fid, _ in _parse_log(work / "vehicle.log")
+                 if fid == c.frame_id(rt.MSG_YAW))  # the plant's last measurement: the run's end
+    angles = [(t_, d.signals["AuxSteerCmd_Angle"]) for t_, d in cmds
+              if d is not None and d.status.accepted and t_ <= cutoff]
+    cmds = [(t_, d.signals["AuxSteerCmd_State"]) for t_, d in cmds
+            if d is not None and d.status.accepted and t_ <= cutoff]
+    # The controller's own commands respect its rate limit, faults and restarts included
+    # (bus resolution 1e-6 rad); across a kill the next instance starts again from zero.
+    for (ta, a), (tb, b) in zip(angles, angles[1:]):
+        crash = killed_at is not None and ta <= killed_at and (restarted is None or tb >= restarted)
+        if not crash and abs(b - a) > RATE_LIMIT * ts + 2e-6:
+            fails.append(f"command stepped {math.degrees(abs(b - a)):.4f} deg in one cycle")
+            break
+
+    causes = [(t_, int(c.decode(fid, data).signals["CtrlStatus_Cause"])) for t_, fid, data in frames
+              if fid == status_id and c.decode(fid, data) is not None]
+    first_active = next((t_ for t_, s in cmds if s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
+    faults_after = [t_ for t_, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t_ > first_active]
+    detection = None
+    if row.no_fault and faults_after:
+        # A FAULT is the right answer when the machine stalled the plant past the timeout: judge
+        # only those without such a gap in the sensor frames the controller was given.
+        gaps = _gaps(frames, [c.frame_id(n) for n in (rt.MSG_STEER, rt.MSG_YAW)], (TIMEOUT_CYCLES - 1) * ts)
+        unexplained = [t_ for t_ in faults_after if not any(g0 - 0.005 <= t_ <= g1 + 0.1 for g0, g1 in gaps)]
+        if unexplained:
+            fails.append(f"controller faulted without a cause {len(unexplained)} times")
+        else:
+            observed.append(f"{len(gaps)} sensor gap(s) from machine stalls, each detected")
+    affected0, affected1 = bridge["first_affected"], bridge["last_affected"]
+    if row.detect_within is not None:
+        if affected0 is None:
+            fails.append("the fault never hit a frame")
+        else:
+            first_fault = next((t_ for t_ in faults_after if t_ >= affected0), None)
+            if first_fault is None:
+                fails.append("fault not detected")
+            else:
+                detection = sum(1 for t_, _ in cmds if affected0 <= t_ <= first_fault)
+                observed.append(f"FAULT after {detection} cycles")
+                if detection > row.detect_within:
+                    fails.append(f"detected after {detection} cycles, allowed {row.detect_within}")
+                seen = [cause for t_, cause in causes if first_fault <= t_ <= affected1 + 0.05]
+                if row.cause and not any(cause & row.cause for cause in seen):
+                    fails.append(f"status never gave cause 0x{row.cause:02X} (saw {sorted(set(seen))})")
+            back = next((t_ for t_, s in cmds if t_ > affected1 and s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
+            if back is None:
+                fails.append("did not recover after the fault")
+            else:
+                observed.append(f"recovered {1e3 * (back - affected1):.0f} ms after")
+    if ctl_stats is not None:
+        rejected = ctl_stats["rx_rejected"]
+        observed.append(f"controller rejected {rejected}")
+        if row.reject_all and rejected < bridge["affected"]:
+            fails.append(f"controller rejected {rejected} of {bridge['affected']} bad frames")
+        if ctl_stats["rx_ignored"]:
+            fails.append(f"{ctl_stats['rx_ignored']} foreign frames reached the controller process")
+    if row.plant_rejects:
+        if plant["cmd_rejected"] < bridge["affected"]:
+            fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")
+        observed.append(f"plant rejected {plant['cmd_rejected']}")
+    if row.kill and killed_at is not None:
+        last_cmd = max((t_ for t_, _ in cmds if t_ <= killed_at), default=killed_at)
+        t0 = t[0]
+        wall0 = bridge["t0"]
+        # plant time runs with the wall clock (realtime): align by the bridge's first frame
+        i_kill = next(i for i, tt in enumerate(t) if wall0 + (tt - t0) >= last_cmd)
+        a_kill = abs(applied[i_kill])
+        allowed = CMD_TIMEOUT + a_kill / PLANT_FADE + 3 * ts + 0.05
+        i_zero = next((i for i in range(i_kill, len(t)) if applied[i] == 0.0), None)
+        end = restarted - wall0 + t0 if restarted is not None else t[-1]
+        if i_zero is None or t[i_zero] - t[i_kill] > allowed or t[i_zero] > end:
+            fails.append(f"actuator not at zero within {allowed * 1e3:.0f} ms of the controller's death")
+        else:
+            observed.append(f"actuator at 0 {1e3 * (t[i_zero] - t[i_kill]):.0f} ms after the last command")
+        if row.restart:
+            back = [t_ for t_, s in cmds if restarted is not None and t_ > restarted and s == mr.STATUS_ACTIVE]
+            if not back:
+                fails.append("the restarted controller never became active")
+            else:
+                observed.append("restarted controller active again")
+    return RowResult(row.name, row.expected, not fails, "; ".join(observed), math.degrees(worst),
+                     math.degrees(worst_step), detection, fails)
+
+
+def run_matrix(rows: tuple[Row, ...] = ROWS, say: Callable[[str], None] | None = None,
+               keep: Path | None = None) -> list[RowResult]:
+    say = say or (lambda m: None)
+    results = []
+    with tempfile.TemporaryDirectory(prefix="mrsteer-faults-") as tmp:
+        for i, row in enumerate(rows, 1):
+            work = (keep or Path(tmp)) / f"{i:02d}"
+            work.mkdir(parents=True, exist_ok=True)
+            say(f"[{i}/{len(rows)}] {row.name}")
+            results.append(run_row(row, work, say))
+    return results
+
+
+def format_table(results: list[RowResult]) -> str:
+    lines = [f"{'fault':<38}{'expected':<42}{'result':<7}{'max |applied|':>14}{'max step':>10}{'detect':>8}  observed",
+             "-" * 160]
+    for r in results:
+        det = "-" if r.detection_cycles is None else f"{r.detection_cycles} cyc"
+        lines.append(f"{r.name:<38}{r.expected:<42}{'PASS' if r.passed else 'FAIL':<7}{r.worst_applied_deg:>12.3f} deg"
+                     f"{r.worst_step_deg:>8.4f}°{det:>8}  {r.observed}")
+        for f in r.failures:
+            lines.append(f"{'':<38}!! {f}")
+    n_pass = sum(r.passed for r in results)
+    lines.append(f"{n_pass}/{len(results)} rows pass")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
+    import argparse
+
+    from firmware_py.cli_support import Parser
+
+    p = Parser(prog=prog, description="Fault injection: the fault matrix, or the bridge on its own.")
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=Parser)
+    r = sub.add_parser("run", help="run the fault matrix on the fallback bus and print the table",
+                       description="Run every row of the fault matrix (each a few seconds of realtime plant and "
+                       "controller joined by the fault bridge) and judge it from the logged traffic.")
+    r.add_argument("--only", action="append", metavar="TEXT", help="only rows whose name contains TEXT; repeatable")
+    r.add_argument("--keep", type=Path, metavar="DIR", help="keep every row's logs, traces and statistics here")
+    r.add_argument("--json", action="store_true", help="print the results as JSON")
+    b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
+    b.add_argument("args", nargs=argparse.REMAINDER)
+    args = p.parse_args(argv)
+    if args.cmd == "bridge":
+        from sim_plant.fault_bridge import main as bridge_main
+
+        return bridge_main(args.args, prog=f"{prog} bridge")
+    rows = tuple(row for row in ROWS if not args.only or any(o.lower() in row.name.lower() for o in args.only))
+    if not rows:
+        p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in ROWS))
+    try:
+        results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep)
+    except HilError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps([asdict(r) for r in results], indent=2))
+    else:
+        print(format_table(results))
+    return 0 if all(r.passed for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,121 @@
+"""Fault injection: the bridge's transformations, fuzzing of the receive path, and the whole
+fault matrix on live processes (as `mrsteer faults run` runs it)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import mrsteer_dbc
+from firmware_py import runtime as rt
+from mrsteer_dbc import E2EStatus
+from sim_plant.fault_bridge import Bridge, Fault
+from sim_plant.faults import ROWS, format_table, run_matrix
+
+ROOT = Path(__file__).resolve().parents[1]
+C = mrsteer_dbc.load()
+YAW = C.frame_id("MRS_YawRate")
+
+
+def _yaw(counter: int, value: float = 0.1) -> can.Message:
+    return can.Message(arbitration_id=YAW, is_extended_id=False,
+                       data=C.encode("MRS_YawRate", {"YawRate_YawRate": value, "YawRate_LatAccel": 0.0}, counter))
+
+
+@pytest.fixture
+def bridge(channel: str):
+    buses = [can.Bus(interface="virtual", channel=f"{channel}-{side}") for side in ("a", "b")]
+
+    def make(kind: str, param: float = 1.0) -> Bridge:
+        b = Bridge(*buses, Fault(kind, "MRS_YawRate", 1.0, 2.0, param))
+        b.stats.t0 = 100.0
+        return b
+
+    yield make
+    for b in buses:
+        b.shutdown()
+
+
+@pytest.mark.parametrize("kind,status", [("corrupt_payload", E2EStatus.BAD_CRC), ("corrupt_crc", E2EStatus.BAD_CRC),
+                                         ("corrupt_counter", E2EStatus.BAD_COUNTER),
+                                         ("wrong_length", E2EStatus.BAD_LENGTH),
+                                         ("out_of_range", E2EStatus.OUT_OF_RANGE)])
+def test_corruptions_are_the_ones_named(bridge, kind: str, status: E2EStatus) -> None:
+    b = bridge(kind, 5.0)
+    (when, out), = b._transform(_yaw(3), 101.5)
+    assert when == 101.5 and C.decode(YAW, bytes(out.data)).status is status
+    (_, untouched), = b._transform(_yaw(4), 102.5)  # outside the window
+    assert C.decode(YAW, bytes(untouched.data)).status is E2EStatus.OK
+    assert b.stats.affected == 1
+
+
+def test_timing_faults(bridge) -> None:
+    assert bridge("drop", 1.0)._transform(_yaw(1), 101.0) == []
+    (when, _), = bridge("delay", 0.004)._transform(_yaw(1), 101.0)
+    assert when == pytest.approx(101.004)
+    assert len(bridge("duplicate")._transform(_yaw(1), 101.0)) == 2
+    r = bridge("reorder")
+    assert r._transform(_yaw(1), 101.0) == []
+    (_, first), (_, second) = r._transform(_yaw(2), 101.002)
+    assert [C.decode(YAW, bytes(m.data)).counter for m in (first, second)] == [2, 1]
+    p = bridge("replay", 1.0)
+    p._transform(_yaw(5), 100.5)  # before the window: recorded
+    (_, real), (_, old) = p._transform(_yaw(6), 101.0)
+    assert C.decode(YAW, bytes(real.data)).counter == 6 and C.decode(YAW, bytes(old.data)).counter == 5
+
+
+def test_bridge_rejects_a_bad_fault_spec() -> None:
+    proc = subprocess.run([sys.executable, "-m", "sim_plant.fault_bridge", "--vehicle", "a", "--controller", "b",
+                           "--fault", '{"kind": "explode"}'], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "fault kind must be one of" in proc.stderr
+
+
+@settings(max_examples=400, deadline=None)
+@given(frame_id=st.integers(0, 0x7FF), data=st.binary(max_size=8))
+def test_decoder_and_e2e_never_raise_on_random_frames(frame_id: int, data: bytes) -> None:
+    d = C.decode(frame_id, data)
+    if d is None:
+        assert C.name_of(frame_id) is None
+        return
+    assert isinstance(d.status, E2EStatus)
+    if d.status is E2EStatus.OK:
+        msg = C.message(d.name)
+        assert len(data) == msg.length
+        for s in msg.signals:
+            assert s.minimum <= d.signals[s.name] <= s.maximum
+        if d.counter is not None:
+            assert mrsteer_dbc.E2EReceiver().check(d.counter).accepted
+
+
+@settings(max_examples=300, deadline=None)
+@given(frames=st.lists(st.tuples(st.sampled_from([0x100, 0x101, 0x102, 0x0A0, 0x7AB]), st.binary(max_size=8),
+                                 st.booleans()), max_size=40))
+def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
+    bus = can.Bus(interface="virtual", channel="mrsteer-fuzz-receive")
+    try:
+        node = rt.ControllerNode(bus, rt.RuntimeConfig())
+        for fid, data, extended in frames:
+            node._receive(can.Message(arbitration_id=fid, data=data, is_extended_id=extended))
+            node.control()  # and the cycle behind it
+        s = node.stats
+        assert s.rx_frames == len(frames) and s.rx_rejected + s.rx_ignored <= s.rx_frames
+        assert abs(node.state.u_prev) <= node.coeffs.u_max
+    finally:
+        bus.shutdown()
+
+
+def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
+    results = run_matrix(ROWS, keep=tmp_path)
+    table = format_table(results)
+    assert all(r.passed for r in results), table
+    assert len(results) == len(ROWS) >= 17
+    detected = {r.name: r.detection_cycles for r in results if r.detection_cycles is not None}
+    assert detected["yaw-rate frames lost (burst)"] <= rt.RuntimeConfig().timeout_cycles + 2
+    assert json.loads((tmp_path / "01" / "bridge.json").read_text())["affected"] == 0  # the baseline is clean
