@@ -360,6 +360,11 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
 
     from firmware_py.cli_support import Parser
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["bridge"]:  # the bridge owns its whole argument list, --help included
+        from sim_plant.fault_bridge import main as bridge_main
+
+        return bridge_main(argv[1:], prog=f"{prog} bridge")
     p = Parser(prog=prog, description="Fault injection: the fault matrix, or the bridge on its own.")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=Parser)
     r = sub.add_parser("run", help="run the fault matrix on the fallback bus and print the table",
@@ -371,10 +376,6 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
-    if args.cmd == "bridge":
-        from sim_plant.fault_bridge import main as bridge_main
-
-        return bridge_main(args.args, prog=f"{prog} bridge")
     rows = tuple(row for row in ROWS if not args.only or any(o.lower() in row.name.lower() for o in args.only))
     if not rows:
         p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in ROWS))

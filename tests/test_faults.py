@@ -119,3 +119,15 @@ def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     detected = {r.name: r.detection_cycles for r in results if r.detection_cycles is not None}
     assert detected["yaw-rate frames lost (burst)"] <= rt.RuntimeConfig().timeout_cycles + 2
     assert json.loads((tmp_path / "01" / "bridge.json").read_text())["affected"] == 0  # the baseline is clean
+
+
+@pytest.mark.parametrize("argv", [["faults", "--help"], ["faults", "run", "--help"], ["faults", "bridge", "--help"]])
+def test_every_faults_command_has_help(argv: list[str]) -> None:
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", *argv], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "usage:" in proc.stdout
+
+
+def test_faults_run_rejects_an_unknown_row() -> None:
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", "--only", "no such row"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "no row matches" in proc.stderr
