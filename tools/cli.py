@@ -351,6 +351,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ValueError) as exc:
         print(f"mrsteer: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as exc:  # an output path that cannot be created or written
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"mrsteer: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
