@@ -210,6 +210,17 @@ class FallbackBus(BusABC):
         if self._is_shutdown:
             return
         super().shutdown()
+        # Closing a Unix socket with frames still unread in our own receive queue makes the
+        # kernel reset the connection, and the broker would lose the frames we sent last.  So:
+        # end our side, let the broker read everything and hang up, then close.
+        try:
+            self._sock.shutdown(socket.SHUT_WR)
+            self._sock.settimeout(0.2)
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline and self._sock.recv(_MAX_PACKET):
+                pass
+        except OSError:
+            pass
         self._sock.close()
 
     @staticmethod

@@ -189,3 +189,23 @@ def test_a_client_gets_every_frame_sent_after_it_opened(broker, channel: str) ->
             assert m is not None and m.arbitration_id == round_
             rx.shutdown()
     tx.shutdown()
+
+
+def test_frames_sent_just_before_shutdown_are_not_lost(broker, channel: str) -> None:
+    # A client that exits right after sending, with frames of others still unread in its own
+    # queue: the kernel used to reset the connection and the broker lost its last frames.
+    rx, noisy = _bus(channel), _bus(channel)
+    for round_ in range(20):
+        tx = _bus(channel)
+        for i in range(50):
+            noisy.send(can.Message(arbitration_id=0x200, data=bytes([i]), is_extended_id=False))
+        for i in range(3):
+            tx.send(can.Message(arbitration_id=0x300 + i, data=bytes([round_]), is_extended_id=False))
+        tx.shutdown()
+    got = []
+    while (m := rx.recv(0.5)) is not None:
+        if m.arbitration_id >= 0x300:
+            got.append(m.arbitration_id)
+    assert len(got) == 60
+    rx.shutdown()
+    noisy.shutdown()
