@@ -101,6 +101,7 @@ class Bridge:
         self._history: dict[int, collections.deque[tuple[float, bytes]]] = collections.defaultdict(collections.deque)
         self._held: dict[int, can.Message] = {}
         self._last_cmd: bytes | None = None
+        self._cmd_id = self.contract.frame_id(COMMAND)
 
     def stop(self, *_: Any) -> None:
         self._running = False
@@ -189,15 +190,7 @@ class Bridge:
             if msg is None:
                 continue
             now = time.time()
-            with self._lock:
-                if to_controller:
-                    self.stats.seen_on_vehicle += 1
-                    if self.stats.t0 is None:
-                        self.stats.t0 = now  # the vehicle's first frame starts the fault clock
-                else:
-                    self.stats.seen_on_controller += 1
-                    if msg.arbitration_id == self.contract.frame_id(COMMAND):
-                        self._last_cmd = bytes(msg.data)
+            self._saw(msg, to_controller, now)
             for when, out in self._transform(msg, now):
                 if when <= now:
                     self._send(dst, out, to_controller)
@@ -206,14 +199,22 @@ class Bridge:
                     heapq.heappush(pending, (when, seq, out))
         # Stopped: what is already queued for us was on the bus too; forward it unchanged.
         while (msg := src.recv(0.05)) is not None:
-            with self._lock:
-                if to_controller:
-                    self.stats.seen_on_vehicle += 1
-                else:
-                    self.stats.seen_on_controller += 1
+            self._saw(msg, to_controller, time.time())
             self._send(dst, msg, to_controller)
         for _, _, out in sorted(pending):
             self._send(dst, out, to_controller)
+
+    def _saw(self, msg: can.Message, on_vehicle: bool, now: float) -> None:
+        """Count a frame seen on one side; the vehicle's first frame starts the fault clock."""
+        with self._lock:
+            if on_vehicle:
+                self.stats.seen_on_vehicle += 1
+                if self.stats.t0 is None:
+                    self.stats.t0 = now
+            else:
+                self.stats.seen_on_controller += 1
+                if msg.arbitration_id == self._cmd_id:
+                    self._last_cmd = bytes(msg.data)
 
     def _send(self, dst: can.BusABC, msg: can.Message, to_controller: bool, injected: bool = False) -> None:
         dst.send(msg)
@@ -232,7 +233,7 @@ class Bridge:
         """Extra traffic of the flood and spoof faults."""
         f = self.fault
         period = 1.0 / max(f.param, 1.0) if f.kind == "flood" else 0.001
-        cmd_id = self.contract.frame_id(COMMAND)
+        cmd_id = self._cmd_id
         while self._running:
             now = time.time()
             if self._active(now):

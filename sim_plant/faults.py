@@ -258,8 +258,8 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
             fails.append(f"command stepped {math.degrees(abs(b - a)):.4f} deg in one cycle")
             break
 
-    causes = [(t_, int(c.decode(fid, data).signals["CtrlStatus_Cause"])) for t_, fid, data in frames
-              if fid == status_id and c.decode(fid, data) is not None]
+    statuses = [(t_, c.decode(fid, data)) for t_, fid, data in frames if fid == status_id]
+    causes = [(t_, int(d.signals["CtrlStatus_Cause"])) for t_, d in statuses if d is not None]
     first_active = next((t_ for t_, s in cmds if s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
     faults_after = [t_ for t_, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t_ > first_active]
     detection = None

@@ -93,12 +93,7 @@ class _Screen:
 
 
 def _meets(m: EnvelopeMargins) -> bool:
-    w = m.worst()
-    gm_ok = w["gain_margin_db"] is None or w["gain_margin_db"] >= GM_MIN_DB
-    pm_ok = w["phase_margin_deg"] is None or w["phase_margin_deg"] >= PM_MIN_DEG
-    # Every phase crossover, not only the nearest to 0 dB, must have the margin: a negative
-    # reported margin (gain reduction) fails gm_ok above.
-    return m.stable and gm_ok and pm_ok
+    return all(_point_meets(p) for p in m.points)
 
 
 @dataclass(frozen=True)
@@ -168,6 +163,7 @@ def tune(ts: float, delay_steps: int, envelope: Envelope = Envelope(), q_form: s
 
 
 def _point_meets(m: Margins) -> bool:
+    # A negative reported gain margin (a gain reduction destabilises) fails as well.
     return (m.stable and (m.gain_margin_db is None or m.gain_margin_db >= GM_MIN_DB)
             and (m.phase_margin_deg is None or m.phase_margin_deg >= PM_MIN_DEG))
 
