@@ -96,6 +96,10 @@ class Contract:
         self._by_name = {m.name: m for m in self.db.messages}
         self._by_id = {m.frame_id: m for m in self.db.messages}
         self._e2e = {m.name: self._e2e_config(m) for m in self.db.messages}
+        # Signals with a DBC start value (GenSigStartValue) may be left out when encoding: the
+        # optional SecOC fields are 0 unless authentication fills them.
+        self._defaults = {m.name: {s.name: s.initial for s in m.signals if s.initial is not None}
+                          for m in self.db.messages}
 
     @staticmethod
     def _e2e_config(msg: Any) -> E2EConfig | None:
@@ -160,11 +164,12 @@ class Contract:
                *, strict: bool = True) -> bytes:
         """Encode physical values; for E2E messages set the counter and the CRC.
 
-        ``strict=False`` lets a test bench send values outside the DBC ranges on purpose.
+        Signals not given take their DBC start value where it has one.  ``strict=False`` lets a
+        test bench send values outside the DBC ranges on purpose.
         """
         msg = self._by_name[name]
         cfg = self._e2e[name]
-        full = dict(values)
+        full = {**self._defaults[name], **values}
         if cfg is not None:
             if counter is None:
                 raise ValueError(f"{name} is E2E-protected: give the alive counter")

@@ -29,3 +29,24 @@ def resolve_model_delay(args: argparse.Namespace) -> None:
     d = ControllerConfig()
     shipped = (args.k, args.tau, args.tau_n) == (d.k, d.tau, d.tau_n)
     args.model_delay = d.model_delay_steps if shipped else 0
+
+
+def add_secoc_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--secoc", action="store_true",
+                   help="authenticate MRS_AuxSteerCmd (AUTOSAR SecOC style, AES-CMAC) with the 128-bit key in "
+                   "$MRSTEER_SECOC_KEY (32 hex digits); both controller and plant must have it")
+    g.add_argument("--secoc-key", type=str, metavar="FILE",
+                   help="as --secoc, with the key read from FILE (32 hex digits)")
+
+
+def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser) -> bytes | None:
+    """The key the SecOC options ask for, or None; a bad or missing key is a usage error."""
+    if not (args.secoc or args.secoc_key):
+        return None
+    from mrsteer_dbc.secoc import SecOCError, load_key
+
+    try:
+        return load_key(args.secoc_key)
+    except SecOCError as exc:
+        parser.error(str(exc))

@@ -10,6 +10,10 @@ Each cycle, in this order (the scheduling contract a port must keep):
    command to zero and re-initialise bumplessly once the input is good again;
 4. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
 
+With a SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's
+``MRS_SecOCSync`` frames, and step 4 signs each command (``mrsteer_dbc.secoc``); without a
+valid sync for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
+
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
 plant, where simulated time is set by the plant; with no yaw-rate frame for
@@ -38,7 +42,8 @@ import can
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser, model_delay_help, resolve_model_delay
+from firmware_py.cli_support import Parser, add_secoc_args, model_delay_help, resolve_model_delay, secoc_key
+from mrsteer_dbc import secoc
 
 MSG_STEER = "MRS_DriverSteer"
 MSG_YAW = "MRS_YawRate"
@@ -53,6 +58,8 @@ CAUSE_SPEED_MISSING = 0x04
 CAUSE_E2E = 0x08
 CAUSE_RANGE = 0x10
 CAUSE_LOW_SPEED = 0x20
+CAUSE_AUTH = 0x40  # SecOC on, but no valid freshness sync: the actuator will not apply commands
+SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
@@ -76,6 +83,7 @@ class RuntimeConfig:
     # arrival, so a measurement waits ~this long for its command (None: free-running grid).
     sync_offset: float | None = DEFAULT_SYNC_OFFSET
     duration: float | None = None  # s; None runs until a signal
+    secoc_key: bytes | None = None  # authenticate the commands (mrsteer_dbc.secoc) when given
     controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
 
 
@@ -147,6 +155,7 @@ class LoopStats:
     rx_frames: int = 0
     rx_rejected: int = 0
     rx_ignored: int = 0
+    syncs_rejected: int = 0  # MRS_SecOCSync frames that failed their MAC or were not newer
     tx_frames: int = 0
     faults_entered: int = 0
     lateness: LatenessHistogram = field(default_factory=LatenessHistogram)
@@ -159,6 +168,7 @@ class LoopStats:
         return {
             "cycles": self.cycles, "overruns": self.overruns, "missed_cycles": self.missed_cycles,
             "rx_frames": self.rx_frames, "rx_rejected": self.rx_rejected, "rx_ignored": self.rx_ignored,
+            "syncs_rejected": self.syncs_rejected,
             "tx_frames": self.tx_frames, "faults_entered": self.faults_entered,
             "lateness_p50_s": lat.percentile(0.5), "lateness_p99_s": lat.percentile(0.99), "lateness_max_s": lat.max,
             "rss_kb_loop_start": self.rss_kb_loop_start, "rss_kb_loop_end": self.rss_kb_loop_end,
@@ -212,7 +222,13 @@ class ControllerNode:
         }
         self._steer, self._yaw, self._speed = self.inputs.values()
         self.yaw_id = c.frame_id(MSG_YAW)
-        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in self.inputs])
+        self.signer = secoc.CommandSigner(c, config.secoc_key) if config.secoc_key is not None else None
+        self.sync_id = c.frame_id(secoc.SYNC) if self.signer is not None else None
+        sync_cycle = c.cycle_time_s(secoc.SYNC) or 0.1
+        self.sync_limit = max(1, int(math.ceil(SYNC_STALE_CYCLES * sync_cycle / period - 1e-9)))  # 0.3/1e-3 is 300.00000000000006
+        self._sync_age = self.sync_limit + 1
+        wanted = [*self.inputs, *([self.sync_id] if self.sync_id is not None else [])]
+        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in wanted])
         self.cmd_id = c.frame_id(MSG_CMD)
         self.status_id = c.frame_id(MSG_STATUS)
         self.cmd_counter = mrsteer_dbc.AliveCounter()
@@ -232,6 +248,9 @@ class ControllerNode:
     def _receive(self, msg: can.Message) -> bool:
         """Check and store one frame; True if it was an accepted yaw-rate frame."""
         self.stats.rx_frames += 1
+        if msg.arbitration_id == self.sync_id and not (msg.is_extended_id or msg.is_error_frame):
+            self._receive_sync(bytes(msg.data))
+            return False
         inp = self.inputs.get(msg.arbitration_id)
         if inp is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             self.stats.rx_ignored += 1
@@ -253,6 +272,13 @@ class ControllerNode:
             self._yaw_stamp = msg.timestamp or 0.0
             return True
         return False
+
+    def _receive_sync(self, data: bytes) -> None:
+        decoded = self.contract.decode(self.sync_id, data)
+        if decoded is not None and decoded.status.accepted and self.signer.accept_sync(data):
+            self._sync_age = 0
+        else:
+            self.stats.syncs_rejected += 1
 
     def drain(self) -> bool:
         got_yaw = False
@@ -282,6 +308,10 @@ class ControllerNode:
             cause |= CAUSE_RANGE
         if self.state.status == mr.STATUS_INACTIVE and not cause:
             cause |= CAUSE_LOW_SPEED
+        if self.signer is not None:
+            self._sync_age += 1
+            if self._sync_age > self.sync_limit or not self.signer.synced:
+                cause |= CAUSE_AUTH
         fault = self.state.status == mr.STATUS_FAULT
         if fault and not self._was_fault:
             self.stats.faults_entered += 1
@@ -294,9 +324,11 @@ class ControllerNode:
             self._send_status()
 
     def _send_command(self, u: float, state: int) -> None:
-        data = self.contract.encode(MSG_CMD, {"AuxSteerCmd_State": state, "AuxSteerCmd_Angle": u,
-                                              "AuxSteerCmd_MeasCounter": self._answers},
-                                    self.cmd_counter.next())
+        values = {"AuxSteerCmd_State": state, "AuxSteerCmd_Angle": u, "AuxSteerCmd_MeasCounter": self._answers}
+        if self.signer is not None:
+            data = self.signer.sign(values, self.cmd_counter.next())
+        else:
+            data = self.contract.encode(MSG_CMD, values, self.cmd_counter.next())
         self.bus.send(can.Message(arbitration_id=self.cmd_id, data=data, is_extended_id=False))
         self.stats.tx_frames += 1
 
@@ -432,6 +464,7 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
     p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
                    help="write loop statistics as JSON here on exit")
+    add_secoc_args(p)
     p.add_argument("--rt-priority", type=int, default=0, metavar="P",
                    help="run under SCHED_FIFO at priority P (1..99) where permitted; 0 (default) leaves the "
                    "scheduler alone; what was applied is reported in --stats-out")
@@ -483,7 +516,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error(f"--sync-offset-us must be in [0, one period), got {args.sync_offset_us}")
     cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
                         sync_offset=None if args.no_sync else args.sync_offset_us * 1e-6,
-                        duration=args.duration, controller=ctrl)
+                        duration=args.duration, secoc_key=secoc_key(args, parser), controller=ctrl)
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
@@ -493,7 +526,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
     signal.signal(signal.SIGTERM, node.stop)
     signal.signal(signal.SIGINT, node.stop)
-    print(f"{prog}: running at {args.rate_hz:g} Hz ({args.trigger} trigger) on {bus.channel_info}",
+    auth = ", commands authenticated (SecOC)" if cfg.secoc_key is not None else ""
+    print(f"{prog}: running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}",
           file=sys.stderr, flush=True)
     code = 0
     try:

@@ -20,10 +20,14 @@ corrupt_counter    alive counter set to 15 (never sent), CRC made valid again
 wrong_length       drop the last byte
 replay             after each frame, also send the frame of the same message ``param`` frames
                    earlier again (recorded traffic played back by an attacker)
+substitute         send the frame of the same message ``param`` frames earlier *instead* (a
+                   man in the middle; with ``param`` 15 the alive counter is what the receiver
+                   expects, so E2E alone cannot tell)
 out_of_range       first physical signal set to ``param`` (outside the DBC range), E2E valid
 flood              also send frames of an unused ID (0x7F0) on the controller side, ``param`` per s
-spoof_command      also send forged MRS_AuxSteerCmd frames (angle ``param`` rad) on the vehicle
-                   side, re-using the counter of the last real command (a replay-style forgery)
+spoof_command      after each real MRS_AuxSteerCmd (target ``commands``), also send a forged one
+                   with angle ``param`` rad: the next alive counter and FV counter, a valid CRC
+                   and a random MAC (the best a forger without the SecOC key can do)
 =================  ===================================================================
 """
 
@@ -47,10 +51,11 @@ import mrsteer_dbc
 from firmware_py.cli_support import Parser
 
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
-         "wrong_length", "replay", "out_of_range", "flood", "spoof_command")
+         "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")
 SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
 COMMAND = "MRS_AuxSteerCmd"
 FLOOD_ID = 0x7F0
+HISTORY = 256  # frames kept per message for replay and substitution
 
 
 @dataclass(frozen=True)
@@ -100,8 +105,6 @@ class Bridge:
         self._lock = threading.Lock()
         self._history: dict[int, collections.deque[tuple[float, bytes]]] = collections.defaultdict(collections.deque)
         self._held: dict[int, can.Message] = {}
-        self._last_cmd: bytes | None = None
-        self._cmd_id = self.contract.frame_id(COMMAND)
 
     def stop(self, *_: Any) -> None:
         self._running = False
@@ -135,12 +138,12 @@ class Bridge:
         f = self.fault
         hist = self._history[msg.arbitration_id]
         hist.append((now, bytes(msg.data)))
-        while len(hist) > 64:
+        while len(hist) > HISTORY:
             hist.popleft()
         if msg.arbitration_id not in self.ids or not self._active(now):
             return [(now, msg)]
         kind = f.kind
-        if kind in ("none", "flood", "spoof_command"):
+        if kind in ("none", "flood"):
             return [(now, msg)]
         self._mark(now)
         data = bytearray(msg.data)
@@ -170,11 +173,28 @@ class Bridge:
             if len(hist) <= back:
                 return [(now, msg)]
             return [(now, msg), (now, _copy(msg, hist[-1 - back][1]))]
+        elif kind == "substitute":
+            back = int(f.param)
+            data = bytearray(hist[-1 - back][1]) if len(hist) > back else data
+        elif kind == "spoof_command":
+            return [(now, msg), (now, _copy(msg, self._forge(msg)))]
         elif kind == "out_of_range":
             m = self.contract.message(self.contract.name_of(msg.arbitration_id))
             first = next(s for s in m.signals if not s.name.endswith(("_CRC", "_Counter")))
             data = bytearray(self._reencode(msg, {first.name: f.param}))
         return [(now, _copy(msg, bytes(data)))]
+
+    def _forge(self, real: can.Message) -> bytes:
+        name = self.contract.name_of(real.arbitration_id)
+        m = self.contract.message(name)
+        values = m.decode(bytes(real.data), decode_choices=False)
+        e2e = self.contract.e2e(name)
+        changes = {e2e.counter_signal: (values[e2e.counter_signal] + 1) % mrsteer_dbc.COUNTER_MODULO,
+                   "AuxSteerCmd_Angle": self.fault.param, "AuxSteerCmd_State": 1,
+                   "AuxSteerCmd_MAC": self.rng.getrandbits(m.get_signal_by_name("AuxSteerCmd_MAC").length)}
+        fv = m.get_signal_by_name("AuxSteerCmd_FvCounter")
+        changes[fv.name] = (values[fv.name] + 1) % (1 << fv.length)
+        return self._reencode(real, changes)
 
     # ------------------------------------------------------------------ threads
 
@@ -213,8 +233,6 @@ class Bridge:
                     self.stats.t0 = now
             else:
                 self.stats.seen_on_controller += 1
-                if msg.arbitration_id == self._cmd_id:
-                    self._last_cmd = bytes(msg.data)
 
     def _send(self, dst: can.BusABC, msg: can.Message, to_controller: bool, injected: bool = False) -> None:
         dst.send(msg)
@@ -229,31 +247,21 @@ class Bridge:
             else:
                 self.stats.forwarded_to_vehicle += 1
 
-    def _inject(self) -> None:
-        """Extra traffic of the flood and spoof faults."""
-        f = self.fault
-        period = 1.0 / max(f.param, 1.0) if f.kind == "flood" else 0.001
-        cmd_id = self._cmd_id
+    def _flood(self) -> None:
+        period = 1.0 / max(self.fault.param, 1.0)
         while self._running:
             now = time.time()
             if self._active(now):
-                if f.kind == "flood":
-                    self._send(self.controller, can.Message(arbitration_id=FLOOD_ID, data=bytes(8),
-                                                            is_extended_id=False), True, injected=True)
-                    self._mark(now)
-                elif f.kind == "spoof_command" and self._last_cmd is not None:
-                    forged = self._reencode(can.Message(arbitration_id=cmd_id, data=self._last_cmd),
-                                            {"AuxSteerCmd_Angle": f.param, "AuxSteerCmd_State": 1})
-                    self._send(self.vehicle, can.Message(arbitration_id=cmd_id, data=forged, is_extended_id=False),
-                               False, injected=True)
-                    self._mark(now)
+                self._send(self.controller, can.Message(arbitration_id=FLOOD_ID, data=bytes(8), is_extended_id=False),
+                           True, injected=True)
+                self._mark(now)
             time.sleep(period)
 
     def run(self) -> BridgeStats:
         threads = [threading.Thread(target=self._pump, args=(self.vehicle, self.controller, True), daemon=True),
                    threading.Thread(target=self._pump, args=(self.controller, self.vehicle, False), daemon=True)]
-        if self.fault.kind in ("flood", "spoof_command"):
-            threads.append(threading.Thread(target=self._inject, daemon=True))
+        if self.fault.kind == "flood":
+            threads.append(threading.Thread(target=self._flood, daemon=True))
         for t in threads:
             t.start()
         while self._running and all(t.is_alive() for t in threads):

@@ -15,6 +15,10 @@ the controller.  Every row is then judged from what was logged and reported:
 * row-specific: detection within the stated number of controller cycles (counted in commands
   on the bus, not in wall time), the cause in ``MRS_CtrlStatus``, recovery after the fault,
   rejected frames counted, the actuator's fade after a controller crash.
+
+Rows marked SecOC run controller and plant with a fresh random key (``$MRSTEER_SECOC_KEY``).  A
+16-bit MAC lets a random guess through with probability 2^-16, so those rows allow up to
+``MAC_LUCK`` lucky frames in a few hundred (the chance of more is below 1e-8) and report them.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from typing import Callable
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
+from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
 from sim_plant.fault_bridge import Fault
 from sim_plant.hil import HilError, _Proc, _spawn, _stop, _wait_for_socket, _wait_ready, _wait_stderr
 
@@ -48,6 +53,10 @@ KILL_AT = 1.2
 RESTART_AT = 1.7
 TIMEOUT_CYCLES = rt.RuntimeConfig().timeout_cycles
 E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
+# The forger's angle: the DBC maximum, just beyond the controller's 3 deg limit, so a forgery the
+# actuator took is told apart from every real command.
+FORGED_ANGLE = mrsteer_dbc.load().signal_range(rt.MSG_CMD, "AuxSteerCmd_Angle")[1]
+MAC_LUCK = 2
 
 
 @dataclass(frozen=True)
@@ -62,6 +71,8 @@ class Row:
     plant_rejects: bool = False  # the plant must reject the affected command frames
     kill: bool = False
     restart: bool = False
+    secoc: bool = False  # controller and plant authenticate the commands
+    auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
 
 
 def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
@@ -93,6 +104,13 @@ ROWS = (
         no_fault=True),
     Row("command frames lost (burst)", _f("drop", "commands"), "actuator times out, fades, slews back"),
     Row("command CRC corrupted", _f("corrupt_crc", "commands"), "actuator rejects them", plant_rejects=True),
+    Row("SecOC: baseline", _f("none"), "runs clean, commands authenticated", no_fault=True, secoc=True),
+    # The forger sends the next alive counter with a valid CRC: E2E alone would take it.
+    Row("SecOC: commands forged", _f("spoof_command", "commands", FORGED_ANGLE),
+        "forgeries rejected (MAC), real ones kept", secoc=True, auth_rejects=True),
+    # 150 frames (0.3 s) back: counter-aligned, so E2E alone would take them (docs/faults.md).
+    Row("SecOC: 0.3 s old commands substituted", _f("substitute", "commands", 150.0),
+        "stale freshness rejected, fade, slew back", secoc=True, auth_rejects=True),
     Row("controller killed", _f("none"), "actuator at zero within timeout + fade", kill=True),
     Row("controller killed and restarted", _f("none"), "resumes without a jump", kill=True, restart=True),
 )
@@ -119,17 +137,18 @@ def _parse_log(path: Path) -> list[tuple[float, int, bytes]]:
     return frames
 
 
-def _trace(path: Path) -> tuple[list[float], list[float]]:
-    """Plant time and applied angle of every plant step."""
-    t, applied = [], []
+def _trace(path: Path) -> tuple[list[float], list[float], list[float]]:
+    """Plant time, applied angle and the command the actuator holds, of every plant step."""
+    t, applied, held = [], [], []
     lines = path.read_text().splitlines()
     head = lines[0].split(",")
-    ti, ai = head.index("t_s"), head.index("aux_applied_rad")
+    ti, ai, ci = head.index("t_s"), head.index("aux_applied_rad"), head.index("aux_cmd_rad")
     for line in lines[1:]:
         cols = line.split(",")
         t.append(float(cols[ti]))
         applied.append(float(cols[ai]))
-    return t, applied
+        held.append(float(cols[ci]))
+    return t, applied, held
 
 
 def _gaps(frames: list[tuple[float, int, bytes]], ids: list[int], longer: float) -> list[tuple[float, float]]:
@@ -147,8 +166,11 @@ def run_row(row: Row, work: Path, say: Callable[[str], None]) -> RowResult:
     tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
     ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"
     procs: list[_Proc] = []
+    secoc = ["--secoc"] if row.secoc else []
+    if row.secoc:
+        env[SECOC_KEY_ENV] = os.urandom(16).hex()
     ctl_cmd = [py, "-m", "firmware_py", "--interface", "mrsteer", "--channel", ch_b, "--rate-hz", repr(RATE_HZ),
-               "--rate-limit", repr(RATE_LIMIT), "--stats-out", str(work / "controller.json")]
+               "--rate-limit", repr(RATE_LIMIT), "--stats-out", str(work / "controller.json"), *secoc]
     try:
         for ch in (ch_a, ch_b):
             procs.append(_spawn(f"broker {ch}", [py, "-m", "sim_plant.vbus", "--channel", ch], work, env))
@@ -174,7 +196,7 @@ def run_row(row: Row, work: Path, say: Callable[[str], None]) -> RowResult:
                                  "realtime", "--rate-hz", repr(RATE_HZ), "--actuator-rate", repr(ACTUATOR_RATE),
                                  "--scenario", "paper-fig9", "--duration",
                                  repr(DURATION), "--trace-out", str(work / "trace.csv"),
-                                 "--stats-out", str(work / "plant.json")], work, env)
+                                 "--stats-out", str(work / "plant.json"), *secoc], work, env)
         procs.append(plant)
         start = time.monotonic()
         killed_at = restarted = None
@@ -208,7 +230,7 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
     c = mrsteer_dbc.load()
     fails: list[str] = []
     observed: list[str] = []
-    t, applied = _trace(work / "trace.csv")
+    t, applied, held = _trace(work / "trace.csv")
     ts = 1.0 / RATE_HZ
     limit = mr.ControllerConfig().aux_limit
     worst = max(abs(a) for a in applied)
@@ -304,6 +326,22 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         if plant["cmd_rejected"] < bridge["affected"]:
             fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")
         observed.append(f"plant rejected {plant['cmd_rejected']}")
+    if row.auth_rejects:
+        failed = plant["cmd_auth_failed"]
+        observed.append(f"plant: {failed} failed SecOC")
+        if failed < bridge["affected"] - MAC_LUCK:
+            fails.append(f"plant's SecOC rejected {failed} of {bridge['affected']} bad commands")
+    if row.fault.kind == "spoof_command":
+        # Each forgery the actuator took would show as its marker angle in the held command.
+        taken = sum(1 for a, b in zip([0.0, *held], held) if abs(b - FORGED_ANGLE) < 5e-7 <= abs(a - FORGED_ANGLE))
+        observed.append(f"{taken} of {bridge['affected']} forgeries taken")
+        if taken > MAC_LUCK:
+            fails.append(f"the actuator took {taken} forged commands")
+        # Authentication comes before the counter check, so forgeries cannot push the real
+        # commands out of the alive-counter sequence.
+        e2e_rejected = plant["cmd_rejected"] - plant["cmd_auth_failed"]
+        if e2e_rejected > MAC_LUCK:
+            fails.append(f"{e2e_rejected} real commands rejected by the counter check after forgeries")
     if row.kill and killed_at is not None:
         last_cmd = max((t_ for t_, _ in cmds if t_ <= killed_at), default=killed_at)
         t0 = t[0]

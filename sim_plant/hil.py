@@ -29,6 +29,7 @@ from typing import IO, Any, Callable
 import numpy as np
 
 import mrsteer_dbc
+from mrsteer_dbc import secoc as secoc_mod
 from firmware_py import bus_open
 from firmware_py import model_regulator as mr
 from sim_plant import scenario as scn
@@ -64,6 +65,7 @@ class HilConfig:
     model_delay: int = _DEFAULT.model_delay_steps
     delay_steps: int = 1
     out: Path = Path("out/hil")
+    secoc_key: bytes | None = None  # authenticate the commands (mrsteer_dbc.secoc)
 
 
 @dataclass
@@ -107,6 +109,11 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=say)
         bus_args = ["--interface", iface] + (["--channel", channel] if channel else [])
         env = dict(os.environ)
+        secoc: list[str] = []
+        if cfg.secoc_key is not None:
+            # Through the environment, not argv: a command line is visible to every user.
+            env[secoc_mod.KEY_ENV] = cfg.secoc_key.hex()
+            secoc = ["--secoc"]
         if iface == bus_open.FALLBACK[0] and cfg.channel is None:
             # A private bus for this run: nothing else on it, and it goes away with the run.
             channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
@@ -128,11 +135,11 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
                 "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
                 "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
                 "--model-delay", str(cfg.model_delay),
-                "--stats-out", str(work / "controller.json")], work, env))
+                "--stats-out", str(work / "controller.json"), *secoc], work, env))
             _wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
                      "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
-                     "--stats-out", str(work / "plant.json")]
+                     "--stats-out", str(work / "plant.json"), *secoc]
         for flag, value in (("--v", cfg.v), ("--mu", cfg.mu), ("--mz", cfg.mz)):
             if value is not None:
                 plant_cmd += [flag, repr(value)]
@@ -271,7 +278,9 @@ def _finish(cfg: HilConfig, sc: scn.Scenario, ctrl: mr.ControllerConfig, work: P
         "received_controller": stats["controller"].get("rx_frames"),
         "rejected_controller": stats["controller"].get("rx_rejected"),
         "rejected_plant": stats["plant"].get("cmd_rejected"),
+        "auth_failed_plant": stats["plant"].get("cmd_auth_failed"),
     }
+    summary["secoc"] = cfg.secoc_key is not None
     summary["loop"] = {"controller": stats["controller"], "plant": stats["plant"]}
     files = {
         "traffic.log": (work / "traffic.log").read_bytes(),

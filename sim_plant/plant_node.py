@@ -6,9 +6,10 @@ Each plant step (period ``ts``):
    model if speed or friction changed;
 2. the driver model sets the driver's front-wheel angle;
 3. the actuator takes the newest valid auxiliary command: only frames that pass length, CRC,
-   alive-counter and range checks count; with no valid command for ``cmd_timeout`` it fades
-   to zero at a bounded rate;
-4. publish the sensor messages due at this step (each at its DBC cycle time, never faster than
+   range, SecOC (when a key is given: ``mrsteer_dbc.secoc``) and alive-counter checks count,
+   in that order; with no valid command for ``cmd_timeout`` it fades to zero at a bounded rate;
+4. publish the sensor messages due at this step (with SecOC, first ``MRS_SecOCSync`` at its
+   DBC cycle time: the actuator is the freshness master) (each at its DBC cycle time, never faster than
    the plant step): driver angle, speed, then yaw rate last, so a controller triggered by the
    yaw-rate frame sees a complete set;
 5. advance the exactly discretised model with front-wheel angle = driver angle + actuator.
@@ -39,7 +40,8 @@ import can
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser
+from firmware_py.cli_support import Parser, add_secoc_args, secoc_key
+from mrsteer_dbc import secoc
 from sim_plant import scenario as scn
 from sim_plant.vehicle import DiscretePlant
 
@@ -53,7 +55,8 @@ class PlantStats:
     steps: int = 0
     tx_frames: int = 0
     cmd_accepted: int = 0
-    cmd_rejected: int = 0
+    cmd_rejected: int = 0  # every rejected command, whatever the reason
+    cmd_auth_failed: int = 0  # of which: SecOC verification failed (forged, replayed, stale)
     cmd_unmatched: int = 0  # valid commands that did not answer the awaited measurement (lockstep)
     lockstep_timeouts: int = 0
     actuator_timeouts: int = 0
@@ -69,12 +72,13 @@ class PlantStats:
 
 class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
-                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2")
+                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad")
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = 0.02, lockstep_timeout: float = 1.0,
                  fade_rate: float = math.radians(30.0), contract: mrsteer_dbc.Contract | None = None,
-                 expect_controller: bool = True, actuator_rate: float = 0.0) -> None:
+                 expect_controller: bool = True, actuator_rate: float = 0.0,
+                 secoc_key: bytes | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}")
         self.bus, self.sc, self.mode, self.ts = bus, sc, mode, ts
@@ -86,6 +90,9 @@ class PlantNode:
         self.cmd_id = c.frame_id("MRS_AuxSteerCmd")
         self.bench_id = c.frame_id("MRS_BenchInject")
         self.cmd_rx = mrsteer_dbc.E2EReceiver()
+        self.verifier = secoc.CommandVerifier(c, secoc_key) if secoc_key is not None else None
+        self.sync_id = c.frame_id(secoc.SYNC)
+        self.sync_every = max(1, int(round((c.cycle_time_s(secoc.SYNC) or 0.1) / ts)))
         self.bench_rx = mrsteer_dbc.E2EReceiver()
         bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in (self.cmd_id, self.bench_id)])
         self.counters = {name: mrsteer_dbc.AliveCounter() for name in ("MRS_DriverSteer", "MRS_YawRate",
@@ -130,6 +137,11 @@ class PlantNode:
                 self.stats.bench_injections += 1
             return False
         status = decoded.status
+        # Authenticate before the counter check: a forged frame must not advance the sequence.
+        if status is mrsteer_dbc.E2EStatus.OK and self.verifier is not None and not self.verifier.verify(bytes(msg.data)):
+            self.stats.cmd_auth_failed += 1
+            self.stats.cmd_rejected += 1
+            return False
         if status is mrsteer_dbc.E2EStatus.OK:
             status = self.cmd_rx.check(decoded.counter)
         if not status.accepted:
@@ -149,6 +161,9 @@ class PlantNode:
 
     def _publish(self, k: int, driver: float, y: Any) -> int:
         c = self.contract
+        if self.verifier is not None and k % self.sync_every == 0:
+            self.bus.send(can.Message(arbitration_id=self.sync_id, data=self.verifier.next_sync(), is_extended_id=False))
+            self.stats.tx_frames += 1
         sends = []
         if k % self.every["MRS_DriverSteer"] == 0:
             sends.append(("MRS_DriverSteer", {"DriverSteer_Angle": driver}))
@@ -214,7 +229,7 @@ class PlantNode:
         self.cmd_age += 1
         if self.record_trace:
             self.stats.trace.append((t, driver, self.applied, m_z, self.scene.mu, self.scene.v,
-                                     float(y[0]), float(y[1]), float(y[2])))
+                                     float(y[0]), float(y[1]), float(y[2]), self.latest_cmd))
         self.plant.advance(driver + self.applied, m_z)
         self.stats.steps += 1
 
@@ -291,6 +306,7 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
                    help="lockstep: longest wait for the controller's answer (default 1)")
     p.add_argument("--no-controller", action="store_true",
                    help="lockstep without a controller on the bus: do not wait for commands")
+    add_secoc_args(p)
     p.add_argument("--stats-out", type=Path, metavar="FILE", help="write plant statistics as JSON here")
     p.add_argument("--trace-out", type=Path, metavar="FILE", help="write the true states as CSV here")
     return p
@@ -314,6 +330,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
                                                    duration=args.duration)
     except scn.ScenarioError as exc:
         parser.error(str(exc))
+    key = secoc_key(args, parser)
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
@@ -321,7 +338,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         return 1
     node = PlantNode(bus, sc, args.mode, 1.0 / args.rate_hz, args.delay_steps, args.cmd_timeout,
                      args.lockstep_timeout, expect_controller=not args.no_controller,
-                     actuator_rate=args.actuator_rate)
+                     actuator_rate=args.actuator_rate, secoc_key=key)
     node.record_trace = args.trace_out is not None
     signal.signal(signal.SIGTERM, node.stop)
     signal.signal(signal.SIGINT, node.stop)

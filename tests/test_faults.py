@@ -71,6 +71,34 @@ def test_timing_faults(bridge) -> None:
     assert C.decode(YAW, bytes(real.data)).counter == 6 and C.decode(YAW, bytes(old.data)).counter == 5
 
 
+def test_substitution_sends_the_old_frame_instead(bridge) -> None:
+    b = bridge("substitute", 15.0)
+    for counter in range(15):
+        b._transform(_yaw(counter, 0.01 * counter), 100.0 + 0.002 * counter)  # recorded
+    (_, out), = b._transform(_yaw(0, 0.5), 101.0)  # the 16th frame: counter 0 again after 0..14
+    old = C.decode(YAW, bytes(out.data))
+    assert old.status is E2EStatus.OK and old.counter == 0 and old.signals["YawRate_YawRate"] == 0.0
+
+
+def test_the_forger_takes_the_next_counters_with_a_valid_crc(channel: str) -> None:
+    buses = [can.Bus(interface="virtual", channel=f"{channel}-{side}") for side in ("a", "b")]
+    try:
+        b = Bridge(*buses, Fault("spoof_command", "commands", 1.0, 2.0, 0.05))
+        b.stats.t0 = 100.0
+        name = "MRS_AuxSteerCmd"
+        real = can.Message(arbitration_id=C.frame_id(name), is_extended_id=False,
+                           data=C.encode(name, {"AuxSteerCmd_State": 1, "AuxSteerCmd_Angle": 0.01,
+                                                "AuxSteerCmd_MeasCounter": 15, "AuxSteerCmd_FvCounter": 15}, 14))
+        (_, first), (_, forged) = b._transform(real, 101.0)
+        assert first is real
+        d = C.decode(real.arbitration_id, bytes(forged.data))
+        assert d.status is E2EStatus.OK and d.counter == 0 and d.signals["AuxSteerCmd_FvCounter"] == 0
+        assert d.signals["AuxSteerCmd_Angle"] == pytest.approx(0.05) and b.stats.affected == 1
+    finally:
+        for bus in buses:
+            bus.shutdown()
+
+
 def test_bridge_rejects_a_bad_fault_spec() -> None:
     proc = subprocess.run([sys.executable, "-m", "sim_plant.fault_bridge", "--vehicle", "a", "--controller", "b",
                            "--fault", '{"kind": "explode"}'], capture_output=True, text=True, timeout=60)
@@ -115,7 +143,7 @@ def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     results = run_matrix(ROWS, keep=tmp_path)
     table = format_table(results)
     assert all(r.passed for r in results), table
-    assert len(results) == len(ROWS) >= 17
+    assert len(results) == len(ROWS) >= 20
     detected = {r.name: r.detection_cycles for r in results if r.detection_cycles is not None}
     assert detected["yaw-rate frames lost (burst)"] <= rt.RuntimeConfig().timeout_cycles + 2
     assert json.loads((tmp_path / "01" / "bridge.json").read_text())["affected"] == 0  # the baseline is clean

@@ -60,6 +60,24 @@ def test_lockstep_matches_the_offline_firmware_simulation(lockstep_run: tuple[di
     assert f["rejected_controller"] == 0 and f["rejected_plant"] == 0
 
 
+def test_lockstep_with_secoc_authenticates_every_command_and_changes_nothing(
+        lockstep_run: tuple[dict, Path], tmp_path: Path) -> None:
+    key = tmp_path / "key.hex"
+    key.write_text(os.urandom(16).hex())
+    proc = mrsteer("hil", "run", "--scenario", "paper-fig9", "--mode", "lockstep", "--v", "27", "--mu", "0.9",
+                   "--mz", "3000", "--out", str(tmp_path / "out"), "--json", "--secoc-key", str(key))
+    assert proc.returncode == 0, proc.stderr
+    secured, (plain, _) = json.loads(proc.stdout), lockstep_run
+    assert secured["secoc"] and not plain["secoc"]
+    f = secured["frames"]
+    assert f["rejected_plant"] == 0 and f["auth_failed_plant"] == 0  # the sync precedes the first command
+    assert secured["commands_answering_measurements"] == secured["measurements"]
+    for k in ("peak_aux_steer_deg", "final_aux_steer_deg", "peak_yaw_rate_rad_s", "final_yaw_rate_rad_s"):
+        assert secured[k] == plain[k], k  # authentication does not touch the values
+    syncs = [line for line in (tmp_path / "out" / "traffic.log").read_text().splitlines() if " 0A1#" in line]
+    assert len(syncs) == round(secured["duration"] / 0.1) + 1  # one every 100 ms of plant time, from step 0
+
+
 def test_outputs_are_written_and_the_log_decodes_with_cantools(lockstep_run: tuple[dict, Path]) -> None:
     _, out = lockstep_run
     assert sorted(p.name for p in out.iterdir()) == ["plot.png", "signals.csv", "summary.json", "traffic.log"]

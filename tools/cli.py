@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import EXIT_USAGE, Parser, resolve_model_delay
+from firmware_py.cli_support import EXIT_USAGE, Parser, add_secoc_args, resolve_model_delay
 from mrsteer_cli import design_cli
 from mrsteer_cli.cli_args import add_gains, count, number
 from sim_plant import experiments
@@ -152,6 +152,7 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
                    help=f"controller and plant rate in Hz (default {rate:g}, the rate the default gains are tuned for)")
     p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
                    help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")
+    add_secoc_args(p)
 
 
 def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
@@ -174,7 +175,10 @@ def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
 def _hil_config(args: argparse.Namespace, **overrides: object) -> "HilConfig":
     from sim_plant.hil import HilConfig
 
-    base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel)
+    from mrsteer_dbc.secoc import load_key
+
+    key = load_key(args.secoc_key) if args.secoc or args.secoc_key else None  # SecOCError: a usage error
+    base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel, secoc_key=key)
     base.update(overrides)
     return HilConfig(**base)  # type: ignore[arg-type]
 
