@@ -1,9 +1,18 @@
-"""Argument parsing shared by every mrsteer command: one-line errors and exit status 2."""
+"""What every mrsteer command shares: argument errors in one line with exit status 2, the
+SecOC key options, output files written whole or not at all, and the life of a bus process."""
 
 from __future__ import annotations
 
 import argparse
-from typing import NoReturn
+import contextlib
+import os
+import signal
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any, Callable, Mapping, NoReturn, Sequence
+
+import can
 
 EXIT_USAGE = 2
 
@@ -50,3 +59,84 @@ def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser) -> byte
         return load_key(args.secoc_key)
     except SecOCError as exc:
         parser.error(str(exc))
+
+
+def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:
+    """Refuse, before any work is done, an output file that could not be written."""
+    if path is None:
+        return
+    if path.is_dir():
+        parser.error(f"{flag} {path} is a directory")
+    parent = path.parent
+    if not parent.is_dir():
+        parser.error(f"{flag} {path}: {parent} is not an existing directory")
+    if not os.access(parent, os.W_OK):
+        parser.error(f"{flag} {path}: directory {parent} is not writable")
+
+
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+_FILE_MODE = 0o666 & ~_UMASK  # mkstemp creates 0600; outputs get ordinary permissions
+
+
+def write_files(directory: Path, files: Mapping[str, str | bytes]) -> list[Path]:
+    """Write every file whole, or none of them: each goes to a temporary file in ``directory``
+    first, and only when all are written are they renamed into place.  A failure (disk full,
+    say) removes the temporary files and leaves the directory as it was."""
+    staged: list[tuple[str, str]] = []
+    try:
+        for name, data in files.items():
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
+            staged.append((name, tmp))
+            with os.fdopen(fd, "wb") as f:
+                os.fchmod(f.fileno(), _FILE_MODE)
+                f.write(data.encode() if isinstance(data, str) else data)
+        for name, tmp in staged:
+            os.replace(tmp, directory / name)
+    except BaseException:
+        for _, tmp in staged:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        raise
+    return [directory / name for name in files]
+
+
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """One file, whole or not at all (``write_files``)."""
+    write_files(path.parent, {path.name: data})
+
+
+Outputs = Sequence[tuple[Path | None, Callable[[], str | bytes]]]
+
+
+def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[], Any], stop: Callable[..., Any],
+             outputs: Outputs = (), ready: str | None = None) -> int:
+    """The life of a bus process after its bus is open.
+
+    SIGINT and SIGTERM call ``stop`` (the loop ends after its current cycle); ``ready`` is then
+    printed on stderr (a supervisor may signal from that moment on); a bus failure is
+    one line and exit status 1; the bus (or each of them) is always shut down; then each output whose path was
+    given is written whole (``write_atomic``), and one that cannot be is one line and exit 1.
+    """
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    if ready is not None:
+        print(f"{prog}: {ready}", file=sys.stderr, flush=True)
+    code = 0
+    try:
+        run()
+    except can.CanError as exc:
+        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        for b in [bus] if isinstance(bus, can.BusABC) else bus:
+            b.shutdown()
+    for path, render in outputs:
+        if path is None:
+            continue
+        try:
+            write_atomic(path, render())
+        except OSError as exc:
+            print(f"{prog}: error: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
+            code = 1
+    return code

@@ -30,7 +30,6 @@ import gc
 import json
 import math
 import os
-import signal
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -42,7 +41,8 @@ import can
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser, add_secoc_args, model_delay_help, resolve_model_delay, secoc_key
+from firmware_py.cli_support import (Parser, add_secoc_args, check_output_file, model_delay_help, resolve_model_delay,
+                                     run_node, secoc_key)
 from mrsteer_dbc import secoc
 
 MSG_STEER = "MRS_DriverSteer"
@@ -514,6 +514,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error(str(exc))
     if not (math.isfinite(args.sync_offset_us) and 0.0 <= args.sync_offset_us * 1e-6 < 1.0 / args.rate_hz):
         parser.error(f"--sync-offset-us must be in [0, one period), got {args.sync_offset_us}")
+    check_output_file(parser, "--stats-out", args.stats_out)
     cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
                         sync_offset=None if args.no_sync else args.sync_offset_us * 1e-6,
                         duration=args.duration, secoc_key=secoc_key(args, parser), controller=ctrl)
@@ -524,19 +525,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         return 1
     node = ControllerNode(bus, cfg)
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
-    signal.signal(signal.SIGTERM, node.stop)
-    signal.signal(signal.SIGINT, node.stop)
     auth = ", commands authenticated (SecOC)" if cfg.secoc_key is not None else ""
-    print(f"{prog}: running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}",
-          file=sys.stderr, flush=True)
-    code = 0
-    try:
-        node.run()
-    except can.CanError as exc:
-        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
-        code = 1
-    finally:
-        bus.shutdown()
-        if args.stats_out is not None:
-            args.stats_out.write_text(json.dumps(node.stats.summary(), indent=2))
-    return code
+    return run_node(prog, bus, node.run, node.stop,
+                    [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2))],
+                    ready=f"running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}")

@@ -7,7 +7,6 @@ Runs until SIGINT/SIGTERM, then drains what is still queued, flushes and reports
 from __future__ import annotations
 
 import json
-import signal
 import sys
 from pathlib import Path
 from typing import Any, Sequence, TextIO
@@ -15,7 +14,7 @@ from typing import Any, Sequence, TextIO
 import can
 
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser
+from firmware_py.cli_support import Parser, check_output_file, run_node
 
 
 def candump_line(msg: can.Message, iface: str) -> str:
@@ -62,26 +61,25 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.bus
     p.add_argument("--iface-name", default=None, help="interface name written in the log (default: the channel)")
     p.add_argument("--stats-out", type=Path, help="write the frame count as JSON here on exit")
     args = p.parse_args(argv)
+    check_output_file(p, "--stats-out", args.stats_out)
     try:
-        bus = open_bus(args.interface, args.channel, notice=lambda m: None)
-    except BusOpenError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        out = args.out.open("w")  # a live log, written as frames come: it cannot be atomic
+    except OSError as exc:
+        print(f"{prog}: error: cannot write {args.out}: {exc.strerror}", file=sys.stderr)
         return 1
-    with args.out.open("w") as out:
-        log = Logger(bus, out, args.iface_name or args.channel or "can0")
-        signal.signal(signal.SIGTERM, log.stop)
-        signal.signal(signal.SIGINT, log.stop)
-        print("ready", flush=True)
+    with out:
         try:
-            log.run()
-        except can.CanError as exc:
-            print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+            bus = open_bus(args.interface, args.channel, notice=lambda m: None)
+        except BusOpenError as exc:
+            print(f"{prog}: error: {exc}", file=sys.stderr)
             return 1
-        finally:
-            bus.shutdown()
-    if args.stats_out is not None:
-        args.stats_out.write_text(json.dumps({"frames": log.frames}))
-    return 0
+        log = Logger(bus, out, args.iface_name or args.channel or "can0")
+
+        def run() -> None:
+            print("ready", flush=True)  # on stdout, for the supervisor; the signal handlers are set
+            log.run()
+
+        return run_node(prog, bus, run, log.stop, [(args.stats_out, lambda: json.dumps({"frames": log.frames}))])
 
 
 if __name__ == "__main__":

@@ -37,7 +37,6 @@ import collections
 import heapq
 import json
 import random
-import signal
 import sys
 import threading
 import time
@@ -48,7 +47,7 @@ from typing import Any, Sequence
 import can
 
 import mrsteer_dbc
-from firmware_py.cli_support import Parser
+from firmware_py.cli_support import Parser, check_output_file, run_node
 
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
          "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")
@@ -296,6 +295,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
         p.error(f"--fault: {exc}")
     if args.vehicle == args.controller:
         p.error("--vehicle and --controller must be different channels")
+    check_output_file(p, "--stats-out", args.stats_out)
     try:
         a = can.Bus(interface=args.interface, channel=args.vehicle)
         b = can.Bus(interface=args.interface, channel=args.controller)
@@ -303,17 +303,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
         print(f"{prog}: error: cannot open the buses: {exc}", file=sys.stderr)
         return 1
     bridge = Bridge(a, b, fault, args.seed)
-    signal.signal(signal.SIGTERM, bridge.stop)
-    signal.signal(signal.SIGINT, bridge.stop)
-    print(f"{prog}: bridging {args.vehicle} <-> {args.controller}, fault {fault.kind}", file=sys.stderr, flush=True)
-    try:
-        stats = bridge.run()
-    finally:
-        a.shutdown()
-        b.shutdown()
-    if args.stats_out is not None:
-        args.stats_out.write_text(json.dumps(asdict(stats), indent=2))
-    return 0
+    return run_node(prog, (a, b), bridge.run, bridge.stop,
+                    [(args.stats_out, lambda: json.dumps(asdict(bridge.stats), indent=2))],
+                    ready=f"bridging {args.vehicle} <-> {args.controller}, fault {fault.kind}")
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ import signal
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -39,7 +39,7 @@ from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
 from sim_plant.fault_bridge import Fault
-from sim_plant.hil import HilError, _Proc, _spawn, _stop, _wait_for_socket, _wait_ready, _wait_stderr
+from sim_plant.processes import Proc, RunError, spawn, stop, wait_for_socket, wait_ready, wait_stderr
 
 RATE_HZ = 1.0 / mr.ControllerConfig().ts
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
@@ -48,9 +48,58 @@ CMD_TIMEOUT = 0.02  # s, the actuator's command timeout (plant_node default)
 DURATION = 2.6  # s of scenario
 WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
 BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
+TRACE_RESOLUTION = 1e-8  # rad: angles up to 0.06 rad written with 9 significant digits
 ACTUATOR_RATE = math.radians(60.0)  # rad/s, the actuator's own slew limit in these runs
-KILL_AT = 1.2
+KILL_AT = 1.2  # s after the plant started
 RESTART_AT = 1.7
+# Calibrations tuned for other control rates (docs/design.md, `mrsteer design tune`): each keeps
+# 6 dB / 45 deg over the envelope at its rate.  K, tau, tau_n, modelled delay.
+CALIBRATIONS: dict[float, tuple[float, float, float, int]] = {
+    1000.0: (50.0, 0.012, 0.02, 1),
+    500.0: (mr.ControllerConfig().k, mr.ControllerConfig().tau, mr.ControllerConfig().tau_n,
+            mr.ControllerConfig().model_delay_steps),
+    200.0: (14.2, 0.0161, 0.02, 1),
+    100.0: (4.52, 0.0075, 0.02, 1),
+}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Where and how fast the matrix runs.  The default is two private fallback buses at the
+    shipped rate; on real SocketCAN give two interfaces (vehicle, controller).  A slow machine
+    (QEMU without KVM) needs a lower rate, stretched time and longer process start-ups."""
+
+    interface: str = "mrsteer"
+    channels: tuple[str, str] | None = None  # (vehicle, controller); None: fresh fallback buses
+    rate_hz: float = RATE_HZ
+    time_scale: float = 1.0  # stretches the scenario, the fault window and the kill/restart times
+    startup_s: float = 0.0  # extra scenario time in the restart row for the new process to start
+
+    def __post_init__(self) -> None:
+        if self.rate_hz not in CALIBRATIONS:
+            raise ValueError(f"rate must be one of {', '.join(f'{r:g}' for r in CALIBRATIONS)} Hz (a tuned "
+                             f"calibration exists for each), got {self.rate_hz:g}")
+        if not (math.isfinite(self.time_scale) and 1.0 <= self.time_scale <= 20.0):
+            raise ValueError(f"time scale must be in [1, 20], got {self.time_scale:g}")
+        if not (math.isfinite(self.startup_s) and 0.0 <= self.startup_s <= 120.0):
+            raise ValueError(f"start-up allowance must be in [0, 120] s, got {self.startup_s:g}")
+        if self.channels is not None and (len(self.channels) != 2 or self.channels[0] == self.channels[1]):
+            raise ValueError("give two different channels: vehicle side, controller side")
+        if self.channels is None and self.interface != "mrsteer":
+            raise ValueError(f"--interface {self.interface} needs --channels VEHICLE,CONTROLLER")
+
+    @property
+    def ts(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def cmd_timeout(self) -> float:
+        """The actuator's command timeout: the plant's 20 ms, and never under 4 control periods."""
+        return max(CMD_TIMEOUT, 4.0 * self.ts)
+
+    def gains(self) -> list[str]:
+        k, tau, tau_n, m = CALIBRATIONS[self.rate_hz]
+        return ["--k", repr(k), "--tau", repr(tau), "--tau-n", repr(tau_n), "--model-delay", str(m)]
 TIMEOUT_CYCLES = rt.RuntimeConfig().timeout_cycles
 E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
 # The forger's angle: the DBC maximum, just beyond the controller's 3 deg limit, so a forgery the
@@ -160,78 +209,86 @@ def _gaps(frames: list[tuple[float, int, bytes]], ids: list[int], longer: float)
     return out
 
 
-def run_row(row: Row, work: Path, say: Callable[[str], None]) -> RowResult:
+def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Setup()) -> RowResult:
     py = sys.executable
     env = dict(os.environ)
-    tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
-    ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"
-    procs: list[_Proc] = []
+    scale = setup.time_scale
+    fault = replace(row.fault, start=row.fault.start * scale, stop=row.fault.stop * scale)
+    duration = DURATION * scale + (setup.startup_s if row.restart else 0.0)
+    if setup.channels is None:
+        tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
+        ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"
+    else:
+        ch_a, ch_b = setup.channels
+    iface = ["--interface", setup.interface]
+    procs: list[Proc] = []
     secoc = ["--secoc"] if row.secoc else []
     if row.secoc:
         env[SECOC_KEY_ENV] = os.urandom(16).hex()
-    ctl_cmd = [py, "-m", "firmware_py", "--interface", "mrsteer", "--channel", ch_b, "--rate-hz", repr(RATE_HZ),
+    ctl_cmd = [py, "-m", "firmware_py", *iface, "--channel", ch_b, "--rate-hz", repr(setup.rate_hz), *setup.gains(),
                "--rate-limit", repr(RATE_LIMIT), "--stats-out", str(work / "controller.json"), *secoc]
     try:
-        for ch in (ch_a, ch_b):
-            procs.append(_spawn(f"broker {ch}", [py, "-m", "sim_plant.vbus", "--channel", ch], work, env))
-            _wait_for_socket(ch, procs[-1])
+        for ch in (ch_a, ch_b) if setup.channels is None else ():
+            procs.append(spawn(f"broker {ch}", [py, "-m", "sim_plant.vbus", "--channel", ch], work, env))
+            wait_for_socket(ch, procs[-1])
         loggers = []
         for side, ch in (("vehicle", ch_a), ("controller", ch_b)):
-            lg = _spawn(f"logger {side}", [py, "-m", "sim_plant.buslog", "--interface", "mrsteer", "--channel", ch,
+            lg = spawn(f"logger {side}", [py, "-m", "sim_plant.buslog", *iface, "--channel", ch,
                                            "--out", str(work / f"{side}.log"), "--iface-name", side,
                                            "--stats-out", str(work / f"logger-{side}.json")], work, env, stdout=True)
             procs.append(lg)
             loggers.append(lg)
-            _wait_ready(lg)
+            wait_ready(lg)
         # The bridge first: it must see every frame the controller ever sends.
-        bridge = _spawn("bridge", [py, "-m", "sim_plant.fault_bridge", "--vehicle", ch_a, "--controller", ch_b,
-                                   "--fault", json.dumps(asdict(row.fault)), "--stats-out", str(work / "bridge.json")],
+        bridge = spawn("bridge", [py, "-m", "sim_plant.fault_bridge", *iface, "--vehicle", ch_a, "--controller", ch_b,
+                                   "--fault", json.dumps(asdict(fault)), "--stats-out", str(work / "bridge.json")],
                         work, env)
         procs.append(bridge)
-        _wait_stderr(bridge, "bridging")
-        ctl = _spawn("controller", ctl_cmd, work, env)
+        wait_stderr(bridge, "bridging")
+        ctl = spawn("controller", ctl_cmd, work, env)
         procs.append(ctl)
-        _wait_stderr(ctl, "running at")
-        plant = _spawn("plant", [py, "-m", "sim_plant", "--interface", "mrsteer", "--channel", ch_a, "--mode",
-                                 "realtime", "--rate-hz", repr(RATE_HZ), "--actuator-rate", repr(ACTUATOR_RATE),
-                                 "--scenario", "paper-fig9", "--duration",
-                                 repr(DURATION), "--trace-out", str(work / "trace.csv"),
+        wait_stderr(ctl, "running at")
+        plant = spawn("plant", [py, "-m", "sim_plant", *iface, "--channel", ch_a, "--mode",
+                                 "realtime", "--rate-hz", repr(setup.rate_hz), "--actuator-rate", repr(ACTUATOR_RATE),
+                                 "--cmd-timeout", repr(setup.cmd_timeout), "--scenario", "paper-fig9", "--duration",
+                                 repr(duration), "--trace-out", str(work / "trace.csv"),
                                  "--stats-out", str(work / "plant.json"), *secoc], work, env)
         procs.append(plant)
+        wait_stderr(plant, "realtime) on")  # started: kill and restart times count from here
         start = time.monotonic()
         killed_at = restarted = None
         while plant.popen.poll() is None:
             now = time.monotonic() - start
-            if row.kill and killed_at is None and now >= KILL_AT:
+            if row.kill and killed_at is None and now >= KILL_AT * scale:
                 ctl.popen.send_signal(signal.SIGKILL)
                 ctl.popen.wait()
                 killed_at = time.time()
-            if row.restart and killed_at is not None and restarted is None and now >= RESTART_AT:
-                ctl = _spawn("controller-2", ctl_cmd, work, env)
+            if row.restart and killed_at is not None and restarted is None and now >= RESTART_AT * scale:
+                ctl = spawn("controller-2", ctl_cmd, work, env)
                 procs.append(ctl)
                 restarted = time.time()
-            if time.monotonic() - start > 120:
-                raise HilError("the plant did not finish in time")
+            if time.monotonic() - start > 120 + 2 * duration:
+                raise RunError("the plant did not finish in time")
             time.sleep(0.01)
         ctl_code = None
         if ctl.popen.poll() is None:
-            _stop(ctl)
+            stop(ctl)
             ctl_code = ctl.popen.returncode
         for p in (bridge, *loggers):
-            _stop(p)
+            stop(p)
     finally:
         for p in reversed(procs):
-            _stop(p)
-    return judge(row, work, ctl_code, killed_at, restarted)
+            stop(p)
+    return judge(row, work, ctl_code, killed_at, restarted, setup)
 
 
 def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
-          restarted: float | None) -> RowResult:
+          restarted: float | None, setup: Setup = Setup()) -> RowResult:
     c = mrsteer_dbc.load()
     fails: list[str] = []
     observed: list[str] = []
     t, applied, held = _trace(work / "trace.csv")
-    ts = 1.0 / RATE_HZ
+    ts = setup.ts
     limit = mr.ControllerConfig().aux_limit
     worst = max(abs(a) for a in applied)
     steps = [abs(b - a) for a, b in zip(applied, applied[1:])]
@@ -240,7 +297,8 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         fails.append(f"applied {math.degrees(worst):.3f} deg beyond the limit")
     # The actuator (the plant, standing in for its ECU) limits its own slew to ACTUATOR_RATE
     # whatever arrives; this checks that it does, step by step, faults and crashes included.
-    if worst_step > max(ACTUATOR_RATE, PLANT_FADE) * ts * (1 + 1e-9) + 1e-12:
+    # The trace holds 9 significant digits: a step at exactly the limit may read up to ~1e-9 rad over.
+    if worst_step > max(ACTUATOR_RATE, PLANT_FADE) * ts + TRACE_RESOLUTION:
         fails.append(f"applied angle jumped {math.degrees(worst_step):.4f} deg in one step")
 
     bridge = json.loads((work / "bridge.json").read_text())
@@ -349,7 +407,7 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         # plant time runs with the wall clock (realtime): align by the bridge's first frame
         i_kill = next(i for i, tt in enumerate(t) if wall0 + (tt - t0) >= last_cmd)
         a_kill = abs(applied[i_kill])
-        allowed = CMD_TIMEOUT + a_kill / PLANT_FADE + 3 * ts + 0.05
+        allowed = setup.cmd_timeout + a_kill / PLANT_FADE + 3 * ts + 0.05
         i_zero = next((i for i in range(i_kill, len(t)) if applied[i] == 0.0), None)
         end = restarted - wall0 + t0 if restarted is not None else t[-1]
         if i_zero is None or t[i_zero] - t[i_kill] > allowed or t[i_zero] > end:
@@ -367,7 +425,7 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
 
 
 def run_matrix(rows: tuple[Row, ...] = ROWS, say: Callable[[str], None] | None = None,
-               keep: Path | None = None) -> list[RowResult]:
+               keep: Path | None = None, setup: Setup = Setup()) -> list[RowResult]:
     say = say or (lambda m: None)
     results = []
     with tempfile.TemporaryDirectory(prefix="mrsteer-faults-") as tmp:
@@ -375,7 +433,7 @@ def run_matrix(rows: tuple[Row, ...] = ROWS, say: Callable[[str], None] | None =
             work = (keep or Path(tmp)) / f"{i:02d}"
             work.mkdir(parents=True, exist_ok=True)
             say(f"[{i}/{len(rows)}] {row.name}")
-            results.append(run_row(row, work, say))
+            results.append(run_row(row, work, say, setup))
     return results
 
 
@@ -405,12 +463,25 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         return bridge_main(argv[1:], prog=f"{prog} bridge")
     p = Parser(prog=prog, description="Fault injection: the fault matrix, or the bridge on its own.")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=Parser)
-    r = sub.add_parser("run", help="run the fault matrix on the fallback bus and print the table",
+    r = sub.add_parser("run", help="run the fault matrix and print the table",
                        description="Run every row of the fault matrix (each a few seconds of realtime plant and "
-                       "controller joined by the fault bridge) and judge it from the logged traffic.")
+                       "controller joined by the fault bridge) and judge it from the logged traffic.  By default "
+                       "on two private fallback buses; on SocketCAN: --interface socketcan --channels vcan0,vcan1 "
+                       "(tools/vcan.sh up 2).")
     r.add_argument("--only", action="append", metavar="TEXT", help="only rows whose name contains TEXT; repeatable")
     r.add_argument("--keep", type=Path, metavar="DIR", help="keep every row's logs, traces and statistics here")
     r.add_argument("--json", action="store_true", help="print the results as JSON")
+    r.add_argument("--interface", default="mrsteer", help="python-can interface of both buses (default mrsteer, "
+                   "the fallback bus)")
+    r.add_argument("--channels", metavar="VEHICLE,CONTROLLER",
+                   help="the two buses the bridge joins (default: two private fallback buses)")
+    r.add_argument("--rate-hz", type=float, default=RATE_HZ,
+                   help=f"control and plant rate, one of {', '.join(f'{k:g}' for k in CALIBRATIONS)}, each with its "
+                   f"tuned calibration (default {RATE_HZ:g})")
+    r.add_argument("--time-scale", type=float, default=1.0, metavar="F",
+                   help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
+    r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
+                   help="extra scenario seconds in the restart row for the new controller to start (default 0)")
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
@@ -418,8 +489,15 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     if not rows:
         p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in ROWS))
     try:
-        results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep)
-    except HilError as exc:
+        channels = tuple(args.channels.split(",")) if args.channels else None
+        setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s)  # type: ignore[arg-type]
+    except ValueError as exc:
+        p.error(str(exc))
+    if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
+        p.error(f"--keep {args.keep} exists and is not a directory")
+    try:
+        results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
+    except RunError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     if args.json:

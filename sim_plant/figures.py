@@ -9,12 +9,11 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from firmware_py.cli_support import write_files
 from sim_plant.closed_loop import Trace
 from sim_plant.paper import CONDITIONS, FIG10_CONDITION, PAPER_M_Z, Condition, PaperRun
 
@@ -28,12 +27,7 @@ def write_all(run: PaperRun, out_dir: Path) -> list[Path]:
     for name, columns in _figure_columns(run).items():
         files[f"{name}.csv"] = _csv_bytes(columns)
     files.update(_render_pngs(run))
-    written = []
-    for name, data in files.items():
-        path = out_dir / name
-        _atomic_write(path, data)
-        written.append(path)
-    return written
+    return write_files(out_dir, files)
 
 
 def _figure_columns(run: PaperRun) -> dict[str, dict[str, np.ndarray]]:
@@ -123,15 +117,3 @@ def _png(fig, plt) -> bytes:  # type: ignore[no-untyped-def]
     return buf.getvalue()
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file ordinary permissions
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise

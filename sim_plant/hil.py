@@ -10,7 +10,6 @@ this process dies (Linux ``PR_SET_PDEATHSIG``), so even a killed runner leaves n
 
 from __future__ import annotations
 
-import ctypes
 import csv
 import json
 import math
@@ -18,13 +17,12 @@ import os
 import re
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import IO, Any, Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -32,17 +30,17 @@ import mrsteer_dbc
 from mrsteer_dbc import secoc as secoc_mod
 from firmware_py import bus_open
 from firmware_py import model_regulator as mr
+from firmware_py.cli_support import write_files
 from sim_plant import scenario as scn
 from sim_plant.closed_loop import discrete_loop_poles
-from sim_plant.vbus import socket_path
+from sim_plant.processes import Proc, RunError, spawn, stop, tail, wait_for_socket, wait_ready, wait_stderr
 from sim_plant.vehicle import VehicleParams
 
 MODES = ("lockstep", "realtime")
 _LINE = re.compile(r"\((?P<t>[0-9.]+)\)\s+(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<data>[0-9A-Fa-f]*)")
 
 
-class HilError(RuntimeError):
-    """A HIL run failed; the message says which process and how."""
+HilError = RunError  # a HIL run failed; the message says which process and how
 
 
 _DEFAULT = mr.ControllerConfig()
@@ -69,21 +67,6 @@ class HilConfig:
 
 
 @dataclass
-class _Proc:
-    name: str
-    popen: subprocess.Popen
-    stderr: IO[bytes]
-
-
-def _pdeathsig() -> None:  # runs in the child between fork and exec
-    try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-
-
-@dataclass
 class HilRun:
     """What ``run()`` produced."""
 
@@ -104,7 +87,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         raise ValueError(f"--out {cfg.out} exists and is not a directory")
     cfg.out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=".hil-", dir=cfg.out))
-    procs: list[_Proc] = []
+    procs: list[Proc] = []
     try:
         iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=say)
         bus_args = ["--interface", iface] + (["--channel", channel] if channel else [])
@@ -118,25 +101,25 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             # A private bus for this run: nothing else on it, and it goes away with the run.
             channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
             bus_args = ["--interface", iface, "--channel", channel]
-            procs.append(_spawn("bus broker", [sys.executable, "-m", "sim_plant.vbus", "--channel", channel],
+            procs.append(spawn("bus broker", [sys.executable, "-m", "sim_plant.vbus", "--channel", channel],
                                 work, env))
-            _wait_for_socket(channel, procs[-1])
+            wait_for_socket(channel, procs[-1])
         say(f"bus: {iface} {channel}")
 
-        logger = _spawn("logger", [sys.executable, "-m", "sim_plant.buslog", *bus_args, "--out",
+        logger = spawn("logger", [sys.executable, "-m", "sim_plant.buslog", *bus_args, "--out",
                                    str(work / "traffic.log"), "--iface-name", str(channel),
                                    "--stats-out", str(work / "logger.json")], work, env, stdout=True)
         procs.append(logger)
-        _wait_ready(logger)
+        wait_ready(logger)
 
         if cfg.controller != "none":
-            procs.append(_spawn("controller", [
+            procs.append(spawn("controller", [
                 sys.executable, "-m", "firmware_py", *bus_args, "--rate-hz", repr(cfg.rate_hz),
                 "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
                 "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
                 "--model-delay", str(cfg.model_delay),
                 "--stats-out", str(work / "controller.json"), *secoc], work, env))
-            _wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
+            wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
                      "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
                      "--stats-out", str(work / "plant.json"), *secoc]
@@ -145,7 +128,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
                 plant_cmd += [flag, repr(value)]
         if cfg.controller == "none":
             plant_cmd += ["--no-controller"]
-        plant = _spawn("plant", plant_cmd, work, env)
+        plant = spawn("plant", plant_cmd, work, env)
         procs.append(plant)
         say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}")
 
@@ -154,16 +137,16 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             for p in procs:
                 if p is not plant and p.popen.poll() is not None:
                     raise HilError(f"{p.name} exited unexpectedly with status {p.popen.returncode}"
-                                   f"{_tail(p)} ; stopped the others")
+                                   f"{tail(p)} ; stopped the others")
             if time.monotonic() > limit:
                 raise HilError("the plant did not finish in time; stopped everything")
             time.sleep(0.05)
         if plant.popen.returncode != 0:
-            raise HilError(f"plant exited with status {plant.popen.returncode}{_tail(plant)}")
+            raise HilError(f"plant exited with status {plant.popen.returncode}{tail(plant)}")
         for p in [p for p in procs if p.name == "controller"] + [logger]:
-            _stop(p)
+            stop(p)
             if p.popen.returncode not in (0, -signal.SIGTERM):
-                raise HilError(f"{p.name} exited with status {p.popen.returncode}{_tail(p)}")
+                raise HilError(f"{p.name} exited with status {p.popen.returncode}{tail(p)}")
         return _finish(cfg, sc, ctrl, work, say)
     except BaseException:
         partial = work / "traffic.log"
@@ -172,78 +155,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         raise
     finally:
         for p in reversed(procs):
-            _stop(p)
+            stop(p)
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _spawn(name: str, argv: list[str], work: Path, env: dict[str, str], stdout: bool = False) -> _Proc:
-    err = open(work / f"{name.replace(' ', '_')}.stderr", "w+b")
-    popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE if stdout else subprocess.DEVNULL,
-                             stderr=err, env=env, preexec_fn=_pdeathsig)
-    return _Proc(name, popen, err)
-
-
-def _tail(p: _Proc) -> str:
-    try:
-        p.stderr.flush()
-        p.stderr.seek(0)
-        lines = [ln for ln in p.stderr.read().decode(errors="replace").splitlines() if ln.strip()]
-    except (OSError, ValueError):
-        return ""
-    return f" (last words: {lines[-1]})" if lines else ""
-
-
-def _wait_ready(p: _Proc, timeout: float = 120.0) -> None:
-    assert p.popen.stdout is not None
-    os.set_blocking(p.popen.stdout.fileno(), False)
-    deadline = time.monotonic() + timeout
-    buf = b""
-    while time.monotonic() < deadline:
-        if p.popen.poll() is not None:
-            raise HilError(f"{p.name} exited with status {p.popen.returncode} before it was ready{_tail(p)}")
-        chunk = p.popen.stdout.read() or b""
-        buf += chunk
-        if b"ready" in buf:
-            return
-        time.sleep(0.02)
-    raise HilError(f"{p.name} did not become ready")
-
-
-def _wait_stderr(p: _Proc, marker: str, timeout: float = 120.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if p.popen.poll() is not None:
-            raise HilError(f"{p.name} exited with status {p.popen.returncode} before it was ready{_tail(p)}")
-        p.stderr.flush()
-        with open(p.stderr.name, "rb") as f:
-            if marker.encode() in f.read():
-                return
-        time.sleep(0.02)
-    raise HilError(f"{p.name} did not become ready")
-
-
-def _wait_for_socket(channel: str, broker: _Proc) -> None:
-    path = socket_path(channel)
-    deadline = time.monotonic() + 10.0
-    while not path.exists():
-        if broker.popen.poll() is not None:
-            raise HilError(f"bus broker exited with status {broker.popen.returncode}{_tail(broker)}")
-        if time.monotonic() > deadline:
-            raise HilError("bus broker did not come up")
-        time.sleep(0.02)
-
-
-def _stop(p: _Proc, timeout: float = 10.0) -> None:
-    if p.popen.poll() is None:
-        p.popen.send_signal(signal.SIGTERM)
-        try:
-            p.popen.wait(timeout)
-        except subprocess.TimeoutExpired:
-            p.popen.kill()
-            p.popen.wait()
-    if p.popen.stdout is not None:
-        p.popen.stdout.close()
-    p.stderr.close()
 
 
 # ------------------------------------------------------------------------- results
@@ -290,12 +203,7 @@ def _finish(cfg: HilConfig, sc: scn.Scenario, ctrl: mr.ControllerConfig, work: P
     png = _plot(rows, summary)
     if png is not None:
         files["plot.png"] = png
-    written = []
-    for name, data in files.items():
-        tmp = work / (name + ".tmp")
-        tmp.write_bytes(data)
-        os.replace(tmp, cfg.out / name)
-        written.append(cfg.out / name)
+    written = write_files(cfg.out, files)
     say(f"wrote {', '.join(files)} to {cfg.out}/")
     return HilRun(summary, cfg.out, written)
 

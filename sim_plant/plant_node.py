@@ -26,9 +26,9 @@ from __future__ import annotations
 import argparse
 import collections
 import csv
+import io
 import json
 import math
-import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -40,7 +40,7 @@ import can
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser, add_secoc_args, secoc_key
+from firmware_py.cli_support import Parser, add_secoc_args, check_output_file, run_node, secoc_key
 from mrsteer_dbc import secoc
 from sim_plant import scenario as scn
 from sim_plant.vehicle import DiscretePlant
@@ -269,12 +269,13 @@ class PlantNode:
         self.stats.wall_time_s = time.monotonic() - start
         return self.stats
 
-    def write_trace(self, path: Path) -> None:
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(self.TRACE_COLUMNS)
-            for row in self.stats.trace:
-                w.writerow([f"{x:.9g}" for x in row])
+    def trace_csv(self) -> str:
+        f = io.StringIO(newline="")
+        w = csv.writer(f)
+        w.writerow(self.TRACE_COLUMNS)
+        for row in self.stats.trace:
+            w.writerow([f"{x:.9g}" for x in row])
+        return f.getvalue()
 
 
 def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
@@ -331,6 +332,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
     except scn.ScenarioError as exc:
         parser.error(str(exc))
     key = secoc_key(args, parser)
+    check_output_file(parser, "--stats-out", args.stats_out)
+    check_output_file(parser, "--trace-out", args.trace_out)
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
@@ -340,19 +343,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
                      args.lockstep_timeout, expect_controller=not args.no_controller,
                      actuator_rate=args.actuator_rate, secoc_key=key)
     node.record_trace = args.trace_out is not None
-    signal.signal(signal.SIGTERM, node.stop)
-    signal.signal(signal.SIGINT, node.stop)
-    print(f"{prog}: {sc.name} ({sc.duration:g} s, {args.mode}) on {bus.channel_info}", file=sys.stderr, flush=True)
-    code = 0
-    try:
-        node.run()
-    except can.CanError as exc:
-        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
-        code = 1
-    finally:
-        bus.shutdown()
-        if args.stats_out is not None:
-            args.stats_out.write_text(json.dumps(node.stats.summary(), indent=2))
-        if args.trace_out is not None:
-            node.write_trace(args.trace_out)
-    return code
+    return run_node(prog, bus, node.run, node.stop,
+                    [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2)),
+                     (args.trace_out, node.trace_csv)],
+                    ready=f"{sc.name} ({sc.duration:g} s, {args.mode}) on {bus.channel_info}")

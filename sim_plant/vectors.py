@@ -13,11 +13,17 @@ The inputs come from two kinds of scenario:
   vehicle) with one sample of loop delay, so the inputs are what a car would send;
 * synthetic: hand-made input sequences for the fault, inactivity and recovery paths,
   including NaN, infinities, out-of-range values and speeds below activation.
+
+``secoc_setup.txt`` (``key = value`` lines) and ``secoc_frames.csv`` are vectors for a port of
+the optional command authentication (``mrsteer_dbc.secoc``): a fixed key and clock, the sync
+frames the actuator sends and the authenticated command frames that answer them, each with its
+fields and its 8 bytes as they go on the bus, including the lost-commands and epoch-change paths.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections import deque
 from dataclasses import dataclass, fields, replace
@@ -25,6 +31,9 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from firmware_py import model_regulator as mr
+from firmware_py.cli_support import write_files
+import mrsteer_dbc
+from mrsteer_dbc import secoc
 from sim_plant.vehicle import DiscretePlant, VehicleParams
 
 Inputs = tuple[float, float, float]  # driver's front-wheel angle, yaw rate, speed
@@ -137,31 +146,26 @@ def write_all(out: Path, progress: Callable[[str], None] | None = None) -> list[
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {}
     written = []
     for name, cfg in CONFIGS.items():
-        _atomic_write(out / f"{name}.cfg", "\n".join(config_lines(cfg)) + "\n")
+        files[f"{name}.cfg"] = "\n".join(config_lines(cfg)) + "\n"
         for scen, make in SCENARIOS.items():
             c, s = mr.configure(cfg), mr.State()
-            rows = []
+            f = io.StringIO()
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(COLUMNS)
+            n = 0
             for k, (dd, r, v) in enumerate(make(cfg)):
                 u = mr.step(c, s, dd, r, v)
-                rows.append([str(k), _num(dd), _num(r), _num(v), _num(u), *state_row(s)])
-            path = out / f"{name}__{scen}.csv"
-            tmp = path.with_suffix(".csv.tmp")
-            with tmp.open("w", newline="") as f:
-                w = csv.writer(f, lineterminator="\n")
-                w.writerow(COLUMNS)
-                w.writerows(rows)
-            tmp.replace(path)
-            written.append(VectorSet(name, scen, len(rows)))
-            say(f"{path.name}: {len(rows)} steps")
+                w.writerow([str(k), _num(dd), _num(r), _num(v), _num(u), *state_row(s)])
+                n += 1
+            files[f"{name}__{scen}.csv"] = f.getvalue()
+            written.append(VectorSet(name, scen, n))
+            say(f"{name}__{scen}.csv: {n} steps")
+    files.update(secoc_vectors())
+    write_files(out, files)  # all or nothing: a port never sees a mixed set
     return written
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def read_config(path: Path) -> mr.ControllerConfig:
@@ -175,3 +179,63 @@ def read_config(path: Path) -> mr.ControllerConfig:
         kind = types[key]
         values[key] = text if kind == "str" else int(text) if kind == "int" else float(text)
     return mr.ControllerConfig(**values)  # type: ignore[arg-type]
+
+
+SECOC_KEY = bytes(range(16))
+SECOC_T0 = secoc.EPOCH_ORIGIN_S + 1000.0  # the actuator's clock at its first sync
+SECOC_COLUMNS = ("kind", "epoch", "fv_counter", "alive_counter", "state", "angle_rad", "meas_counter", "mac",
+                 "sent", "frame_hex")
+
+
+def secoc_vectors() -> dict[str, str]:
+    """The authentication vectors: ``secoc_setup.txt`` (``key = value`` lines) and ``secoc_frames.csv``.
+
+    ``sent`` is 0 for a command the signer produced but the bus lost (the actuator never saw it:
+    its counter still advances), 1 otherwise.  Every sent command verifies at the actuator in
+    file order; the syncs are what the actuator sent at the time the rows say."""
+    contract = mrsteer_dbc.load()
+    clock = [SECOC_T0]
+    verifier = secoc.CommandVerifier(contract, SECOC_KEY, lambda: clock[0])
+    signer = secoc.CommandSigner(contract, SECOC_KEY)
+    alive = mrsteer_dbc.AliveCounter()
+    lay = secoc.Layout.of(contract)
+    rows: list[list[str]] = []
+
+    def sync() -> None:
+        data = verifier.next_sync()
+        assert signer.accept_sync(data)
+        rows.append(["sync", str(verifier.current), "", "", "", "", "", str(verifier.sync_mac(verifier.current)), "1",
+                     data.hex()])
+
+    def command(i: int, sent: bool = True) -> None:
+        epoch, fv = signer.epoch, signer.counter
+        values = {"AuxSteerCmd_State": mr.STATUS_ACTIVE if i % 7 else mr.STATUS_SATURATED,
+                  "AuxSteerCmd_Angle": round(0.05 * math.sin(0.3 * i), 6), "AuxSteerCmd_MeasCounter": i % 15}
+        counter = alive.next()
+        data = signer.sign(values, counter)
+        assert not sent or verifier.verify(data)
+        raw = contract.message(secoc.COMMAND).decode(data, decode_choices=False, scaling=False)
+        rows.append(["cmd", str(epoch), str(fv), str(counter), str(values["AuxSteerCmd_State"]),
+                     _num(values["AuxSteerCmd_Angle"]), str(values["AuxSteerCmd_MeasCounter"]),
+                     str(raw[lay.mac]), str(int(sent)), data.hex()])
+
+    sync()
+    for i in range(20):  # past the 4-bit FV window and the alive counter's wrap
+        command(i)
+    for i in range(20, 35):  # 15 lost: the most the actuator bridges
+        command(i, sent=False)
+    for i in range(35, 40):
+        command(i)
+    clock[0] += 0.1
+    sync()  # a new epoch: the counter starts at 0 again
+    for i in range(40, 50):
+        command(i)
+    f = io.StringIO()
+    w = csv.writer(f, lineterminator="\n")
+    w.writerow(SECOC_COLUMNS)
+    w.writerows(rows)
+    cfg = [f"key = {SECOC_KEY.hex()}", f"epoch_origin_s = {secoc.EPOCH_ORIGIN_S}", f"clock_s = {_num(SECOC_T0)}",
+           f"command_id = {lay.cmd_id}", f"sync_id = {lay.sync_id}", f"mac_bits = {lay.mac_bits}",
+           f"sync_mac_bits = {lay.sync_mac_bits}", f"fv_counter_low_bits = {lay.counter_low_bits}",
+           f"counter_bits = {secoc.COUNTER_BITS}"]
+    return {"secoc_setup.txt": "\n".join(cfg) + "\n", "secoc_frames.csv": f.getvalue()}

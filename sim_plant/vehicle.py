@@ -93,7 +93,7 @@ class TransferFunction:
 
 def steering_tf(p: VehicleParams) -> TransferFunction:
     """Eq. (14): G_r,delta_f(s) = (b1 s + b0) / (a2 s^2 + a1 s + a0)."""
-    c_f, c_r, l_f, l_r, m, J, v = p.c_f, p.c_r, p.l_f, p.l_r, p.mass, p.inertia, p.v
+    c_f, c_r, l_f, l_r, m, v = p.c_f, p.c_r, p.l_f, p.l_r, p.mass, p.v
     b0 = c_f * c_r * (l_f + l_r) * v
     b1 = c_f * l_f * m * v**2
     return TransferFunction((b1, b0), _char_poly(p))

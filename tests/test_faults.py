@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from dataclasses import replace
 import sys
 from pathlib import Path
 
@@ -14,10 +15,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import mrsteer_dbc
+from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
 from mrsteer_dbc import E2EStatus
 from sim_plant.fault_bridge import Bridge, Fault
-from sim_plant.faults import ROWS, format_table, run_matrix
+from sim_plant.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -147,6 +149,36 @@ def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     detected = {r.name: r.detection_cycles for r in results if r.detection_cycles is not None}
     assert detected["yaw-rate frames lost (burst)"] <= rt.RuntimeConfig().timeout_cycles + 2
     assert json.loads((tmp_path / "01" / "bridge.json").read_text())["affected"] == 0  # the baseline is clean
+
+
+@pytest.mark.parametrize("rate", sorted(CALIBRATIONS))
+def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> None:
+    from sim_plant import margins as M
+    from sim_plant import tuning as T
+
+    k, tau, tau_n, m = CALIBRATIONS[rate]
+    cfg = replace(mr.ControllerConfig(), k=k, tau=tau, tau_n=tau_n, model_delay_steps=m, ts=1.0 / rate)
+    res = M.envelope_margins(cfg, 1)
+    assert res.stable
+    w = res.worst()
+    assert w["gain_margin_db"] >= T.GM_MIN_DB - 0.01 and w["phase_margin_deg"] >= T.PM_MIN_DEG - 0.01
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    (dict(rate_hz=300.0), "rate must be one of"),
+    (dict(time_scale=0.5), "time scale"),
+    (dict(startup_s=-1.0), "start-up"),
+    (dict(interface="socketcan"), "needs --channels"),
+    (dict(interface="socketcan", channels=("vcan0", "vcan0")), "two different channels"),
+])
+def test_matrix_setup_refuses_what_it_cannot_run(kwargs: dict, needle: str) -> None:
+    with pytest.raises(ValueError, match=needle):
+        Setup(**kwargs)
+    argv = {"rate_hz": ["--rate-hz", "300"], "time_scale": ["--time-scale", "0.5"]}.get(next(iter(kwargs)))
+    if argv:
+        proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", *argv], capture_output=True,
+                              text=True, timeout=60)
+        assert proc.returncode == 2 and needle in proc.stderr
 
 
 @pytest.mark.parametrize("argv", [["faults", "--help"], ["faults", "run", "--help"], ["faults", "bridge", "--help"]])

@@ -193,3 +193,29 @@ def test_controller_filters_are_installed_in_the_kernel() -> None:
         assert all(mask & 0x7FF == 0x7FF for _, mask in filters)
     finally:
         bus.shutdown()
+
+
+# Under QEMU without KVM, Python runs about 10x slower than here: the matrix runs at 100 Hz (with
+# the calibration tuned for 100 Hz), its times stretched 4x, with 20 s more for the restarted
+# controller to come up.  Every check is the same as on the fallback bus.
+VM_SETUP = dict(rate_hz=100.0, time_scale=4.0, startup_s=20.0)
+
+
+def test_fault_matrix_on_vcan0_and_vcan1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from sim_plant.faults import ROWS, Setup, format_table, run_matrix
+
+    if not os.environ.get("MRSTEER_VCAN_MATRIX"):
+        # Not yet in CI: under QEMU it takes 35 min and 9 of 20 rows failed (issue 6's note).
+        pytest.skip("set MRSTEER_VCAN_MATRIX=1 to run the fault matrix on vcan0/vcan1 (35 min under QEMU)")
+    if not vcan_available("vcan1"):
+        pytest.fail("the fault matrix needs vcan1 too (tools/vcan.sh up 2)")
+
+    def say(msg: str) -> None:  # progress past pytest's capture: the matrix takes minutes here
+        with capsys.disabled():
+            print(f"fault matrix on vcan: {msg}", flush=True)
+
+    results = run_matrix(ROWS, say, keep=tmp_path, setup=Setup("socketcan", ("vcan0", "vcan1"), **VM_SETUP))
+    table = format_table(results)
+    say("\n" + table)
+    assert all(r.passed for r in results), table
+    assert len(results) == len(ROWS)

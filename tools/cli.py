@@ -332,7 +332,7 @@ def _cmd_vectors(args: argparse.Namespace) -> int:
 
     written = vectors.write_all(args.out, progress=_say)
     print(f"wrote {len(vectors.CONFIGS)} configurations and {len(written)} vector files "
-          f"({sum(w.rows for w in written)} steps) to {args.out}/")
+          f"({sum(w.rows for w in written)} steps), and the SecOC vectors, to {args.out}/")
     return 0
 
 
