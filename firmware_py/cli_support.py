@@ -49,8 +49,9 @@ def add_secoc_args(p: argparse.ArgumentParser) -> None:
                    help="as --secoc, with the key read from FILE (32 hex digits)")
 
 
-def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser) -> bytes | None:
-    """The key the SecOC options ask for, or None; a bad or missing key is a usage error."""
+def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser | None = None) -> bytes | None:
+    """The key the SecOC options ask for, or None.  A bad or missing key is a usage error of
+    ``parser``; without one, the ``SecOCError`` (a ValueError) is raised."""
     if not (args.secoc or args.secoc_key):
         return None
     from mrsteer_dbc.secoc import SecOCError, load_key
@@ -58,6 +59,8 @@ def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser) -> byte
     try:
         return load_key(args.secoc_key)
     except SecOCError as exc:
+        if parser is None:
+            raise
         parser.error(str(exc))
 
 

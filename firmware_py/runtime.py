@@ -208,9 +208,11 @@ class ControllerNode:
         self.coeffs = mr.configure(ctrl)
         self.state = mr.State()
 
-        def limit(name: str) -> int:
+        def limit(name: str, cycles: int = config.timeout_cycles) -> int:
+            """``cycles`` of the message's own cycle time, in controller periods (rounded up; the
+            1e-9 keeps 3 * 0.1 / 1e-3 = 300.00000000000006 at 300)."""
             cycle = c.cycle_time_s(name, period) or period
-            return max(1, int(math.ceil(config.timeout_cycles * cycle / period)))
+            return max(1, int(math.ceil(cycles * cycle / period - 1e-9)))
 
         self.inputs = {
             c.frame_id(MSG_STEER): _Input(MSG_STEER, "DriverSteer_Angle", CAUSE_STEER_MISSING, limit(MSG_STEER),
@@ -224,8 +226,7 @@ class ControllerNode:
         self.yaw_id = c.frame_id(MSG_YAW)
         self.signer = secoc.CommandSigner(c, config.secoc_key) if config.secoc_key is not None else None
         self.sync_id = c.frame_id(secoc.SYNC) if self.signer is not None else None
-        sync_cycle = c.cycle_time_s(secoc.SYNC) or 0.1
-        self.sync_limit = max(1, int(math.ceil(SYNC_STALE_CYCLES * sync_cycle / period - 1e-9)))  # 0.3/1e-3 is 300.00000000000006
+        self.sync_limit = limit(secoc.SYNC, SYNC_STALE_CYCLES)
         self._sync_age = self.sync_limit + 1
         wanted = [*self.inputs, *([self.sync_id] if self.sync_id is not None else [])]
         bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in wanted])

@@ -54,10 +54,10 @@ KILL_AT = 1.2  # s after the plant started
 RESTART_AT = 1.7
 # Calibrations tuned for other control rates (docs/design.md, `mrsteer design tune`): each keeps
 # 6 dB / 45 deg over the envelope at its rate.  K, tau, tau_n, modelled delay.
+_SHIPPED = mr.ControllerConfig()
 CALIBRATIONS: dict[float, tuple[float, float, float, int]] = {
     1000.0: (50.0, 0.012, 0.02, 1),
-    500.0: (mr.ControllerConfig().k, mr.ControllerConfig().tau, mr.ControllerConfig().tau_n,
-            mr.ControllerConfig().model_delay_steps),
+    500.0: (_SHIPPED.k, _SHIPPED.tau, _SHIPPED.tau_n, _SHIPPED.model_delay_steps),
     200.0: (14.2, 0.0161, 0.02, 1),
     100.0: (4.52, 0.0075, 0.02, 1),
 }

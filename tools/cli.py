@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import EXIT_USAGE, Parser, add_secoc_args, resolve_model_delay
+from firmware_py.cli_support import EXIT_USAGE, Parser, add_secoc_args, resolve_model_delay, secoc_key
 from mrsteer_cli import design_cli
 from mrsteer_cli.cli_args import add_gains, count, number
 from sim_plant import experiments
@@ -175,9 +175,7 @@ def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
 def _hil_config(args: argparse.Namespace, **overrides: object) -> "HilConfig":
     from sim_plant.hil import HilConfig
 
-    from mrsteer_dbc.secoc import load_key
-
-    key = load_key(args.secoc_key) if args.secoc or args.secoc_key else None  # SecOCError: a usage error
+    key = secoc_key(args)  # a bad key raises SecOCError, a ValueError: a usage error
     base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel, secoc_key=key)
     base.update(overrides)
     return HilConfig(**base)  # type: ignore[arg-type]
