@@ -15,6 +15,7 @@ import can
 
 from firmware_py.bus_open import BusOpenError, open_bus
 from firmware_py.cli_support import Parser, check_output_file, run_node
+from sim_plant.rx_queue import deepen
 
 
 def candump_line(msg: can.Message, iface: str) -> str:
@@ -73,13 +74,15 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.bus
         except BusOpenError as exc:
             print(f"{prog}: error: {exc}", file=sys.stderr)
             return 1
+        queue = deepen(bus)
         log = Logger(bus, out, args.iface_name or args.channel or "can0")
 
         def run() -> None:
             print("ready", flush=True)  # on stdout, for the supervisor; the signal handlers are set
             log.run()
 
-        return run_node(prog, bus, run, log.stop, [(args.stats_out, lambda: json.dumps({"frames": log.frames}))])
+        return run_node(prog, bus, run, log.stop, [(args.stats_out, lambda: json.dumps({"frames": log.frames,
+                                                                                 "rx_queue_bytes": queue}))])
 
 
 if __name__ == "__main__":

@@ -48,6 +48,7 @@ import can
 
 import mrsteer_dbc
 from firmware_py.cli_support import Parser, check_output_file, run_node
+from sim_plant.rx_queue import deepen
 
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
          "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")
@@ -91,6 +92,7 @@ class BridgeStats:
     first_affected: float | None = None  # epoch s
     last_affected: float | None = None
     t0: float | None = None  # epoch s of the vehicle's first frame: the fault window's origin
+    rx_queue_bytes: int | None = None  # each side's kernel receive queue (None: no kernel socket)
 
 
 class Bridge:
@@ -101,11 +103,13 @@ class Bridge:
         self.stats = BridgeStats()
         self.rng = random.Random(seed)
         self._running = True
+        self._stopped_at = float("inf")
         self._lock = threading.Lock()
         self._history: dict[int, collections.deque[tuple[float, bytes]]] = collections.defaultdict(collections.deque)
         self._held: dict[int, can.Message] = {}
 
     def stop(self, *_: Any) -> None:
+        self._stopped_at = min(self._stopped_at, time.time())
         self._running = False
 
     # ------------------------------------------------------------------ fault logic
@@ -216,8 +220,9 @@ class Bridge:
                 else:
                     seq += 1
                     heapq.heappush(pending, (when, seq, out))
-        # Stopped: what is already queued for us was on the bus too; forward it unchanged.
-        while (msg := src.recv(0.05)) is not None:
+        # Stopped: what was on the bus before the stop may still be queued for us (all of it,
+        # when this process lagged behind); forward it unchanged.  Later frames are not ours.
+        while (msg := src.recv(0.05)) is not None and msg.timestamp <= self._stopped_at:
             self._saw(msg, to_controller, time.time())
             self._send(dst, msg, to_controller)
         for _, _, out in sorted(pending):
@@ -266,8 +271,9 @@ class Bridge:
         while self._running and all(t.is_alive() for t in threads):
             time.sleep(0.05)
         self._running = False
+        self._stopped_at = min(self._stopped_at, time.time())
         for t in threads:
-            t.join(5)
+            t.join()  # the drain ends: it takes only frames from before the stop
         return self.stats
 
 
@@ -303,6 +309,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
         print(f"{prog}: error: cannot open the buses: {exc}", file=sys.stderr)
         return 1
     bridge = Bridge(a, b, fault, args.seed)
+    queues = [deepen(a), deepen(b)]
+    bridge.stats.rx_queue_bytes = None if None in queues else min(queues)  # type: ignore[type-var]
     return run_node(prog, (a, b), bridge.run, bridge.stop,
                     [(args.stats_out, lambda: json.dumps(asdict(bridge.stats), indent=2))],
                     ready=f"bridging {args.vehicle} <-> {args.controller}, fault {fault.kind}")

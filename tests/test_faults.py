@@ -4,6 +4,7 @@ fault matrix on live processes (as `mrsteer faults run` runs it)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 from dataclasses import replace
 import sys
@@ -19,7 +20,9 @@ from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
 from mrsteer_dbc import E2EStatus
 from sim_plant.fault_bridge import Bridge, Fault
+from sim_plant import faults as F
 from sim_plant.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
+from sim_plant.processes import RunError
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -98,6 +101,30 @@ def test_the_forger_takes_the_next_counters_with_a_valid_crc(channel: str) -> No
         assert d.signals["AuxSteerCmd_Angle"] == pytest.approx(0.05) and b.stats.affected == 1
     finally:
         for bus in buses:
+            bus.shutdown()
+
+
+def test_a_stopped_bridge_forwards_its_whole_backlog_and_nothing_later(channel: str) -> None:
+    # A bridge that lagged behind (a stalled machine) still has frames queued when it is told to
+    # stop; they were on the bus, so they must cross and be counted.  Frames sent after the stop
+    # are not its business.
+    names = [f"{channel}-{side}" for side in ("a", "b")]
+    buses = [can.Bus(interface="virtual", channel=n) for n in names]
+    plant, controller_side = (can.Bus(interface="virtual", channel=n) for n in names)
+    try:
+        b = Bridge(*buses, Fault("none"))
+        for counter in range(600):
+            plant.send(_yaw(counter % 15))
+        b.stop()
+        plant.send(_yaw(0))  # after the stop
+        stats = b.run()
+        assert stats.seen_on_vehicle == stats.forwarded_to_controller == 600
+        received = 0
+        while controller_side.recv(0.0) is not None:
+            received += 1
+        assert received == 600
+    finally:
+        for bus in (*buses, plant, controller_side):
             bus.shutdown()
 
 
@@ -191,3 +218,57 @@ def test_faults_run_rejects_an_unknown_row() -> None:
     proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", "--only", "no such row"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "no row matches" in proc.stderr
+
+
+def _stamped(times: list[float], fid: int) -> list[tuple[float, int, bytes]]:
+    return [(t, fid, b"") for t in times]
+
+
+def test_a_stalled_sender_is_judged_by_bad_frames_not_cycles() -> None:
+    # The controller's rule: FAULT in the cycle after the 3rd consecutive bad frame.  Cycles
+    # every 10 ms; bad yaw-rate frames from t = 1.0 s, but only one every 40 ms (a stall).
+    row = next(r for r in ROWS if r.name.startswith("yaw-rate CRC"))
+    bridge = {"first_affected": 1.0}
+    bad = _stamped([1.001, 1.041, 1.081], YAW)
+    cmds = [(1.0 + 0.01 * k + 0.005, 1.0) for k in range(20)]
+    assert rt.RuntimeConfig().e2e_fail_max == 3
+    assert F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.085)  # the next cycle
+    assert F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.095)  # the one after
+    assert not F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.105)  # a cycle late
+    assert not F._fault_on_bad_frame(bad[:2], cmds, bridge, row, first_fault=1.085)  # only 2 bad frames
+    other = _stamped([1.001, 1.041, 1.081], C.frame_id("MRS_VehicleSpeed"))
+    assert not F._fault_on_bad_frame(other, cmds, bridge, row, first_fault=1.085)  # not the faulted message
+
+
+def test_matrix_will_not_judge_an_earlier_runs_files(tmp_path: Path) -> None:
+    (tmp_path / "01").mkdir()
+    (tmp_path / "01" / "controller.json").write_text("{}")
+    with pytest.raises(RunError, match="not empty"):
+        run_matrix(ROWS[:1], keep=tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", "--keep", str(tmp_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "is not empty" in proc.stderr
+
+
+def test_receive_queue_is_deepened_on_kernel_sockets_only() -> None:
+    import socket
+
+    from sim_plant.rx_queue import DEPTH_BYTES, deepen
+
+    class KernelBus:
+        def __init__(self) -> None:
+            self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    bus = KernelBus()
+    try:
+        default = bus.socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        granted = deepen(bus)
+        rmem_max = int(Path("/proc/sys/net/core/rmem_max").read_text())
+        # Privileged: the whole depth (the kernel doubles it for its bookkeeping); else rmem_max.
+        assert granted == bus.socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        assert granted >= min(DEPTH_BYTES, rmem_max) and granted >= default
+        if os.geteuid() == 0:
+            assert granted >= DEPTH_BYTES
+    finally:
+        bus.socket.close()
+    assert deepen(can.Bus(interface="virtual", channel="mrsteer-rxq")) is None

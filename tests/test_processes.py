@@ -1,0 +1,58 @@
+"""Supervised child processes: a node forked from the preloaded server behaves as the same
+node started as its own interpreter (exit status, stderr, stdout, environment, signals)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+
+from sim_plant.processes import RunError, spawn_preloaded, stop, wait_for_socket, wait_stderr
+
+
+def test_a_preloaded_node_reports_its_usage_error_and_status(tmp_path: Path) -> None:
+    p = spawn_preloaded("plant", "sim_plant.plant_node:main", ["--rate-hz", "-5"], tmp_path, dict(os.environ))
+    assert p.popen.wait(60) == 2
+    stop(p)
+    assert "rate" in (tmp_path / "plant.stderr").read_text()
+
+
+def test_a_preloaded_node_gets_the_environment_it_was_given(tmp_path: Path) -> None:
+    # --secoc takes its key from the environment: one without a key is refused, naming it.
+    env = {k: v for k, v in os.environ.items() if k != "MRSTEER_SECOC_KEY"}
+    p = spawn_preloaded("controller", "firmware_py.runtime:main", ["--secoc", "--interface", "virtual"], tmp_path, env)
+    assert p.popen.wait(60) == 2
+    stop(p)
+    assert "MRSTEER_SECOC_KEY" in (tmp_path / "controller.stderr").read_text()
+
+
+def test_a_preloaded_node_writes_stdout_to_its_file(tmp_path: Path) -> None:
+    p = spawn_preloaded("bridge", "sim_plant.fault_bridge:main", ["--help"], tmp_path, dict(os.environ), stdout=True)
+    assert p.popen.wait(60) == 0
+    stop(p)
+    assert "usage:" in (tmp_path / "bridge.stdout").read_text()
+
+
+def test_a_preloaded_node_can_be_killed_and_stopped(tmp_path: Path, channel: str) -> None:
+    env = dict(os.environ)
+    broker = spawn_preloaded("broker", "sim_plant.vbus:main", ["--channel", channel], tmp_path, env)
+    try:
+        wait_for_socket(channel, broker)
+        wait_stderr(broker, "serving")
+        killed = spawn_preloaded("broker-2", "sim_plant.vbus:main", ["--channel", channel + "-2"], tmp_path, env)
+        wait_stderr(killed, "serving")
+        killed.popen.kill()
+        assert killed.popen.wait(60) == -signal.SIGKILL
+        stop(killed)
+    finally:
+        stop(broker)
+    assert broker.popen.returncode == 0  # SIGTERM: its clean shutdown
+
+
+def test_waiting_on_a_node_that_died_names_it(tmp_path: Path) -> None:
+    p = spawn_preloaded("controller", "firmware_py.runtime:main", ["--rate-hz", "nan"], tmp_path, dict(os.environ))
+    with pytest.raises(RunError, match="controller exited with status 2"):
+        wait_stderr(p, "running at", timeout=60)
+    stop(p)
