@@ -411,6 +411,10 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         if plant["cmd_rejected"] < bridge["affected"]:
             fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")
         observed.append(f"plant rejected {plant['cmd_rejected']}")
+    if row.secoc and not row.auth_rejects:
+        # Real commands fail too: before the controller has the first sync, and when they reach
+        # the actuator an epoch too late (a stalled machine).  Both are right; shown, not judged.
+        observed.append(f"plant: {plant['cmd_auth_failed']} failed SecOC")
     if row.auth_rejects:
         failed = plant["cmd_auth_failed"]
         observed.append(f"plant: {failed} failed SecOC")
