@@ -24,7 +24,8 @@ substitute         send the frame of the same message ``param`` frames earlier *
                    man in the middle; with ``param`` 15 the alive counter is what the receiver
                    expects, so E2E alone cannot tell)
 out_of_range       first physical signal set to ``param`` (outside the DBC range), E2E valid
-flood              also send frames of an unused ID (0x7F0) on the controller side, ``param`` per s
+flood              also send 8-byte frames of an unused ID (0x7F0) on the controller side,
+                   ``param`` per s (sent in bursts as they fall due)
 spoof_command      after each real MRS_AuxSteerCmd (target ``commands``), also send a forged one
                    with angle ``param`` rad: the next alive counter and FV counter, a valid CRC
                    and a random MAC (the best a forger without the SecOC key can do)
@@ -252,14 +253,21 @@ class Bridge:
                 self.stats.forwarded_to_vehicle += 1
 
     def _flood(self) -> None:
+        # Keeps count of what is due since the window opened and sends it in bursts: a sleep
+        # per frame would cap the rate at the scheduler's granularity, far below ``param``.
         period = 1.0 / max(self.fault.param, 1.0)
+        began, sent = None, 0
         while self._running:
             now = time.time()
             if self._active(now):
-                self._send(self.controller, can.Message(arbitration_id=FLOOD_ID, data=bytes(8), is_extended_id=False),
-                           True, injected=True)
-                self._mark(now)
-            time.sleep(period)
+                began = now if began is None else began
+                due = int((now - began) / period) + 1
+                while sent < due and self._running:
+                    self._send(self.controller, can.Message(arbitration_id=FLOOD_ID, data=bytes(8),
+                                                            is_extended_id=False), True, injected=True)
+                    self._mark(now)
+                    sent += 1
+            time.sleep(min(period, 0.001))
 
     def run(self) -> BridgeStats:
         threads = [threading.Thread(target=self._pump, args=(self.vehicle, self.controller, True), daemon=True),

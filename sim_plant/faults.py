@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Callable
 
 import mrsteer_dbc
+from mrsteer_dbc.busload import frame_bits
 from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
@@ -107,6 +108,9 @@ E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
 # actuator took is told apart from every real command.
 FORGED_ANGLE = mrsteer_dbc.load().signal_range(rt.MSG_CMD, "AuxSteerCmd_Angle")[1]
 MAC_LUCK = 2
+# 8-byte frames a 500 kbit/s bus carries per second at most (no stuff bits): a flood at this
+# rate saturates a real bus of the vehicle's kind.
+FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
 CONTROLLER = "firmware_py.runtime:main"
 
 
@@ -407,6 +411,9 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
             fails.append(f"controller rejected {rejected} of {bridge['affected']} bad frames")
         if ctl_stats["rx_ignored"]:
             fails.append(f"{ctl_stats['rx_ignored']} foreign frames reached the controller process")
+    if row.fault.kind == "flood":
+        rate = bridge["injected_to_controller"] / ((row.fault.stop - row.fault.start) * setup.time_scale)
+        observed.append(f"flood {rate:.0f} frames/s, {100.0 * rate / FLOOD_CAPACITY:.0f} % of a 500 kbit/s bus")
     if row.plant_rejects:
         if plant["cmd_rejected"] < bridge["affected"]:
             fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")

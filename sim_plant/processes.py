@@ -3,11 +3,12 @@ its stderr in a file and bound to die with its parent, waited for until it says 
 and stopped with SIGTERM, then SIGKILL if it will not go.
 
 ``spawn`` executes a fresh interpreter, as a user would start the node.  ``spawn_preloaded``
-forks the node from a server process that imported every node's modules once
-(``multiprocessing``'s forkserver): the same ``main(argv)`` in its own process, with its own
-sockets, signals and exit status, but without paying the interpreter's start-up each time.
-The fault matrix starts five processes per row and restarts the controller mid-run; under QEMU
-without KVM a fresh interpreter takes 10-20 s to import python-can, numpy and cantools.
+forks the supervisor, which imported the node's modules once, and runs the node's
+``main(argv)`` in the child: its own process, sockets, signal handlers and exit status, without
+paying the interpreter's start-up each time.  The fault matrix starts five processes per row
+and restarts the controller mid-run; under QEMU without KVM a fresh interpreter takes 10-20 s
+to import python-can, numpy and cantools.  (Not ``multiprocessing``'s forkserver: its children
+re-import the caller's ``__main__``, which breaks a plain script that calls the runner.)
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 from sim_plant.vbus import socket_path
 
@@ -51,11 +52,6 @@ def spawn(name: str, argv: list[str], work: Path, env: dict[str, str], stdout: b
     popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE if stdout else subprocess.DEVNULL,
                              stderr=err, env=env, preexec_fn=_pdeathsig)
     return Proc(name, popen, err)
-
-
-# What the server imports before it forks any node: every node's main module.
-PRELOAD = ("firmware_py.runtime", "sim_plant.plant_node", "sim_plant.buslog", "sim_plant.fault_bridge",
-           "sim_plant.vbus")
 
 
 class _Forked:
@@ -94,28 +90,30 @@ def _run_node(entry: str, argv: list[str], env: dict[str, str], stdout: str, std
         target = os.open(path, os.O_WRONLY | os.O_APPEND)
         os.dup2(target, fd)
         os.close(target)
+    # The supervisor's sys.stdout/stderr may write elsewhere than fds 1 and 2 (pytest's capture
+    # does): the node gets its own, line-buffered as a terminal would have them.
+    sys.stdout = open(1, "w", buffering=1, closefd=False)
+    sys.stderr = open(2, "w", buffering=1, closefd=False)
     os.environ.clear()
     os.environ.update(env)
     module, _, func = entry.partition(":")
     sys.exit(getattr(importlib.import_module(module), func)(argv))
 
 
-_context: Any = None
+_FORK = multiprocessing.get_context("fork")
 
 
 def spawn_preloaded(name: str, entry: str, argv: list[str], work: Path, env: dict[str, str],
                     stdout: bool = False) -> Proc:
-    """Start ``entry`` (``"module:function"``, called with ``argv``) as a process forked from
-    the preloaded server; stderr (and stdout if asked, else nothing) go to files in ``work``."""
-    global _context
-    if _context is None:
-        _context = multiprocessing.get_context("forkserver")
-        _context.set_forkserver_preload(list(PRELOAD))
+    """Start ``entry`` (``"module:function"``, called with ``argv``) in a child forked from this
+    process; stderr (and stdout if asked, else nothing) go to files in ``work``.  Call it from a
+    single-threaded supervisor: a fork copies only the calling thread."""
+    importlib.import_module(entry.partition(":")[0])  # once here, inherited by every child
     stem = work / name.replace(" ", "_")
     err = open(f"{stem}.stderr", "w+b")
     out_path = f"{stem}.stdout" if stdout else os.devnull
     out = open(out_path, "w+b") if stdout else None
-    process = _context.Process(target=_run_node, args=(entry, argv, env, out_path, err.name), name=name, daemon=False)
+    process = _FORK.Process(target=_run_node, args=(entry, argv, env, out_path, err.name), name=name)
     process.start()
     return Proc(name, _Forked(process, out), err)
 

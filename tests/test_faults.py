@@ -128,6 +128,28 @@ def test_a_stopped_bridge_forwards_its_whole_backlog_and_nothing_later(channel: 
             bus.shutdown()
 
 
+def test_the_flood_sends_its_rate_over_its_window(channel: str) -> None:
+    # 5000 frames/s (past a 500 kbit/s bus's capacity) over a 0.2 s window: 1000 frames, sent
+    # in bursts as they fall due rather than one per sleep, which the scheduler would stretch.
+    import threading
+    import time
+
+    buses = [can.Bus(interface="virtual", channel=f"{channel}-{side}") for side in ("a", "b")]
+    try:
+        b = Bridge(*buses, Fault("flood", "MRS_YawRate", 0.05, 0.25, 5000.0))
+        b.stats.t0 = time.time()
+        flooder = threading.Thread(target=b._flood)
+        flooder.start()
+        time.sleep(0.4)
+        b.stop()
+        flooder.join()
+        assert 900 <= b.stats.injected_to_controller <= 1001  # a starved thread may miss the last ms
+        assert F.FLOOD_CAPACITY < 5000.0  # the matrix row's rate saturates a real bus
+    finally:
+        for bus in buses:
+            bus.shutdown()
+
+
 def test_bridge_rejects_a_bad_fault_spec() -> None:
     proc = subprocess.run([sys.executable, "-m", "sim_plant.fault_bridge", "--vehicle", "a", "--controller", "b",
                            "--fault", '{"kind": "explode"}'], capture_output=True, text=True, timeout=60)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -56,3 +58,23 @@ def test_waiting_on_a_node_that_died_names_it(tmp_path: Path) -> None:
     with pytest.raises(RunError, match="controller exited with status 2"):
         wait_stderr(p, "running at", timeout=60)
     stop(p)
+
+
+def test_a_plain_script_can_supervise_preloaded_nodes(tmp_path: Path) -> None:
+    # No `if __name__ == "__main__"` guard: the children must not re-run the caller's script
+    # (multiprocessing's spawn and forkserver methods would, and refuse to start).
+    script = tmp_path / "supervise.py"
+    script.write_text(
+        "import os, sys\n"
+        "from pathlib import Path\n"
+        "from sim_plant.processes import spawn_preloaded, stop\n"
+        "print('script ran', flush=True)\n"
+        f"p = spawn_preloaded('bridge', 'sim_plant.fault_bridge:main', ['--help'], Path({str(tmp_path)!r}),"
+        " dict(os.environ), stdout=True)\n"
+        "code = p.popen.wait(60)\n"
+        "stop(p)\n"
+        "sys.exit(code)\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("script ran") == 1
+    assert "usage:" in (tmp_path / "bridge.stdout").read_text()
