@@ -3,7 +3,7 @@
 Each row runs the plant (realtime, ``paper-fig9``: 4000 Nm at 0.5 s) and the controller as
 separate processes on two fallback buses joined by the fault bridge (``fault_bridge.py``), with
 a logger on each bus.  The bridge injects one fault in a window; the runner may kill or restart
-the controller.  Every row is then judged from what was logged and reported:
+the controller or the plant.  Every row is then judged from what was logged and reported:
 
 * **safe** (every row): the applied angle (the plant's trace; the plant stands in for the
   actuator ECU and limits its own slew to 60°/s whatever arrives) never exceeds the ±3° limit
@@ -11,7 +11,7 @@ the controller.  Every row is then judged from what was logged and reported:
   by more than its rate limit (40°/s, set for these runs) from one cycle to the next;
 * **nothing lost** (every row): each logger logged every frame that was on its bus, counted by
   the bridge, which sees every frame of both buses;
-* **alive** (every row but the kill rows): the controller ran to the end and exited cleanly;
+* **alive** (every row but the controller-kill rows): the controller ran to the end and exited cleanly;
 * row-specific: detection within the stated number of controller cycles (counted in commands
   on the bus, not in wall time), the cause in ``MRS_CtrlStatus``, recovery after the fault,
   rejected frames counted, the actuator's fade after a controller crash.
@@ -38,6 +38,7 @@ import mrsteer_dbc
 from mrsteer_dbc.busload import frame_bits
 from firmware_py import model_regulator as mr
 from firmware_py import runtime as rt
+from mrsteer_dbc import secoc
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
 from sim_plant.fault_bridge import Fault
 from sim_plant.processes import Proc, RunError, spawn_preloaded, stop, wait_for_socket, wait_ready, wait_stderr
@@ -75,7 +76,7 @@ class Setup:
     channels: tuple[str, str] | None = None  # (vehicle, controller); None: fresh fallback buses
     rate_hz: float = RATE_HZ
     time_scale: float = 1.0  # stretches the scenario, the fault window and the kill/restart times
-    startup_s: float = 0.0  # extra scenario time in the restart row for the new process to start
+    startup_s: float = 0.0  # extra scenario time in the restart rows for the new process to start
 
     def __post_init__(self) -> None:
         if self.rate_hz not in CALIBRATIONS:
@@ -124,8 +125,9 @@ class Row:
     no_fault: bool = False  # the controller must stay ACTIVE/SATURATED throughout
     reject_all: bool = False  # the controller rejects (at least) every affected frame
     plant_rejects: bool = False  # the plant must reject the affected command frames
-    kill: bool = False
-    restart: bool = False
+    kill: bool = False  # the runner kills the controller (SIGKILL) ...
+    restart: bool = False  # ... and restarts it
+    kill_plant: bool = False  # the runner kills the plant (SIGKILL) and restarts it
     secoc: bool = False  # controller and plant authenticate the commands
     auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
 
@@ -168,6 +170,10 @@ ROWS = (
         "stale freshness rejected, fade, slew back", secoc=True, auth_rejects=True),
     Row("controller killed", _f("none"), "actuator at zero within timeout + fade", kill=True),
     Row("controller killed and restarted", _f("none"), "resumes without a jump", kill=True, restart=True),
+    # The vehicle side crashes: every input goes missing at once, then comes back from a fresh
+    # plant (its counters from 0, its scenario from the start).
+    Row("plant killed and restarted", _f("none"), "FAULT within the timeout, fade, recover",
+        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING, kill_plant=True),
 )
 
 
@@ -235,6 +241,7 @@ def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Set
     scale = setup.time_scale
     fault = replace(row.fault, start=row.fault.start * scale, stop=row.fault.stop * scale)
     duration = DURATION * scale + (setup.startup_s if row.restart else 0.0)
+    restart_duration = (DURATION - RESTART_AT) * scale + setup.startup_s  # the second plant's
     if setup.channels is None:
         tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
         ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"
@@ -268,26 +275,37 @@ def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Set
         ctl = spawn_preloaded("controller", CONTROLLER, ctl_cmd, work, env)
         procs.append(ctl)
         wait_stderr(ctl, "running at")
-        plant = spawn_preloaded("plant", "sim_plant.plant_node:main",
+
+        def start_plant(name: str, seconds: float) -> Proc:
+            # A killed plant writes nothing: its statistics and trace are the next one's files.
+            p = spawn_preloaded(name, "sim_plant.plant_node:main",
                                 [*iface, "--channel", ch_a, "--mode", "realtime", "--rate-hz", repr(setup.rate_hz),
                                  "--actuator-rate", repr(ACTUATOR_RATE), "--cmd-timeout", repr(setup.cmd_timeout),
-                                 "--scenario", "paper-fig9", "--duration", repr(duration),
+                                 "--scenario", "paper-fig9", "--duration", repr(seconds),
                                  "--trace-out", str(work / "trace.csv"), "--stats-out", str(work / "plant.json"),
                                  *secoc], work, env)
-        procs.append(plant)
+            procs.append(p)
+            return p
+
+        plant = start_plant("plant", duration)
         wait_stderr(plant, "realtime) on")  # started: kill and restart times count from here
         start = time.monotonic()
         killed_at = restarted = None
-        while plant.popen.poll() is None:
+        while plant.popen.poll() is None or (row.kill_plant and restarted is None):
             now = time.monotonic() - start
-            if row.kill and killed_at is None and now >= KILL_AT * scale:
-                ctl.popen.send_signal(signal.SIGKILL)
-                ctl.popen.wait()
+            victim = ctl if row.kill else plant if row.kill_plant else None
+            if victim is not None and killed_at is None and now >= KILL_AT * scale:
+                victim.popen.send_signal(signal.SIGKILL)
+                victim.popen.wait()
                 killed_at = time.time()
-            if row.restart and killed_at is not None and restarted is None and now >= RESTART_AT * scale:
-                ctl = spawn_preloaded("controller-2", CONTROLLER, ctl_cmd, work, env)
-                procs.append(ctl)
-                restarted = time.time()
+            if killed_at is not None and restarted is None and now >= RESTART_AT * scale:
+                if row.restart:
+                    ctl = spawn_preloaded("controller-2", CONTROLLER, ctl_cmd, work, env)
+                    procs.append(ctl)
+                    restarted = time.time()
+                elif row.kill_plant:
+                    plant = start_plant("plant-2", restart_duration)
+                    restarted = time.time()
             if time.monotonic() - start > 120 + 2 * duration:
                 raise RunError("the plant did not finish in time")
             time.sleep(0.01)
@@ -324,14 +342,21 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
 
     bridge = json.loads((work / "bridge.json").read_text())
     plant = json.loads((work / "plant.json").read_text())
+    vehicle_frames = _parse_log(work / "vehicle.log")
+    plant_tx = plant["tx_frames"]
+    if row.kill_plant and restarted is not None:
+        # The killed plant wrote no statistics: its frames are the ones its logger saw.
+        own = {c.frame_id(n) for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED, secoc.SYNC)}
+        plant_tx += sum(1 for t_, fid, _ in vehicle_frames if fid in own and t_ < restarted)
+        observed.append("applied angle judged on the restarted plant's trace")
     logged = {side: json.loads((work / f"logger-{side}.json").read_text())["frames"]
               for side in ("vehicle", "controller")}
     on_a = bridge["seen_on_vehicle"] + bridge["forwarded_to_vehicle"] + bridge["injected_to_vehicle"]
     on_b = bridge["seen_on_controller"] + bridge["forwarded_to_controller"] + bridge["injected_to_controller"]
     if logged["vehicle"] != on_a or logged["controller"] != on_b:
         fails.append(f"logger lost frames: vehicle {logged['vehicle']}/{on_a}, controller {logged['controller']}/{on_b}")
-    if bridge["seen_on_vehicle"] != plant["tx_frames"]:
-        fails.append(f"bridge saw {bridge['seen_on_vehicle']} of the plant's {plant['tx_frames']} frames")
+    if bridge["seen_on_vehicle"] != plant_tx:
+        fails.append(f"bridge saw {bridge['seen_on_vehicle']} of the plant's {plant_tx} frames")
     observed.append(f"logged {logged['vehicle']}+{logged['controller']} frames, none lost")
     if plant["overruns"] > 0.1 * plant["steps"]:
         # Every check still holds, but the closed loop's shape is not the one a 100 % on-time
@@ -349,7 +374,6 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
     frames = _parse_log(work / "controller.log")
     cmd_id, status_id = c.frame_id(rt.MSG_CMD), c.frame_id(rt.MSG_STATUS)
     cmds = [(ts_, c.decode(fid, data)) for ts_, fid, data in frames if fid == cmd_id]
-    vehicle_frames = _parse_log(work / "vehicle.log")
     cutoff = max(ts_ for ts_, fid, _ in vehicle_frames
                  if fid == c.frame_id(rt.MSG_YAW))  # the plant's last measurement: the run's end
     angles = [(t_, d.signals["AuxSteerCmd_Angle"]) for t_, d in cmds
@@ -379,6 +403,14 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         else:
             observed.append(f"{len(gaps)} sensor gap(s) from machine stalls, each detected")
     affected0, affected1 = bridge["first_affected"], bridge["last_affected"]
+    if row.kill_plant and killed_at is not None:
+        # The outage, as the controller saw it: from when the dead plant's next yaw-rate frame
+        # was due to the restarted plant's first one.
+        yaws = [t_ for t_, fid, _ in frames if fid == c.frame_id(rt.MSG_YAW)]
+        last = max((t_ for t_ in yaws if t_ <= killed_at), default=None)
+        affected0 = None if last is None else last + (c.cycle_time_s(rt.MSG_YAW, ts) or ts)
+        affected1 = min((t_ for t_ in yaws if restarted is not None and t_ >= restarted), default=killed_at)
+    first_fault = None
     if row.detect_within is not None:
         if affected0 is None:
             fails.append("the fault never hit a frame")
@@ -404,6 +436,14 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
                 fails.append("did not recover after the fault")
             else:
                 observed.append(f"recovered {1e3 * (back - affected1):.0f} ms after")
+    if row.kill_plant and first_fault is not None:
+        # With every input gone the controller fades its command: it never grows meanwhile.
+        fading = [abs(a) for t_, a in angles if first_fault <= t_ <= affected1]
+        if any(b > a + 2e-6 for a, b in zip(fading, fading[1:])):
+            fails.append("the command grew while the inputs were missing")
+        elif fading:
+            observed.append(f"command faded {math.degrees(fading[0]):.2f}° to {math.degrees(fading[-1]):.2f}° "
+                            f"while the plant was down")
     if ctl_stats is not None:
         rejected = ctl_stats["rx_rejected"]
         observed.append(f"controller rejected {rejected}")
@@ -527,7 +567,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     r.add_argument("--time-scale", type=float, default=1.0, metavar="F",
                    help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
     r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
-                   help="extra scenario seconds in the restart row for the new controller to start (default 0)")
+                   help="extra scenario seconds in the restart rows for the new process to start (default 0)")
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
