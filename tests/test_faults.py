@@ -294,3 +294,18 @@ def test_receive_queue_is_deepened_on_kernel_sockets_only() -> None:
     finally:
         bus.socket.close()
     assert deepen(can.Bus(interface="virtual", channel="mrsteer-rxq")) is None
+
+
+@pytest.mark.parametrize("back,replays_taken,live_taken", [
+    (1, 0, 200), (2, 0, 200), (15, 0, 200), (16, 0, 200), (17, 0, 200), (30, 0, 200),
+    (5, 0, 1), (10, 0, 1), (11, 0, 1),
+    (12, 200, 1), (13, 200, 1), (14, 200, 1), (27, 200, 1), (28, 200, 1), (29, 200, 1)])
+def test_replay_aliasing_is_what_the_safety_docs_state(back: int, replays_taken: int, live_taken: int) -> None:
+    # docs/faults.md, "Known limits": a replay sent after each live frame, the one `back` frames
+    # older, against the controller's counter check (window 3).  Change one, change the other.
+    receiver = mrsteer_dbc.E2EReceiver(rt.RuntimeConfig().max_counter_delta)
+    replays = live = 0
+    for n in range(20, 220):
+        live += receiver.check(n % 15).accepted
+        replays += receiver.check((n - back) % 15).accepted
+    assert (replays, live) == (replays_taken, live_taken)
