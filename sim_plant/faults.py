@@ -161,6 +161,10 @@ ROWS = (
         no_fault=True),
     Row("command frames lost (burst)", _f("drop", "commands"), "actuator times out, fades, slews back"),
     Row("command CRC corrupted", _f("corrupt_crc", "commands"), "actuator rejects them", plant_rejects=True),
+    # The same forger without SecOC: E2E alone takes it (docs/faults.md, "E2E is not security");
+    # the actuator's own +-3 deg still bounds what it does.
+    Row("commands forged, E2E only", _f("spoof_command", "commands", FORGED_ANGLE),
+        "forgeries taken, actuator within 3 deg"),
     Row("SecOC: baseline", _f("none"), "runs clean, commands authenticated", no_fault=True, secoc=True),
     # The forger sends the next alive counter with a valid CRC: E2E alone would take it.
     Row("SecOC: commands forged", _f("spoof_command", "commands", FORGED_ANGLE),
@@ -467,7 +471,7 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         observed.append(f"plant: {failed} failed SecOC")
         if failed < bridge["affected"] - MAC_LUCK:
             fails.append(f"plant's SecOC rejected {failed} of {bridge['affected']} bad commands")
-    if row.fault.kind == "spoof_command":
+    if row.fault.kind == "spoof_command" and row.secoc:
         # Each forgery the actuator took would show as its marker angle in the held command.
         taken = sum(1 for a, b in zip([0.0, *held], held) if abs(b - FORGED_ANGLE) < 5e-7 <= abs(a - FORGED_ANGLE))
         observed.append(f"{taken} of {bridge['affected']} forgeries taken")
@@ -478,6 +482,14 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         e2e_rejected = plant["cmd_rejected"] - plant["cmd_auth_failed"]
         if e2e_rejected > MAC_LUCK:
             fails.append(f"{e2e_rejected} real commands rejected by the counter check after forgeries")
+    elif row.fault.kind == "spoof_command":
+        # Without SecOC the same forger must get through (else the SecOC row proves nothing);
+        # the actuator's own range still holds (the "safe" check above).
+        steps = sum(1 for b in held if abs(b - FORGED_ANGLE) < 5e-7)
+        observed.append(f"the actuator held a forged command in {steps} steps; real ones pushed out of sequence: "
+                        f"{plant['cmd_rejected']}")
+        if steps == 0:
+            fails.append("no forgery was taken: the forger is not the threat the SecOC row claims to stop")
     if row.kill and killed_at is not None:
         # The actuator's timeout runs from the last command it was given: the dead controller's
         # last one as it reached the vehicle's bus (the bridge forwards in order, and late when

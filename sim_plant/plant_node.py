@@ -45,6 +45,7 @@ from mrsteer_dbc import secoc
 from sim_plant import scenario as scn
 from sim_plant.vehicle import DiscretePlant
 
+ACTUATOR_LIMIT = math.radians(3.0)  # rad: the auxiliary actuator saturates at +-3 deg of wheel angle (paper, sec. 4.1)
 MODES = ("realtime", "lockstep")
 
 
@@ -86,7 +87,9 @@ class PlantNode:
         self.contract = c = contract or mrsteer_dbc.load()
         self.scene = scn.ScenarioState(sc)
         self.plant = DiscretePlant(self.scene.params(), ts)
-        self.limit = c.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1]
+        # The actuator's own range, not the signal's: the DBC's +-0.0524 rad is 3.0023 deg, so a
+        # command at the signal's edge (a forgery, on a bus without SecOC) would pass +-3 deg.
+        self.limit = min(ACTUATOR_LIMIT, c.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1])
         self.cmd_id = c.frame_id("MRS_AuxSteerCmd")
         self.bench_id = c.frame_id("MRS_BenchInject")
         self.cmd_rx = mrsteer_dbc.E2EReceiver()

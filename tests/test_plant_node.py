@@ -57,6 +57,19 @@ def test_spoofed_out_of_range_command_is_refused(rig) -> None:
     assert node.applied == 0.0 and node.stats.cmd_rejected == 1
 
 
+def test_a_command_at_the_signals_edge_is_clamped_to_the_actuators_3_degrees(rig) -> None:
+    # The DBC's range (0.0524 rad) is 3.0023 deg: an E2E-valid command there (a forgery where
+    # SecOC is off) must still leave the actuator within its +-3 deg.
+    node, ctl = rig
+    edge = C.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1]
+    assert edge > math.radians(3.0)
+    for k in range(3):
+        _cmd(ctl, edge if k % 2 == 0 else -edge, k)
+        node.step(k)
+        assert abs(node.applied) == pytest.approx(math.radians(3.0), abs=1e-15)
+        assert abs(node.applied) <= math.radians(3.0)
+
+
 def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
     node, ctl = rig
     for k in range(5):
