@@ -203,18 +203,20 @@ def _parse_log(path: Path) -> list[tuple[float, int, bytes]]:
     return frames
 
 
-def _trace(path: Path) -> tuple[list[float], list[float], list[float]]:
-    """Plant time, applied angle and the command the actuator holds, of every plant step."""
-    t, applied, held = [], [], []
+def _trace(path: Path) -> tuple[list[float], list[float], list[float], list[float]]:
+    """Plant time, applied angle, the command the actuator holds and the wall clock (epoch s)
+    of every plant step."""
+    t, applied, held, wall = [], [], [], []
     lines = path.read_text().splitlines()
     head = lines[0].split(",")
-    ti, ai, ci = head.index("t_s"), head.index("aux_applied_rad"), head.index("aux_cmd_rad")
+    ti, ai, ci, wi = (head.index(n) for n in ("t_s", "aux_applied_rad", "aux_cmd_rad", "wall_s"))
     for line in lines[1:]:
         cols = line.split(",")
         t.append(float(cols[ti]))
         applied.append(float(cols[ai]))
         held.append(float(cols[ci]))
-    return t, applied, held
+        wall.append(float(cols[wi]))
+    return t, applied, held, wall
 
 
 def _gaps(frames: list[tuple[float, int, bytes]], ids: list[int], longer: float) -> list[tuple[float, float]]:
@@ -331,7 +333,7 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
     c = mrsteer_dbc.load()
     fails: list[str] = []
     observed: list[str] = []
-    t, applied, held = _trace(work / "trace.csv")
+    t, applied, held, wall = _trace(work / "trace.csv")
     ts = setup.ts
     limit = mr.ControllerConfig().aux_limit
     worst = max(abs(a) for a in applied)
@@ -506,14 +508,13 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         sent = sum(1 for t_, fid, _ in frames if fid == cmd_id and t_ <= killed_at)
         delivered = [t_ for t_, fid, _ in vehicle_frames if fid == cmd_id]
         last_cmd = delivered[sent - 1] if 0 < sent <= len(delivered) else killed_at
-        t0 = t[0]
-        wall0 = bridge["t0"]
-        # plant time runs with the wall clock (realtime): align by the bridge's first frame
-        i_kill = next(i for i, tt in enumerate(t) if wall0 + (tt - t0) >= last_cmd)
+        # The step that first ran after that command was on the bus: a plant that lags the wall
+        # clock (a slow machine) gets there late, and its timeout counts its own steps from there.
+        i_kill = next((i for i, w in enumerate(wall) if w >= last_cmd), len(t) - 1)
         a_kill = abs(applied[i_kill])
         allowed = setup.cmd_timeout + a_kill / PLANT_FADE + 3 * ts + 0.05
         i_zero = next((i for i in range(i_kill, len(t)) if applied[i] == 0.0), None)
-        end = restarted - wall0 + t0 if restarted is not None else t[-1]
+        end = next((t[i] for i, w in enumerate(wall) if w >= restarted), t[-1]) if restarted is not None else t[-1]
         if i_zero is None or t[i_zero] - t[i_kill] > allowed or t[i_zero] > end:
             fails.append(f"actuator not at zero within {allowed * 1e3:.0f} ms of the controller's death")
         else:

@@ -73,7 +73,7 @@ class PlantStats:
 
 class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
-                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad")
+                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "wall_s")
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = 0.02, lockstep_timeout: float = 1.0,
@@ -232,7 +232,7 @@ class PlantNode:
         self.cmd_age += 1
         if self.record_trace:
             self.stats.trace.append((t, driver, self.applied, m_z, self.scene.mu, self.scene.v,
-                                     float(y[0]), float(y[1]), float(y[2]), self.latest_cmd))
+                                     float(y[0]), float(y[1]), float(y[2]), self.latest_cmd, time.time()))
         self.plant.advance(driver + self.applied, m_z)
         self.stats.steps += 1
 
@@ -277,7 +277,8 @@ class PlantNode:
         w = csv.writer(f)
         w.writerow(self.TRACE_COLUMNS)
         for row in self.stats.trace:
-            w.writerow([f"{x:.9g}" for x in row])
+            # The wall clock (epoch s, for aligning with bus logs) needs microseconds, not 9 digits.
+            w.writerow([*(f"{x:.9g}" for x in row[:-1]), f"{row[-1]:.6f}"])
         return f.getvalue()
 
 
