@@ -278,8 +278,7 @@ class Bridge:
             t.start()
         while self._running and all(t.is_alive() for t in threads):
             time.sleep(0.05)
-        self._running = False
-        self._stopped_at = min(self._stopped_at, time.time())
+        self.stop()  # a pump that died stops the other: both drain what came before
         for t in threads:
             t.join()  # the drain ends: it takes only frames from before the stop
         return self.stats

@@ -467,13 +467,12 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         if plant["cmd_rejected"] < bridge["affected"]:
             fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")
         observed.append(f"plant rejected {plant['cmd_rejected']}")
-    if row.secoc and not row.auth_rejects:
+    if row.secoc:
         # Real commands fail too: before the controller has the first sync, and when they reach
         # the actuator an epoch too late (a stalled machine).  Both are right; shown, not judged.
         observed.append(f"plant: {plant['cmd_auth_failed']} failed SecOC")
     if row.auth_rejects:
         failed = plant["cmd_auth_failed"]
-        observed.append(f"plant: {failed} failed SecOC")
         if failed < bridge["affected"] - MAC_LUCK:
             fails.append(f"plant's SecOC rejected {failed} of {bridge['affected']} bad commands")
     if row.fault.kind == "spoof_command" and row.secoc:
@@ -529,12 +528,16 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
                      math.degrees(worst_step), detection, fails)
 
 
+def _holds_files(keep: Path | None) -> bool:
+    """A --keep directory must start empty: an earlier run's statistics would be judged as this run's."""
+    return keep is not None and keep.is_dir() and any(keep.iterdir())
+
+
 def run_matrix(rows: tuple[Row, ...] = ROWS, say: Callable[[str], None] | None = None,
                keep: Path | None = None, setup: Setup = Setup()) -> list[RowResult]:
     say = say or (lambda m: None)
-    if keep is not None and keep.is_dir() and any(keep.iterdir()):
-        # An earlier run's statistics would be judged as this run's.
-        raise RunError(f"{keep} is not empty: keep each run's files in a new directory")
+    if _holds_files(keep):
+        raise RunError(f"{keep} is not empty: an earlier run's files would be judged as this run's")
     results = []
     with tempfile.TemporaryDirectory(prefix="mrsteer-faults-") as tmp:
         for i, row in enumerate(rows, 1):
@@ -603,8 +606,8 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         p.error(str(exc))
     if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
         p.error(f"--keep {args.keep} exists and is not a directory")
-    if args.keep is not None and args.keep.is_dir() and any(args.keep.iterdir()):
-        p.error(f"--keep {args.keep} is not empty (an earlier run's files would be judged as this run's)")
+    if _holds_files(args.keep):
+        p.error(f"--keep {args.keep} is not empty: an earlier run's files would be judged as this run's")
     try:
         results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
     except RunError as exc:
