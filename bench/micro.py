@@ -78,7 +78,7 @@ def receive_path(quick: bool) -> dict[str, Any]:
         name = rt.MSG_YAW
         fid = contract.frame_id(name)
         frames = [can.Message(arbitration_id=fid, is_extended_id=False,
-                              data=contract.encode(name, {"YawRate_YawRate": 0.1, "YawRate_LatAccel": 1.0}, k))
+                              data=contract.encode(name, {"YawRate_YawRate": 0.1}, k))
                   for k in range(mrsteer_dbc.COUNTER_MODULO)]
         it = [0]
 

@@ -1,4 +1,5 @@
-"""Optional authentication of ``MRS_AuxSteerCmd`` in the style of AUTOSAR SecOC.
+"""Optional authentication of ``MRS_AuxSteerCmd`` and of the sensor frames in the style of
+AUTOSAR SecOC (the sensor frames: ``SensorSigner``/``SensorVerifier``, further down).
 
 E2E protection (CRC and alive counter) catches corruption, not forgery: its data IDs are in the
 DBC, so anyone on the bus can send a command with a valid CRC and the next counter.  With a
@@ -160,6 +161,11 @@ def freshness(epoch: int, counter: int) -> int:
     return (epoch << COUNTER_BITS) | counter
 
 
+def frame_mac(cmac: TruncatedCmac, frame_id: int, zeroed: bytes, fv: int, bits: int) -> int:
+    """The authenticator of one frame: CMAC over frame ID || payload (CRC and MAC zero) || FV."""
+    return cmac(frame_id.to_bytes(2, "big") + zeroed + fv.to_bytes(8, "big"), bits)
+
+
 class _Peer:
     def __init__(self, contract: Contract, key: bytes) -> None:
         try:
@@ -178,7 +184,7 @@ class _Peer:
     def command_mac(self, zeroed: bytes, fv: int) -> int:
         """MAC of a command payload whose CRC and MAC fields are zero."""
         lay = self.layout
-        return self._cmac(lay.cmd_id.to_bytes(2, "big") + zeroed + fv.to_bytes(8, "big"), lay.mac_bits)
+        return frame_mac(self._cmac, lay.cmd_id, zeroed, fv, lay.mac_bits)
 
 
 class CommandSigner(_Peer):
@@ -279,4 +285,169 @@ class CommandVerifier(_Peer):
             return False
         self.last = (epoch, counter)
         self.stats.accepted += 1
+        return True
+
+
+# --------------------------------------------------------------------------- sensor frames
+#
+# The same scheme in the other direction: the vehicle (the freshness master, which issues the
+# epochs) signs its sensor frames, and the controller verifies them with the epochs it has taken
+# from authentic syncs.  Classic CAN leaves no room for the command's 16-bit MAC and 4 FV bits:
+# each sensor frame carries the epoch's low bit and the per-epoch counter's low 3 bits in the
+# spare nibble of byte 1 and an 8-bit MAC in one extra byte.  The receiver recovers the counter
+# from those 3 bits together with the E2E alive counter (mod 15): 8 and 15 are coprime, so the
+# two residues fix the counter's advance modulo 120.  The verifier takes an advance of at most
+# ``SENSOR_MAX_ADVANCE`` frames (up to 14 lost, more than the 10 that fault an input by timeout):
+# a replayed frame up to 104 frames old is then refused before its MAC is even checked, and an
+# 8-bit MAC that verifies by luck (1 in 256) moves the counter on by at most 15 frames.
+
+SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
+_ALIVE_MODULO = 15  # the E2E alive counter: 0..14
+_INV8_MOD15 = 2  # 8 * 2 = 16 = 1 (mod 15)
+SENSOR_MAX_ADVANCE = 15
+
+
+@dataclass(frozen=True)
+class SensorFields:
+    """The SecOC fields of one sensor message, as the DBC defines them."""
+
+    name: str
+    frame_id: int
+    alive: str  # the E2E alive-counter signal
+    epoch_bit: str
+    counter_low: str
+    mac: str
+    mac_bits: int
+    zero_mask: bytes  # AND mask clearing the CRC byte and the MAC bits
+
+    @classmethod
+    def of(cls, contract: Contract, name: str) -> "SensorFields":
+        try:
+            msg = contract.message(name)
+        except KeyError:
+            raise SecOCError(f"the DBC has no {name} message: sensor SecOC needs it") from None
+        e2e = contract.e2e(name)
+        if e2e is None:
+            raise SecOCError(f"{name} must be E2E-protected: sensor SecOC uses its alive counter")
+        stem = name.removeprefix("MRS_")
+        sigs = {}
+        for suffix, bits in (("FvEpoch", 1), ("FvCounter", 3), ("MAC", None)):
+            try:
+                s = msg.get_signal_by_name(f"{stem}_{suffix}")
+            except KeyError:
+                raise SecOCError(f"{name} has no {stem}_{suffix} signal: sensor SecOC needs it") from None
+            if (bits is not None and s.length != bits) or s.byte_order != "little_endian":
+                raise SecOCError(f"{s.name} must be a little-endian {bits}-bit field")
+            sigs[suffix] = s
+        mac = sigs["MAC"]
+        if not 0 < mac.length <= 128:
+            raise SecOCError(f"{mac.name}: MAC width out of range")
+        mask = bytearray(b"\xff" * msg.length)
+        mask[e2e.crc_byte] = 0
+        for bit in range(mac.start, mac.start + mac.length):
+            mask[bit // 8] &= ~(1 << (bit % 8)) & 0xFF
+        return cls(name, msg.frame_id, e2e.counter_signal, sigs["FvEpoch"].name, sigs["FvCounter"].name,
+                   mac.name, mac.length, bytes(mask))
+
+    def zeroed(self, data: bytes) -> bytes:
+        return bytes(b & m for b, m in zip(data, self.zero_mask))
+
+
+def counter_advance(alive_delta: int, low_delta: int) -> int:
+    """How far a sensor frame's FV counter is past the last accepted one (1..120), from the
+    advance of the alive counter (mod 15) and of the FV counter's low 3 bits (mod 8)."""
+    low = low_delta % 8
+    k = (_INV8_MOD15 * (alive_delta - low)) % _ALIVE_MODULO
+    advance = low + 8 * k
+    return advance if advance else 8 * _ALIVE_MODULO
+
+
+class _SensorPeer:
+    def __init__(self, contract: Contract, key: bytes) -> None:
+        try:
+            self.fields = {name: SensorFields.of(contract, name) for name in SENSORS}
+        except ContractError as exc:
+            raise SecOCError(str(exc)) from None
+        self.by_id = {f.frame_id: f for f in self.fields.values()}
+        self.contract = contract
+        self._cmac = TruncatedCmac(key)
+
+
+class SensorSigner(_SensorPeer):
+    """Vehicle side: signs each sensor frame for the epoch it last announced."""
+
+    def __init__(self, contract: Contract, key: bytes) -> None:
+        super().__init__(contract, key)
+        self._epoch: dict[str, int | None] = dict.fromkeys(SENSORS)
+        self._counter = dict.fromkeys(SENSORS, 0)
+
+    def sign(self, name: str, values: Mapping[str, float | str], alive: int, epoch: int | None,
+             *, strict: bool = True) -> bytes:
+        """The sensor frame, E2E-protected and, with an epoch, authenticated for it."""
+        if epoch is None:
+            return self.contract.encode(name, values, alive, strict=strict)
+        f = self.fields[name]
+        if self._epoch[name] != epoch:
+            self._epoch[name], self._counter[name] = epoch, 0
+        counter = self._counter[name]
+        if counter >= 1 << COUNTER_BITS:
+            raise SecOCError(f"{name}: the freshness counter overflowed within one epoch")
+        full = dict(values)
+        full[f.epoch_bit] = epoch & 1
+        full[f.counter_low] = counter & 7
+        full[f.mac] = 0
+        plain = self.contract.encode(name, full, alive, strict=strict)
+        full[f.mac] = frame_mac(self._cmac, f.frame_id, f.zeroed(plain), freshness(epoch, counter), f.mac_bits)
+        self._counter[name] = counter + 1
+        return self.contract.encode(name, full, alive, strict=strict)
+
+
+@dataclass
+class _SensorLast:
+    epoch: int
+    counter: int
+    alive: int
+
+
+class SensorVerifier(_SensorPeer):
+    """Controller side: verifies sensor frames against the epochs of authentic syncs.
+
+    ``adopt`` each epoch the command signer took; a frame verifies for the current epoch or the
+    one before (its low bit says which) and a counter 1 to ``SENSOR_MAX_ADVANCE`` past the last
+    accepted one.  Each failure is counted per message in ``failed``.
+    """
+
+    def __init__(self, contract: Contract, key: bytes) -> None:
+        super().__init__(contract, key)
+        self.current: int | None = None
+        self.previous: int | None = None
+        self._last: dict[int, _SensorLast | None] = dict.fromkeys(self.by_id)
+        self.failed = dict.fromkeys(SENSORS, 0)
+
+    def adopt(self, epoch: int) -> None:
+        if self.current is None or epoch > self.current:
+            self.previous, self.current = self.current, epoch
+
+    def verify(self, frame_id: int, data: bytes, signals: Mapping[str, float]) -> bool:
+        """True if the frame's MAC verifies for a freshness value newer than the last accepted
+        one of its message.  ``data`` and ``signals`` must come from a frame that passed
+        ``Contract.decode`` (length, CRC, range)."""
+        f = self.by_id[frame_id]
+        alive, low = int(signals[f.alive]), int(signals[f.counter_low])
+        epoch = self.current if self.current is not None and (self.current & 1) == int(signals[f.epoch_bit]) \
+            else self.previous
+        last = self._last[frame_id]
+        if epoch is None or (last is not None and epoch < last.epoch):
+            self.failed[f.name] += 1
+            return False
+        if last is not None and epoch == last.epoch:
+            advance = counter_advance(alive - last.alive, low - last.counter)
+            counter = last.counter + advance
+        else:
+            advance, counter = 1, low  # the epoch's first accepted frame must be one of its first 8
+        if advance > SENSOR_MAX_ADVANCE or counter >= 1 << COUNTER_BITS or frame_mac(self._cmac, frame_id, f.zeroed(data), freshness(epoch, counter),
+                                                     f.mac_bits) != int(signals[f.mac]):
+            self.failed[f.name] += 1
+            return False
+        self._last[frame_id] = _SensorLast(epoch, counter, alive)
         return True

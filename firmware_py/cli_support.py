@@ -43,8 +43,8 @@ def resolve_model_delay(args: argparse.Namespace) -> None:
 def add_secoc_args(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--secoc", action="store_true",
-                   help="authenticate MRS_AuxSteerCmd (AUTOSAR SecOC style, AES-CMAC) with the 128-bit key in "
-                   "$MRSTEER_SECOC_KEY (32 hex digits); both controller and plant must have it")
+                   help="authenticate MRS_AuxSteerCmd and the sensor frames (AUTOSAR SecOC style, AES-CMAC) with the "
+                   "128-bit key in $MRSTEER_SECOC_KEY (32 hex digits); both controller and plant must have it")
     g.add_argument("--secoc-key", type=str, metavar="FILE",
                    help="as --secoc, with the key read from FILE (32 hex digits)")
 

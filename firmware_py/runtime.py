@@ -11,8 +11,10 @@ Each cycle, in this order (the scheduling contract a port must keep):
 4. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
 
 With a SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's
-``MRS_SecOCSync`` frames, and step 4 signs each command (``mrsteer_dbc.secoc``); without a
-valid sync for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
+``MRS_SecOCSync`` frames and verifies each sensor frame's MAC (after length, CRC and range,
+before the alive counter; a failure counts as a rejected frame of cause ``CAUSE_AUTH``), and
+step 4 signs each command (``mrsteer_dbc.secoc``); without a valid sync for
+``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
 
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
@@ -58,7 +60,8 @@ CAUSE_SPEED_MISSING = 0x04
 CAUSE_E2E = 0x08
 CAUSE_RANGE = 0x10
 CAUSE_LOW_SPEED = 0x20
-CAUSE_AUTH = 0x40  # SecOC on, but no valid freshness sync: the actuator will not apply commands
+# SecOC on: no valid freshness sync (the actuator will not apply commands), or sensor frames failing their MAC
+CAUSE_AUTH = 0x40
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
@@ -83,7 +86,7 @@ class RuntimeConfig:
     # arrival, so a measurement waits ~this long for its command (None: free-running grid).
     sync_offset: float | None = DEFAULT_SYNC_OFFSET
     duration: float | None = None  # s; None runs until a signal
-    secoc_key: bytes | None = None  # authenticate the commands (mrsteer_dbc.secoc) when given
+    secoc_key: bytes | None = None  # sign the commands, verify the sensor frames (mrsteer_dbc.secoc) when given
     controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
 
 
@@ -156,6 +159,7 @@ class LoopStats:
     rx_rejected: int = 0
     rx_ignored: int = 0
     syncs_rejected: int = 0  # MRS_SecOCSync frames that failed their MAC or were not newer
+    rx_auth_failed: int = 0  # sensor frames that failed SecOC (also counted in rx_rejected)
     tx_frames: int = 0
     faults_entered: int = 0
     lateness: LatenessHistogram = field(default_factory=LatenessHistogram)
@@ -168,7 +172,7 @@ class LoopStats:
         return {
             "cycles": self.cycles, "overruns": self.overruns, "missed_cycles": self.missed_cycles,
             "rx_frames": self.rx_frames, "rx_rejected": self.rx_rejected, "rx_ignored": self.rx_ignored,
-            "syncs_rejected": self.syncs_rejected,
+            "syncs_rejected": self.syncs_rejected, "rx_auth_failed": self.rx_auth_failed,
             "tx_frames": self.tx_frames, "faults_entered": self.faults_entered,
             "lateness_p50_s": lat.percentile(0.5), "lateness_p99_s": lat.percentile(0.99), "lateness_max_s": lat.max,
             "rss_kb_loop_start": self.rss_kb_loop_start, "rss_kb_loop_end": self.rss_kb_loop_end,
@@ -225,6 +229,7 @@ class ControllerNode:
         self._steer, self._yaw, self._speed = self.inputs.values()
         self.yaw_id = c.frame_id(MSG_YAW)
         self.signer = secoc.CommandSigner(c, config.secoc_key) if config.secoc_key is not None else None
+        self.sensor_verifier = secoc.SensorVerifier(c, config.secoc_key) if config.secoc_key is not None else None
         self.sync_id = c.frame_id(secoc.SYNC) if self.signer is not None else None
         self.sync_limit = limit(secoc.SYNC, SYNC_STALE_CYCLES)
         self._sync_age = self.sync_limit + 1
@@ -258,13 +263,15 @@ class ControllerNode:
             return False
         decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
         status = decoded.status if decoded is not None else mrsteer_dbc.E2EStatus.BAD_LENGTH
+        # Authenticate before the counter check: a forged frame must not advance the sequence.
+        if status is mrsteer_dbc.E2EStatus.OK and self.sensor_verifier is not None and not self.sensor_verifier.verify(
+                msg.arbitration_id, bytes(msg.data), decoded.signals):
+            self.stats.rx_auth_failed += 1
+            return self._reject(inp, CAUSE_AUTH)
         if status is mrsteer_dbc.E2EStatus.OK:
             status = inp.receiver.check(decoded.counter)
         if not status.accepted:
-            self.stats.rx_rejected += 1
-            inp.rejects += 1
-            inp.bad_cause = CAUSE_RANGE if status is mrsteer_dbc.E2EStatus.OUT_OF_RANGE else CAUSE_E2E
-            return False
+            return self._reject(inp, CAUSE_RANGE if status is mrsteer_dbc.E2EStatus.OUT_OF_RANGE else CAUSE_E2E)
         inp.rejects = 0
         inp.value = decoded.signals[inp.signal]
         inp.last_counter = decoded.counter
@@ -274,10 +281,17 @@ class ControllerNode:
             return True
         return False
 
+    def _reject(self, inp: _Input, cause: int) -> bool:
+        self.stats.rx_rejected += 1
+        inp.rejects += 1
+        inp.bad_cause = cause
+        return False
+
     def _receive_sync(self, data: bytes) -> None:
         decoded = self.contract.decode(self.sync_id, data)
         if decoded is not None and decoded.status.accepted and self.signer.accept_sync(data):
             self._sync_age = 0
+            self.sensor_verifier.adopt(self.signer.epoch)
         else:
             self.stats.syncs_rejected += 1
 
@@ -526,7 +540,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         return 1
     node = ControllerNode(bus, cfg)
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
-    auth = ", commands authenticated (SecOC)" if cfg.secoc_key is not None else ""
+    auth = ", commands and sensor frames authenticated (SecOC)" if cfg.secoc_key is not None else ""
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2))],
                     ready=f"running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}")

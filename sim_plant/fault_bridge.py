@@ -57,6 +57,8 @@ SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
 COMMAND = "MRS_AuxSteerCmd"
 FLOOD_ID = 0x7F0
 HISTORY = 256  # frames kept per message for replay and substitution
+# E2E and SecOC fields (the DBC's naming): out_of_range sets the first signal that is none of these.
+PROTECTION_SUFFIXES = ("_CRC", "_Counter", "_FvEpoch", "_FvCounter", "_MAC")
 
 
 @dataclass(frozen=True)
@@ -184,7 +186,7 @@ class Bridge:
             return [(now, msg), (now, _copy(msg, self._forge(msg)))]
         elif kind == "out_of_range":
             m = self.contract.message(self.contract.name_of(msg.arbitration_id))
-            first = next(s for s in m.signals if not s.name.endswith(("_CRC", "_Counter")))
+            first = next(s for s in m.signals if not s.name.endswith(PROTECTION_SUFFIXES))
             data = bytearray(self._reencode(msg, {first.name: f.param}))
         return [(now, _copy(msg, bytes(data)))]
 

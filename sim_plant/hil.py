@@ -63,7 +63,7 @@ class HilConfig:
     model_delay: int = _DEFAULT.model_delay_steps
     delay_steps: int = 1
     out: Path = Path("out/hil")
-    secoc_key: bytes | None = None  # authenticate the commands (mrsteer_dbc.secoc)
+    secoc_key: bytes | None = None  # authenticate the commands and the sensor frames (mrsteer_dbc.secoc)
 
 
 @dataclass

@@ -9,9 +9,10 @@ Each plant step (period ``ts``):
    range, SecOC (when a key is given: ``mrsteer_dbc.secoc``) and alive-counter checks count,
    in that order; with no valid command for ``cmd_timeout`` it fades to zero at a bounded rate;
 4. publish the sensor messages due at this step (with SecOC, first ``MRS_SecOCSync`` at its
-   DBC cycle time: the actuator is the freshness master) (each at its DBC cycle time, never faster than
-   the plant step): driver angle, speed, then yaw rate last, so a controller triggered by the
-   yaw-rate frame sees a complete set;
+   DBC cycle time: the actuator is the freshness master, and the sensor frames are signed for
+   the epoch it announced) (each at its DBC cycle time, never faster than the plant step):
+   driver angle, speed, then yaw rate last, so a controller triggered by the yaw-rate frame
+   sees a complete set;
 5. advance the exactly discretised model with front-wheel angle = driver angle + actuator.
 
 ``lockstep`` mode waits after step 4 for the command that answers this step's yaw-rate frame
@@ -94,6 +95,7 @@ class PlantNode:
         self.bench_id = c.frame_id("MRS_BenchInject")
         self.cmd_rx = mrsteer_dbc.E2EReceiver()
         self.verifier = secoc.CommandVerifier(c, secoc_key) if secoc_key is not None else None
+        self.sensor_signer = secoc.SensorSigner(c, secoc_key) if secoc_key is not None else None
         self.sync_id = c.frame_id(secoc.SYNC)
         self.sync_every = max(1, int(round((c.cycle_time_s(secoc.SYNC) or 0.1) / ts)))
         self.bench_rx = mrsteer_dbc.E2EReceiver()
@@ -174,12 +176,14 @@ class PlantNode:
             sends.append(("MRS_VehicleSpeed", {"VehicleSpeed_Speed": self.scene.v}))
         yaw_counter = -1
         if k % self.every["MRS_YawRate"] == 0:
-            sends.append(("MRS_YawRate", {"YawRate_YawRate": float(y[0]),
-                                          "YawRate_LatAccel": max(-30.0, min(30.0, float(y[2])))}))
+            sends.append(("MRS_YawRate", {"YawRate_YawRate": float(y[0])}))
         for name, values in sends:
             counter = self.counters[name].next()
             # strict=False: a real sensor saturates its range; the controller range-checks.
-            data = c.encode(name, values, counter, strict=False)
+            if self.sensor_signer is not None:
+                data = self.sensor_signer.sign(name, values, counter, self.verifier.current, strict=False)
+            else:
+                data = c.encode(name, values, counter, strict=False)
             self.bus.send(can.Message(arbitration_id=c.frame_id(name), data=data, is_extended_id=False))
             self.stats.tx_frames += 1
             if name == "MRS_YawRate":

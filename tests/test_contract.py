@@ -59,7 +59,7 @@ def test_crc8_known_vectors(data: bytes, expected: int) -> None:
 
 
 def test_e2e_crc_covers_data_id_and_payload(contract: mrsteer_dbc.Contract) -> None:
-    data = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1234, "YawRate_LatAccel": -2.5}, counter=7)
+    data = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1234}, counter=7)
     did = contract.e2e("MRS_YawRate").data_id
     assert data[0] == _crc8_j1850_bitwise(bytes((did & 0xFF, did >> 8)) + data[1:])
     assert data[1] & 0x0F == 7
@@ -87,7 +87,7 @@ def test_round_trip_every_protected_message(contract: mrsteer_dbc.Contract) -> N
 
 def test_corruption_is_detected(contract: mrsteer_dbc.Contract) -> None:
     fid = contract.frame_id("MRS_YawRate")
-    good = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.05, "YawRate_LatAccel": 1.0}, counter=3)
+    good = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.05}, counter=3)
     for byte in range(len(good)):
         for bit in range(8):
             bad = bytearray(good)
@@ -103,10 +103,10 @@ def test_corruption_is_detected(contract: mrsteer_dbc.Contract) -> None:
 
 def test_out_of_range_and_bad_counter_are_rejected(contract: mrsteer_dbc.Contract) -> None:
     fid = contract.frame_id("MRS_YawRate")
-    hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 5.0, "YawRate_LatAccel": 0.0}, counter=1, strict=False)
+    hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 5.0}, counter=1, strict=False)
     assert contract.decode(fid, hot).status is E2EStatus.OUT_OF_RANGE
     # Counter 15 is never sent in profile 1; forge one with a correct CRC.
-    data = bytearray(contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.0, "YawRate_LatAccel": 0.0}, counter=1))
+    data = bytearray(contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.0}, counter=1))
     data[1] = (data[1] & 0xF0) | 0x0F
     data[0] = contract.e2e_crc("MRS_YawRate", bytes(data))
     assert contract.decode(fid, bytes(data)).status is E2EStatus.BAD_COUNTER

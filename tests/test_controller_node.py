@@ -40,7 +40,7 @@ class Rig:
         if speed is not None and self.k % 10 == 0:
             self.send(rt.MSG_SPEED, {"VehicleSpeed_Speed": speed})
         if yaw is not None:
-            self.send(rt.MSG_YAW, {"YawRate_YawRate": yaw, "YawRate_LatAccel": 0.0}, **kw)
+            self.send(rt.MSG_YAW, {"YawRate_YawRate": yaw}, **kw)
         self.k += 1
         self.node.drain()
         self.node.control()

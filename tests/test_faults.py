@@ -31,7 +31,7 @@ YAW = C.frame_id("MRS_YawRate")
 
 def _yaw(counter: int, value: float = 0.1) -> can.Message:
     return can.Message(arbitration_id=YAW, is_extended_id=False,
-                       data=C.encode("MRS_YawRate", {"YawRate_YawRate": value, "YawRate_LatAccel": 0.0}, counter))
+                       data=C.encode("MRS_YawRate", {"YawRate_YawRate": value}, counter))
 
 
 @pytest.fixture

@@ -134,7 +134,7 @@ def test_controller_process_faults_on_a_silenced_sensor_and_recovers(channel: st
         while time.monotonic() < end:
             for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}),
                                  (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.02, "YawRate_LatAccel": 0.0})):
+                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.02})):
                 if name == rt.MSG_YAW and not yaw:
                     continue
                 bus.send(can.Message(arbitration_id=C.frame_id(name), data=C.encode(name, values,

@@ -311,12 +311,13 @@ def test_controller_signs_once_synced_and_reports_a_lost_sync(channel: str) -> N
     with can.Bus(interface="virtual", channel=channel) as cb, can.Bus(interface="virtual", channel=channel) as vb:
         node = rt.ControllerNode(cb, rt.RuntimeConfig(rate_hz=1000.0, secoc_key=KEY))
         counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+        sensors = secoc.SensorSigner(C, KEY)
 
         def cycle(k: int) -> tuple[bool, int]:
             for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}), (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.0, "YawRate_LatAccel": 0.0})):
-                vb.send(can.Message(arbitration_id=C.frame_id(name), data=C.encode(name, values, counters[name].next()),
-                                    is_extended_id=False))
+                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.0})):
+                data = sensors.sign(name, values, counters[name].next(), verifier.current)
+                vb.send(can.Message(arbitration_id=C.frame_id(name), data=data, is_extended_id=False))
             node.drain()
             node.control()
             cmd = next(m for m in iter(lambda: vb.recv(0.0), None) if m.arbitration_id == CMD)

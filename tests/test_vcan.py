@@ -127,7 +127,7 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
             if not paused.is_set():
                 for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}),
                                      (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                     (rt.MSG_YAW, {"YawRate_YawRate": 0.01, "YawRate_LatAccel": 0.0})):
+                                     (rt.MSG_YAW, {"YawRate_YawRate": 0.01})):
                     data = c.encode(name, values, counters[name].next())
                     bus.send(can.Message(arbitration_id=c.frame_id(name), data=data, is_extended_id=False))
                     if name == rt.MSG_YAW:
