@@ -129,7 +129,7 @@ class Row:
     kill: bool = False  # the runner kills the controller (SIGKILL) ...
     restart: bool = False  # ... and restarts it
     kill_plant: bool = False  # the runner kills the plant (SIGKILL) and restarts it
-    secoc: bool = False  # controller and plant authenticate the commands
+    secoc: bool = False  # controller and plant authenticate the commands and the sensor frames
     auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
 
 
@@ -166,10 +166,14 @@ ROWS = (
     # the actuator's own +-3 deg still bounds what it does.
     Row("commands forged, E2E only", _f("spoof_command", "commands", FORGED_ANGLE),
         "forgeries taken, actuator within 3 deg"),
-    Row("SecOC: baseline", _f("none"), "runs clean, commands authenticated", no_fault=True, secoc=True),
+    Row("SecOC: baseline", _f("none"), "runs clean, every frame authenticated", no_fault=True, secoc=True),
     # The forger sends the next alive counter with a valid CRC: E2E alone would take it.
     Row("SecOC: commands forged", _f("spoof_command", "commands", FORGED_ANGLE),
         "forgeries rejected (MAC), real ones kept", secoc=True, auth_rejects=True),
+    # 13 back lands 2 ahead of the 4-bit alive counter: E2E alone takes every replay and rejects
+    # the live frames instead (docs/faults.md); the sensor frames' MAC must refuse them.
+    Row("SecOC: yaw-rate replayed 13 back", _f("replay", param=13.0), "every replay rejected (MAC), no fault",
+        no_fault=True, reject_all=True, secoc=True),
     # 150 frames (0.3 s) back: counter-aligned, so E2E alone would take them (docs/faults.md).
     Row("SecOC: 0.3 s old commands substituted", _f("substitute", "commands", 150.0),
         "stale freshness rejected, fade, slew back", secoc=True, auth_rejects=True),
@@ -471,6 +475,13 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         # Real commands fail too: before the controller has the first sync, and when they reach
         # the actuator an epoch too late (a stalled machine).  Both are right; shown, not judged.
         observed.append(f"plant: {plant['cmd_auth_failed']} failed SecOC")
+        if ctl_stats is not None:
+            sensor_failed = ctl_stats.get("rx_auth_failed", 0)
+            observed.append(f"controller: {sensor_failed} sensor frames failed SecOC")
+            # With E2E alone an aliased replay is accepted and the live frame rejected instead, so
+            # the count of rejections proves nothing here: the MAC must be what refused them.
+            if row.reject_all and sensor_failed < bridge["affected"]:
+                fails.append(f"the controller's SecOC refused {sensor_failed} of {bridge['affected']} replayed frames")
     if row.auth_rejects:
         failed = plant["cmd_auth_failed"]
         if failed < bridge["affected"] - MAC_LUCK:
