@@ -164,6 +164,7 @@ def write_all(out: Path, progress: Callable[[str], None] | None = None) -> list[
             written.append(VectorSet(name, scen, n))
             say(f"{name}__{scen}.csv: {n} steps")
     files.update(secoc_vectors())
+    files.update(secoc_sensor_vectors())
     write_files(out, files)  # all or nothing: a port never sees a mixed set
     return written
 
@@ -230,12 +231,73 @@ def secoc_vectors() -> dict[str, str]:
     sync()  # a new epoch: the counter starts at 0 again
     for i in range(40, 50):
         command(i)
-    f = io.StringIO()
-    w = csv.writer(f, lineterminator="\n")
-    w.writerow(SECOC_COLUMNS)
-    w.writerows(rows)
     cfg = [f"key = {SECOC_KEY.hex()}", f"epoch_origin_s = {secoc.EPOCH_ORIGIN_S}", f"clock_s = {_num(SECOC_T0)}",
            f"command_id = {lay.cmd_id}", f"sync_id = {lay.sync_id}", f"mac_bits = {lay.mac_bits}",
            f"sync_mac_bits = {lay.sync_mac_bits}", f"fv_counter_low_bits = {lay.counter_low_bits}",
            f"counter_bits = {secoc.COUNTER_BITS}"]
-    return {"secoc_setup.txt": "\n".join(cfg) + "\n", "secoc_frames.csv": f.getvalue()}
+    return {"secoc_setup.txt": "\n".join(cfg) + "\n", "secoc_frames.csv": _csv_text(SECOC_COLUMNS, rows)}
+
+
+def _csv_text(columns: tuple[str, ...], rows: list[list[str]]) -> str:
+    f = io.StringIO()
+    w = csv.writer(f, lineterminator="\n")
+    w.writerow(columns)
+    w.writerows(rows)
+    return f.getvalue()
+
+
+SENSOR_COLUMNS = ("kind", "message", "epoch", "fv_counter", "alive_counter", "value", "mac", "sent", "frame_hex")
+_SENSOR_SIGNAL = {"MRS_DriverSteer": "DriverSteer_Angle", "MRS_YawRate": "YawRate_YawRate",
+                  "MRS_VehicleSpeed": "VehicleSpeed_Speed"}
+
+
+def secoc_sensor_vectors() -> dict[str, str]:
+    """``secoc_sensor_frames.csv``: the plant's signed sensor frames, with the syncs it sent.
+
+    Per 2 ms cycle a driver-angle and a yaw-rate frame, a speed frame every 5th cycle.  20
+    cycles, then 14 cycles the bus lost (``sent`` = 0: the most a receiver bridges), 5 more,
+    a new epoch, and 10 more.  Every sent frame verifies in file order with the key of
+    ``secoc_setup.txt``."""
+    contract = mrsteer_dbc.load()
+    clock = [SECOC_T0]
+    master = secoc.CommandVerifier(contract, SECOC_KEY, lambda: clock[0])
+    signer, check = secoc.SensorSigner(contract, SECOC_KEY), secoc.SensorVerifier(contract, SECOC_KEY)
+    alive = {name: mrsteer_dbc.AliveCounter() for name in secoc.SENSORS}
+    fv = dict.fromkeys(secoc.SENSORS, 0)
+    rows: list[list[str]] = []
+
+    def sync() -> None:
+        data = master.next_sync()
+        check.adopt(master.current)
+        fv.update(dict.fromkeys(secoc.SENSORS, 0))
+        rows.append(["sync", secoc.SYNC, str(master.current), "", "", "", str(master.sync_mac(master.current)), "1",
+                     data.hex()])
+
+    def cycle(i: int, sent: bool = True) -> None:
+        values = {"MRS_DriverSteer": round(0.2 * math.sin(0.05 * i), 4), "MRS_YawRate": round(0.3 * math.cos(0.07 * i), 6),
+                  "MRS_VehicleSpeed": round(20.0 + 0.01 * i, 3)}
+        for name in secoc.SENSORS:
+            if name == "MRS_VehicleSpeed" and i % 5:
+                continue
+            counter = alive[name].next()
+            data = signer.sign(name, {_SENSOR_SIGNAL[name]: values[name]}, counter, master.current)
+            decoded = contract.decode(contract.frame_id(name), data)
+            assert not sent or check.verify(contract.frame_id(name), data, decoded.signals)
+            fields = signer.fields[name]
+            rows.append(["sensor", name, str(master.current), str(fv[name]), str(counter),
+                         _num(round(decoded.signals[_SENSOR_SIGNAL[name]], 9)), str(int(decoded.signals[fields.mac])),
+                         str(int(sent)), data.hex()])
+            fv[name] += 1
+
+    sync()
+    for i in range(20):  # past the 3-bit FV wrap and the alive counter's wrap
+        cycle(i)
+    for i in range(20, 34):
+        cycle(i, sent=False)
+    for i in range(34, 39):
+        cycle(i)
+    clock[0] += 0.1
+    sync()  # a new epoch: every message's counter starts at 0 again
+    for i in range(39, 49):
+        cycle(i)
+    return {"secoc_sensor_frames.csv": _csv_text(SENSOR_COLUMNS, rows)}
