@@ -303,6 +303,7 @@ class CommandVerifier(_Peer):
 
 SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
 _ALIVE_MODULO = 15  # the E2E alive counter: 0..14
+SENSOR_FV_LOW_BITS = 3  # the per-epoch counter's bits on the wire: residues mod 8
 _INV8_MOD15 = 2  # 8 * 2 = 16 = 1 (mod 15)
 SENSOR_MAX_ADVANCE = 15
 
@@ -331,7 +332,7 @@ class SensorFields:
             raise SecOCError(f"{name} must be E2E-protected: sensor SecOC uses its alive counter")
         stem = name.removeprefix("MRS_")
         sigs = {}
-        for suffix, bits in (("FvEpoch", 1), ("FvCounter", 3), ("MAC", None)):
+        for suffix, bits in (("FvEpoch", 1), ("FvCounter", SENSOR_FV_LOW_BITS), ("MAC", None)):
             try:
                 s = msg.get_signal_by_name(f"{stem}_{suffix}")
             except KeyError:
@@ -394,7 +395,7 @@ class SensorSigner(_SensorPeer):
             raise SecOCError(f"{name}: the freshness counter overflowed within one epoch")
         full = dict(values)
         full[f.epoch_bit] = epoch & 1
-        full[f.counter_low] = counter & 7
+        full[f.counter_low] = counter & ((1 << SENSOR_FV_LOW_BITS) - 1)
         full[f.mac] = 0
         plain = self.contract.encode(name, full, alive, strict=strict)
         full[f.mac] = frame_mac(self._cmac, f.frame_id, f.zeroed(plain), freshness(epoch, counter), f.mac_bits)
@@ -449,5 +450,8 @@ class SensorVerifier(_SensorPeer):
                                                      f.mac_bits) != int(signals[f.mac]):
             self.failed[f.name] += 1
             return False
-        self._last[frame_id] = _SensorLast(epoch, counter, alive)
+        if last is None:
+            self._last[frame_id] = _SensorLast(epoch, counter, alive)
+        else:
+            last.epoch, last.counter, last.alive = epoch, counter, alive
         return True

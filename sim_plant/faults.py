@@ -480,7 +480,8 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
             observed.append(f"controller: {sensor_failed} sensor frames failed SecOC")
             # With E2E alone an aliased replay is accepted and the live frame rejected instead, so
             # the count of rejections proves nothing here: the MAC must be what refused them.
-            if row.reject_all and sensor_failed < bridge["affected"]:
+            # (Corrupted frames are refused earlier, by their CRC, length or range.)
+            if row.fault.kind == "replay" and sensor_failed < bridge["affected"]:
                 fails.append(f"the controller's SecOC refused {sensor_failed} of {bridge['affected']} replayed frames")
     if row.auth_rejects:
         failed = plant["cmd_auth_failed"]
