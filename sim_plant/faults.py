@@ -131,6 +131,7 @@ class Row:
     kill_plant: bool = False  # the runner kills the plant (SIGKILL) and restarts it
     secoc: bool = False  # controller and plant authenticate the commands and the sensor frames
     auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
+    e2e_only: bool = False  # shows what E2E alone lets through: meaningless with SecOC on
 
 
 def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
@@ -165,7 +166,7 @@ ROWS = (
     # The same forger without SecOC: E2E alone takes it (docs/faults.md, "E2E is not security");
     # the actuator's own +-3 deg still bounds what it does.
     Row("commands forged, E2E only", _f("spoof_command", "commands", FORGED_ANGLE),
-        "forgeries taken, actuator within 3 deg"),
+        "forgeries taken, actuator within 3 deg", e2e_only=True),
     Row("SecOC: baseline", _f("none"), "runs clean, every frame authenticated", no_fault=True, secoc=True),
     # The forger sends the next alive counter with a valid CRC: E2E alone would take it.
     Row("SecOC: commands forged", _f("spoof_command", "commands", FORGED_ANGLE),
@@ -540,6 +541,23 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
                      math.degrees(worst_step), detection, fails)
 
 
+def secured_rows(rows: tuple[Row, ...] = ROWS) -> tuple[Row, ...]:
+    """The rows as they run with SecOC on (``faults run --secoc``): every row authenticates,
+    the E2E-only rows are left out, and a row that became the same run as an earlier one (the
+    baseline and "SecOC: baseline") appears once."""
+    out: list[Row] = []
+    seen: set[Row] = set()
+    for row in rows:
+        if row.e2e_only:
+            continue
+        row = replace(row, secoc=True)
+        key = replace(row, name="", expected="")
+        if key not in seen:
+            seen.add(key)
+            out.append(row)
+    return tuple(out)
+
+
 def _holds_files(keep: Path | None) -> bool:
     """A --keep directory must start empty: an earlier run's statistics would be judged as this run's."""
     return keep is not None and keep.is_dir() and any(keep.iterdir())
@@ -594,6 +612,9 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     r.add_argument("--only", action="append", metavar="TEXT", help="only rows whose name contains TEXT; repeatable")
     r.add_argument("--keep", type=Path, metavar="DIR", help="keep every row's logs, traces and statistics here")
     r.add_argument("--json", action="store_true", help="print the results as JSON")
+    r.add_argument("--secoc", action="store_true",
+                   help="run every row with the commands and sensor frames authenticated (a random key per row); "
+                   "the rows that show what E2E alone lets through are left out")
     r.add_argument("--interface", default="mrsteer", help="python-can interface of both buses (default mrsteer, "
                    "the fallback bus)")
     r.add_argument("--channels", metavar="VEHICLE,CONTROLLER",
@@ -608,9 +629,10 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
-    rows = tuple(row for row in ROWS if not args.only or any(o.lower() in row.name.lower() for o in args.only))
+    every = secured_rows() if args.secoc else ROWS
+    rows = tuple(row for row in every if not args.only or any(o.lower() in row.name.lower() for o in args.only))
     if not rows:
-        p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in ROWS))
+        p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s)  # type: ignore[arg-type]

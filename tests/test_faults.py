@@ -309,3 +309,22 @@ def test_replay_aliasing_is_what_the_safety_docs_state(back: int, replays_taken:
         live += receiver.check(n % 15).accepted
         replays += receiver.check((n - back) % 15).accepted
     assert (replays, live) == (replays_taken, live_taken)
+
+
+def test_secured_rows_authenticate_every_row_and_drop_the_e2e_only_ones() -> None:
+    rows = F.secured_rows()
+    assert all(r.secoc for r in rows)
+    assert not any(r.e2e_only for r in rows) and any(r.e2e_only for r in F.ROWS)
+    names = [r.name for r in rows]
+    assert "baseline" in names and "SecOC: baseline" not in names  # the same run once
+    assert "SecOC: commands forged" in names and "plant killed and restarted" in names
+    assert len(rows) == len(F.ROWS) - 2
+
+
+def test_faults_run_secoc_judges_a_row_with_the_sensor_frames_authenticated(capsys: pytest.CaptureFixture[str]) -> None:
+    assert F.main(["run", "--secoc", "--only", "yaw-rate frames replayed", "--json"]) == 0
+    (result,) = json.loads(capsys.readouterr().out)
+    assert result["passed"], result
+    # Every replay 1 back was refused by the controller's MAC, not only counted as rejected.
+    refused = int(result["observed"].split("controller: ")[1].split(" sensor frames failed SecOC")[0])
+    assert refused >= 190
