@@ -161,6 +161,12 @@ def freshness(epoch: int, counter: int) -> int:
     return (epoch << COUNTER_BITS) | counter
 
 
+def epoch_named(bit: int, current: int | None, previous: int | None) -> int | None:
+    """The epoch a frame's FV epoch bit names: the current one if the low bits agree, else the
+    one before (a sync may still be in flight)."""
+    return current if current is not None and (current & 1) == bit else previous
+
+
 def frame_mac(cmac: TruncatedCmac, frame_id: int, zeroed: bytes, fv: int, bits: int) -> int:
     """The authenticator of one frame: CMAC over frame ID || payload (CRC and MAC zero) || FV."""
     return cmac(frame_id.to_bytes(2, "big") + zeroed + fv.to_bytes(8, "big"), bits)
@@ -269,7 +275,7 @@ class CommandVerifier(_Peer):
         one (which it then becomes).  ``data`` must have passed ``Contract.decode``."""
         lay = self.layout
         raw = self._cmd.decode(data, decode_choices=False, scaling=False)
-        epoch = self.current if self.current is not None and (self.current & 1) == raw[lay.epoch_bit] else self.previous
+        epoch = epoch_named(int(raw[lay.epoch_bit]), self.current, self.previous)
         if epoch is None or (self.last is not None and epoch < self.last[0]):
             self.stats.failed += 1
             return False
@@ -435,8 +441,7 @@ class SensorVerifier(_SensorPeer):
         ``Contract.decode`` (length, CRC, range)."""
         f = self.by_id[frame_id]
         alive, low = int(signals[f.alive]), int(signals[f.counter_low])
-        epoch = self.current if self.current is not None and (self.current & 1) == int(signals[f.epoch_bit]) \
-            else self.previous
+        epoch = epoch_named(int(signals[f.epoch_bit]), self.current, self.previous)
         last = self._last[frame_id]
         if epoch is None or (last is not None and epoch < last.epoch):
             self.failed[f.name] += 1
@@ -446,8 +451,10 @@ class SensorVerifier(_SensorPeer):
             counter = last.counter + advance
         else:
             advance, counter = 1, low  # the epoch's first accepted frame must be one of its first 8
-        if advance > SENSOR_MAX_ADVANCE or counter >= 1 << COUNTER_BITS or frame_mac(self._cmac, frame_id, f.zeroed(data), freshness(epoch, counter),
-                                                     f.mac_bits) != int(signals[f.mac]):
+        # The window first: a replay (or too many lost frames) is refused before any MAC is computed.
+        if (advance > SENSOR_MAX_ADVANCE or counter >= 1 << COUNTER_BITS
+                or frame_mac(self._cmac, frame_id, f.zeroed(data), freshness(epoch, counter), f.mac_bits)
+                != int(signals[f.mac])):
             self.failed[f.name] += 1
             return False
         if last is None:

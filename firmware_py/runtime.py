@@ -261,11 +261,12 @@ class ControllerNode:
         if inp is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             self.stats.rx_ignored += 1
             return False
-        decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
+        data = bytes(msg.data)
+        decoded = self.contract.decode(msg.arbitration_id, data)
         status = decoded.status if decoded is not None else mrsteer_dbc.E2EStatus.BAD_LENGTH
         # Authenticate before the counter check: a forged frame must not advance the sequence.
         if status is mrsteer_dbc.E2EStatus.OK and self.sensor_verifier is not None and not self.sensor_verifier.verify(
-                msg.arbitration_id, bytes(msg.data), decoded.signals):
+                msg.arbitration_id, data, decoded.signals):
             self.stats.rx_auth_failed += 1
             return self._reject(inp, CAUSE_AUTH)
         if status is mrsteer_dbc.E2EStatus.OK:
