@@ -18,7 +18,7 @@ import can
 import numpy as np
 
 import mrsteer_dbc
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 
 READY_TIMEOUT_S = 60.0
 
@@ -107,7 +107,7 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
         env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
         procs: list[subprocess.Popen] = []
         try:
-            broker = _spawn([py, "-m", "sim_plant.vbus", "--channel", env_channel], work / "bus.err")
+            broker = _spawn([py, "-m", "firmware_py.platform.fallback_broker", "--channel", env_channel], work / "bus.err")
             procs.append(broker)
             _wait_for(work / "bus.err", "serving", broker)
             ncpu = os.cpu_count() or 1

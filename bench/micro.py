@@ -10,7 +10,7 @@ import numpy as np
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 from mrsteer_bench.timer import per_call_us
 
 

@@ -10,9 +10,9 @@ import numpy as np
 from scipy import signal
 
 from firmware_py import model_regulator as mr
-from sim_plant.closed_loop import discrete_loop_matrix
-from sim_plant.sweep import sweep
-from sim_plant.vehicle import VehicleParams
+from sim_plant.offline.closed_loop import discrete_loop_matrix
+from sim_plant.offline.sweep import sweep
+from sim_plant.car.vehicle import VehicleParams
 
 M_Z = 4000.0
 DURATION = 3.0

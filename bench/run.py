@@ -8,8 +8,8 @@ import sys
 import time
 from typing import Any, Callable, Sequence
 
-from firmware_py import runtime as rt
-from firmware_py.cli_support import Parser
+from firmware_py.controller import node as rt
+from firmware_py.platform.cli import Parser
 
 NAMES = ("step", "receive", "sweep", "loop", "soak")
 

@@ -1,5 +1,5 @@
 import sys
 
-from firmware_py.runtime import main
+from firmware_py.controller.main import main
 
 sys.exit(main(prog="python -m firmware_py"))

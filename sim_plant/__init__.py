@@ -1,0 +1,11 @@
+"""Everything that stands in for the car, and the harness that puts it on a bus with a controller.
+
+* ``car``: the vehicle (the linear single-track model of eqs. 14/16, discretised exactly) and
+  the scenarios it plays.
+* ``offline``: analysis with no bus and no processes: closed-loop simulation, margins, tuning,
+  sweeps, the paper's figures, golden vectors.
+* ``nodes``: bus processes other than the controller: the plant, the bus logger, the fault bridge.
+* ``harness``: running nodes together: process supervision, HIL runs, the fault matrix.
+
+``python -m sim_plant`` runs the plant node.
+"""

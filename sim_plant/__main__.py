@@ -1,5 +1,5 @@
 import sys
 
-from sim_plant.plant_node import main
+from sim_plant.nodes.plant import main
 
 sys.exit(main(prog="python -m sim_plant"))

@@ -114,9 +114,9 @@ def test_a_full_disk_leaves_no_partial_vector_set(tmp_path: Path) -> None:
 
 
 SERVERS = {  # processes that run until signalled, and write their statistics then
-    "bridge": (["-m", "sim_plant.fault_bridge", "--interface", "virtual", "--vehicle", "a", "--controller", "b"],
+    "bridge": (["-m", "sim_plant.nodes.fault_bridge", "--interface", "virtual", "--vehicle", "a", "--controller", "b"],
                "bridging"),
-    "logger": (["-m", "sim_plant.buslog", "--interface", "virtual", "--channel", "a"], "ready"),
+    "logger": (["-m", "sim_plant.nodes.logger", "--interface", "virtual", "--channel", "a"], "ready"),
 }
 
 

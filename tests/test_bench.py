@@ -14,9 +14,9 @@ from firmware_py import model_regulator as mr
 from mrsteer_bench.loop import loop_timing
 from mrsteer_bench.micro import NumpyRegulator
 from mrsteer_cli.cli import main
-from sim_plant.closed_loop import Experiment, simulate_discrete
-from sim_plant.sweep import sweep
-from sim_plant.vehicle import VehicleParams
+from sim_plant.offline.closed_loop import Experiment, simulate_discrete
+from sim_plant.offline.sweep import sweep
+from sim_plant.car.vehicle import VehicleParams
 
 
 @pytest.mark.parametrize("model_delay,delay,ts", [(0, 0, 0.001), (0, 1, 0.001), (1, 1, 0.002), (2, 3, 0.005)])

@@ -10,10 +10,10 @@ from scipy import signal
 
 from conftest import polyadd, polymul
 from firmware_py import model_regulator as mr
-from sim_plant import experiments
-from sim_plant.paper import PAPER_CONFIG
-from sim_plant.closed_loop import Experiment, simulate_continuous
-from sim_plant.vehicle import VehicleParams, disturbance_tf, steering_tf
+from sim_plant.offline import experiments
+from sim_plant.offline.paper import PAPER_CONFIG
+from sim_plant.offline.closed_loop import Experiment, simulate_continuous
+from sim_plant.car.vehicle import VehicleParams, disturbance_tf, steering_tf
 
 
 def _q(form: str, k: float = 10.0, tau: float = 0.006) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,8 @@ import pytest
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
+from firmware_py.controller import timing
 
 C = mrsteer_dbc.load()
 FADE = mr.ControllerConfig().fade_rate * 1e-3
@@ -167,7 +168,7 @@ def test_lateness_histogram_percentiles_and_constant_memory() -> None:
 
     rng = np.random.default_rng(7)
     values = np.concatenate([rng.exponential(80e-6, 20_000), [0.0, -1e-6, 0.2]])  # negative: early; 0.2: overflow
-    h = rt.LatenessHistogram()
+    h = timing.LatenessHistogram()
     size = len(h.counts)
     for v in values:
         h.add(float(v))
@@ -182,11 +183,11 @@ def test_phase_lock_moves_cycle_starts_toward_the_frame_arrival_and_converges() 
     period, offset = 2e-3, 150e-6
     # Frames arrive 0.3 ms into each period; a loop starting at 0.9 ms moves earlier, by at most
     # the slew limit per cycle; one starting at 1.7 ms is nearer the next frame and moves later.
-    assert rt.phase_correction(0.3e-3, 0.9e-3, period, offset) == pytest.approx(-rt.SYNC_MAX_SLEW * period)
-    assert rt.phase_correction(0.3e-3, 1.7e-3, period, offset) == pytest.approx(rt.SYNC_MAX_SLEW * period)
+    assert timing.phase_correction(0.3e-3, 0.9e-3, period, offset) == pytest.approx(-timing.SYNC_MAX_SLEW * period)
+    assert timing.phase_correction(0.3e-3, 1.7e-3, period, offset) == pytest.approx(timing.SYNC_MAX_SLEW * period)
     for start in (0.9e-3, 1.7e-3):
         for k in range(400):
-            start += rt.phase_correction(0.3e-3 + k * period, start + k * period, period, offset)
+            start += timing.phase_correction(0.3e-3 + k * period, start + k * period, period, offset)
         assert math.remainder(start - (0.3e-3 + offset), period) == pytest.approx(0.0, abs=1e-7)
     # The error wraps: a frame 0.1 ms *after* the cycle start of the previous period is close.
-    assert rt.phase_correction(1.95e-3, 0.0, period, 0.0) == pytest.approx(rt.SYNC_GAIN * -0.05e-3)
+    assert timing.phase_correction(1.95e-3, 0.0, period, 0.0) == pytest.approx(timing.SYNC_GAIN * -0.05e-3)

@@ -14,10 +14,10 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from mrsteer_cli.cli import main
 from mrsteer_dbc.busload import bus_load, frame_bits, max_rate_hz
-from sim_plant import margins as M
-from sim_plant import tuning as T
-from sim_plant.closed_loop import discrete_loop_poles
-from sim_plant.vehicle import VehicleParams
+from sim_plant.offline import margins as M
+from sim_plant.offline import tuning as T
+from sim_plant.offline.closed_loop import discrete_loop_poles
+from sim_plant.car.vehicle import VehicleParams
 
 SMALL = M.Envelope(speeds=(5.0, 20.0, 50.0), frictions=(0.3, 1.0), masses=(1296.0, 1800.0))
 

@@ -17,12 +17,12 @@ from hypothesis import strategies as st
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 from mrsteer_dbc import E2EStatus
-from sim_plant.fault_bridge import Bridge, Fault
-from sim_plant import faults as F
-from sim_plant.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
-from sim_plant.processes import RunError
+from sim_plant.nodes.fault_bridge import Bridge, Fault
+from sim_plant.harness import faults as F
+from sim_plant.harness.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
+from sim_plant.harness.processes import RunError
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -151,7 +151,7 @@ def test_the_flood_sends_its_rate_over_its_window(channel: str) -> None:
 
 
 def test_bridge_rejects_a_bad_fault_spec() -> None:
-    proc = subprocess.run([sys.executable, "-m", "sim_plant.fault_bridge", "--vehicle", "a", "--controller", "b",
+    proc = subprocess.run([sys.executable, "-m", "sim_plant.nodes.fault_bridge", "--vehicle", "a", "--controller", "b",
                            "--fault", '{"kind": "explode"}'], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "fault kind must be one of" in proc.stderr
 
@@ -202,8 +202,8 @@ def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("rate", sorted(CALIBRATIONS))
 def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> None:
-    from sim_plant import margins as M
-    from sim_plant import tuning as T
+    from sim_plant.offline import margins as M
+    from sim_plant.offline import tuning as T
 
     k, tau, tau_n, m = CALIBRATIONS[rate]
     cfg = replace(mr.ControllerConfig(), k=k, tau=tau, tau_n=tau_n, model_delay_steps=m, ts=1.0 / rate)
@@ -275,7 +275,7 @@ def test_matrix_will_not_judge_an_earlier_runs_files(tmp_path: Path) -> None:
 def test_receive_queue_is_deepened_on_kernel_sockets_only() -> None:
     import socket
 
-    from sim_plant.rx_queue import DEPTH_BYTES, deepen
+    from firmware_py.platform.rx_queue import DEPTH_BYTES, deepen
 
     class KernelBus:
         def __init__(self) -> None:

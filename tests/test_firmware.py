@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from firmware_py import model_regulator as mr
-from sim_plant import experiments
-from sim_plant.paper import PAPER_CONFIG
-from sim_plant.closed_loop import discrete_loop_matrix, discrete_loop_poles
-from sim_plant.vehicle import VehicleParams
+from sim_plant.offline import experiments
+from sim_plant.offline.paper import PAPER_CONFIG
+from sim_plant.offline.closed_loop import discrete_loop_matrix, discrete_loop_poles
+from sim_plant.car.vehicle import VehicleParams
 
 LIMIT = math.radians(3.0)
 
@@ -87,7 +87,7 @@ def test_loop_poles_match_an_independent_polynomial_construction(ts: float, dela
     c = mr.configure(cfg)
     # Plant delta_f -> r discretised by scipy; controller r -> u from the textbook form
     # u = Q/(1-Q) (-(tau_n s + 1) r / K_n), Tustin by scipy, with z^-delay.
-    from sim_plant.vehicle import state_space, steering_tf
+    from sim_plant.car.vehicle import state_space, steering_tf
 
     ss = state_space(p)
     pn, pd, *_ = signal.cont2discrete((ss.A, ss.B[:, :1], ss.C[:1], ss.D[:1, :1]), ts, method="zoh")
@@ -150,7 +150,7 @@ def test_state_stays_bounded_while_saturated() -> None:
 
 def _pulse_run(law, ts: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """Closed loop, one sample of delay: 9000 Nm of yaw moment for 1 s, then none."""
-    from sim_plant.vehicle import DiscretePlant
+    from sim_plant.car.vehicle import DiscretePlant
 
     plant = DiscretePlant(VehicleParams(v=20.0, mu=1.0), ts)
     queued, cmds, yaw = 0.0, [], []

@@ -16,7 +16,7 @@ import pytest
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()

@@ -8,8 +8,8 @@ import can
 import pytest
 
 import mrsteer_dbc
-from sim_plant import scenario as scn
-from sim_plant.plant_node import PlantNode
+from sim_plant.car import scenario as scn
+from sim_plant.nodes.plant import PlantNode
 
 C = mrsteer_dbc.load()
 CMD = C.frame_id("MRS_AuxSteerCmd")

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from sim_plant.processes import RunError, spawn_preloaded, stop, wait_for_socket, wait_stderr
+from sim_plant.harness.processes import RunError, spawn_preloaded, stop, wait_for_socket, wait_stderr
 
 
 def test_a_preloaded_node_reports_its_usage_error_and_status(tmp_path: Path) -> None:
-    p = spawn_preloaded("plant", "sim_plant.plant_node:main", ["--rate-hz", "-5"], tmp_path, dict(os.environ))
+    p = spawn_preloaded("plant", "sim_plant.nodes.plant:main", ["--rate-hz", "-5"], tmp_path, dict(os.environ))
     assert p.popen.wait(60) == 2
     stop(p)
     assert "rate" in (tmp_path / "plant.stderr").read_text()
@@ -24,14 +24,14 @@ def test_a_preloaded_node_reports_its_usage_error_and_status(tmp_path: Path) -> 
 def test_a_preloaded_node_gets_the_environment_it_was_given(tmp_path: Path) -> None:
     # --secoc takes its key from the environment: one without a key is refused, naming it.
     env = {k: v for k, v in os.environ.items() if k != "MRSTEER_SECOC_KEY"}
-    p = spawn_preloaded("controller", "firmware_py.runtime:main", ["--secoc", "--interface", "virtual"], tmp_path, env)
+    p = spawn_preloaded("controller", "firmware_py.controller.main:main", ["--secoc", "--interface", "virtual"], tmp_path, env)
     assert p.popen.wait(60) == 2
     stop(p)
     assert "MRSTEER_SECOC_KEY" in (tmp_path / "controller.stderr").read_text()
 
 
 def test_a_preloaded_node_writes_stdout_to_its_file(tmp_path: Path) -> None:
-    p = spawn_preloaded("bridge", "sim_plant.fault_bridge:main", ["--help"], tmp_path, dict(os.environ), stdout=True)
+    p = spawn_preloaded("bridge", "sim_plant.nodes.fault_bridge:main", ["--help"], tmp_path, dict(os.environ), stdout=True)
     assert p.popen.wait(60) == 0
     stop(p)
     assert "usage:" in (tmp_path / "bridge.stdout").read_text()
@@ -39,11 +39,11 @@ def test_a_preloaded_node_writes_stdout_to_its_file(tmp_path: Path) -> None:
 
 def test_a_preloaded_node_can_be_killed_and_stopped(tmp_path: Path, channel: str) -> None:
     env = dict(os.environ)
-    broker = spawn_preloaded("broker", "sim_plant.vbus:main", ["--channel", channel], tmp_path, env)
+    broker = spawn_preloaded("broker", "firmware_py.platform.fallback_broker:main", ["--channel", channel], tmp_path, env)
     try:
         wait_for_socket(channel, broker)
         wait_stderr(broker, "serving")
-        killed = spawn_preloaded("broker-2", "sim_plant.vbus:main", ["--channel", channel + "-2"], tmp_path, env)
+        killed = spawn_preloaded("broker-2", "firmware_py.platform.fallback_broker:main", ["--channel", channel + "-2"], tmp_path, env)
         wait_stderr(killed, "serving")
         killed.popen.kill()
         assert killed.popen.wait(60) == -signal.SIGKILL
@@ -54,7 +54,7 @@ def test_a_preloaded_node_can_be_killed_and_stopped(tmp_path: Path, channel: str
 
 
 def test_waiting_on_a_node_that_died_names_it(tmp_path: Path) -> None:
-    p = spawn_preloaded("controller", "firmware_py.runtime:main", ["--rate-hz", "nan"], tmp_path, dict(os.environ))
+    p = spawn_preloaded("controller", "firmware_py.controller.main:main", ["--rate-hz", "nan"], tmp_path, dict(os.environ))
     with pytest.raises(RunError, match="controller exited with status 2"):
         wait_stderr(p, "running at", timeout=60)
     stop(p)
@@ -67,9 +67,9 @@ def test_a_plain_script_can_supervise_preloaded_nodes(tmp_path: Path) -> None:
     script.write_text(
         "import os, sys\n"
         "from pathlib import Path\n"
-        "from sim_plant.processes import spawn_preloaded, stop\n"
+        "from sim_plant.harness.processes import spawn_preloaded, stop\n"
         "print('script ran', flush=True)\n"
-        f"p = spawn_preloaded('bridge', 'sim_plant.fault_bridge:main', ['--help'], Path({str(tmp_path)!r}),"
+        f"p = spawn_preloaded('bridge', 'sim_plant.nodes.fault_bridge:main', ['--help'], Path({str(tmp_path)!r}),"
         " dict(os.environ), stdout=True)\n"
         "code = p.popen.wait(60)\n"
         "stop(p)\n"

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from sim_plant import scenario as scn
-from sim_plant.vehicle import VehicleParams, nominal_yaw_gain
+from sim_plant.car import scenario as scn
+from sim_plant.car.vehicle import VehicleParams, nominal_yaw_gain
 
 
 def _write(tmp_path: Path, text: str) -> str:

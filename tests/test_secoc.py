@@ -14,10 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import mrsteer_dbc
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
-from sim_plant import scenario as scn
-from sim_plant.plant_node import PlantNode
+from sim_plant.car import scenario as scn
+from sim_plant.nodes.plant import PlantNode
 
 C = mrsteer_dbc.load()
 CMD = C.frame_id(secoc.COMMAND)

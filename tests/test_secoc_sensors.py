@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
 
 C = mrsteer_dbc.load()

@@ -13,14 +13,14 @@ import time
 import can
 import pytest
 
-from sim_plant import vbus
+from firmware_py.platform import fallback_wire
 
 
 @pytest.fixture
 def broker(channel: str):
-    proc = subprocess.Popen([sys.executable, "-m", "sim_plant.vbus", "--channel", channel],
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_py.platform.fallback_broker", "--channel", channel],
                             stderr=subprocess.PIPE, env=os.environ.copy())
-    path = vbus.socket_path(channel)
+    path = fallback_wire.socket_path(channel)
     deadline = time.monotonic() + 10
     while not path.exists():
         assert proc.poll() is None, proc.stderr.read()
@@ -161,7 +161,7 @@ def test_autostart_brings_up_a_broker_that_leaves_when_idle(channel: str) -> Non
     assert b.recv(2.0).arbitration_id == 5
     a.shutdown()
     b.shutdown()
-    path = vbus.socket_path(channel)
+    path = fallback_wire.socket_path(channel)
     deadline = time.monotonic() + 15
     while path.exists() and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -169,7 +169,7 @@ def test_autostart_brings_up_a_broker_that_leaves_when_idle(channel: str) -> Non
 
 
 def test_socket_is_private_to_this_user(broker, channel: str) -> None:
-    path = vbus.socket_path(channel)
+    path = fallback_wire.socket_path(channel)
     assert path.stat().st_mode & 0o077 == 0
     assert path.parent.stat().st_mode & 0o077 == 0
     s = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)

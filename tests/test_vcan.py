@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from firmware_py.bus_open import vcan_available
+from firmware_py.platform.bus_open import vcan_available
 
 pytestmark = [
     pytest.mark.vcan,
@@ -110,7 +110,7 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
 
     import mrsteer_dbc
     from firmware_py import model_regulator as mr
-    from firmware_py import runtime as rt
+    from firmware_py.controller import node as rt
 
     c = mrsteer_dbc.load()
     stats = tmp_path / "ctl.json"
@@ -182,7 +182,7 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
 def test_controller_filters_are_installed_in_the_kernel() -> None:
     import can
 
-    from firmware_py import runtime as rt
+    from firmware_py.controller import node as rt
 
     bus = can.Bus(interface="socketcan", channel="vcan0")
     try:
@@ -203,8 +203,8 @@ VM_SETUP = dict(rate_hz=100.0, time_scale=4.0, startup_s=20.0)
 
 
 def test_fault_matrix_on_vcan0_and_vcan1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from sim_plant.faults import ROWS, Setup, format_table, run_matrix
-    from sim_plant.rx_queue import DEPTH_BYTES
+    from sim_plant.harness.faults import ROWS, Setup, format_table, run_matrix
+    from firmware_py.platform.rx_queue import DEPTH_BYTES
 
     if os.environ.get("MRSTEER_VCAN_MATRIX") == "0":
         pytest.skip("MRSTEER_VCAN_MATRIX=0: the fault matrix on vcan0/vcan1 left out")

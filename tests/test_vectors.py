@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from firmware_py import model_regulator as mr
-from sim_plant import vectors
+from sim_plant.offline import vectors
 
 VECTOR_DIR = Path(__file__).parent / "vectors"
 FILES = sorted(VECTOR_DIR.glob("*__*.csv"))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sim_plant.vehicle import (
+from sim_plant.car.vehicle import (
     DiscretePlant,
     VehicleParams,
     disturbance_tf,

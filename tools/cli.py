@@ -15,12 +15,13 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import EXIT_USAGE, Parser, add_secoc_args, resolve_model_delay, secoc_key
+from firmware_py.controller.options import resolve_model_delay
+from firmware_py.platform.cli import EXIT_USAGE, Parser, add_secoc_args, secoc_key
 from mrsteer_cli import design_cli
 from mrsteer_cli.cli_args import add_gains, count, number
-from sim_plant import experiments
-from sim_plant.closed_loop import CONTROLLERS
-from sim_plant.vehicle import MAX_MU, PAPER_MASS, VehicleParams
+from sim_plant.offline import experiments
+from sim_plant.offline.closed_loop import CONTROLLERS
+from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 
 SPEED_RANGE = (3.0, 70.0)  # m/s: where the firmware is active and the model is used
 MASS_RANGE = (300.0, 10000.0)
@@ -158,22 +159,22 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
 def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
     def handler(args: argparse.Namespace) -> int:
         if name == "controller":
-            from firmware_py.runtime import main as target
+            from firmware_py.controller.main import main as target
         elif name == "plant":
-            from sim_plant.plant_node import main as target
+            from sim_plant.nodes.plant import main as target
         elif name == "bench":
             from mrsteer_bench.run import main as target
         elif name == "faults":
-            from sim_plant.faults import main as target
+            from sim_plant.harness.faults import main as target
         else:
-            from sim_plant.vbus import main as target
+            from firmware_py.platform.fallback_broker import main as target
         return target(args.args, prog=f"mrsteer {name}")
 
     return handler
 
 
 def _hil_config(args: argparse.Namespace, **overrides: object) -> "HilConfig":
-    from sim_plant.hil import HilConfig
+    from sim_plant.harness.hil import HilConfig
 
     key = secoc_key(args)  # a bad key raises SecOCError, a ValueError: a usage error
     base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel, secoc_key=key)
@@ -186,7 +187,7 @@ def _say(msg: str) -> None:
 
 
 def _cmd_hil_run(args: argparse.Namespace) -> int:
-    from sim_plant import hil
+    from sim_plant.harness import hil
 
     out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
     cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, controller=args.controller,
@@ -210,7 +211,7 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_hil_demo(args: argparse.Namespace) -> int:
-    from sim_plant import hil
+    from sim_plant.harness import hil
 
     results = {}
     for ctrl in (mr.Q_LIMITED, "none"):
@@ -306,10 +307,10 @@ def _cmd_threshold(args: argparse.Namespace) -> int:
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:
-    from sim_plant import paper
+    from sim_plant.offline import paper
 
     try:
-        from sim_plant import figures
+        from sim_plant.offline import figures
         import matplotlib  # noqa: F401
     except ImportError:
         raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
@@ -326,7 +327,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_vectors(args: argparse.Namespace) -> int:
-    from sim_plant import vectors
+    from sim_plant.offline import vectors
 
     written = vectors.write_all(args.out, progress=_say)
     print(f"wrote {len(vectors.CONFIGS)} configurations and {len(written)} vector files "

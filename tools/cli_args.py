@@ -7,7 +7,7 @@ import math
 from typing import Callable
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import model_delay_help
+from firmware_py.controller.options import model_delay_help
 
 
 def number(kind: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,

@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
 from mrsteer_cli.cli_args import add_gains, count, number
-from sim_plant.vehicle import MAX_MU
+from sim_plant.car.vehicle import MAX_MU
 
 GRID_HELP = "LO:HI:N (N evenly spaced values, ends included) or a single value"
 
@@ -21,7 +21,7 @@ def _grid(kind: str, lo_limit: float, hi_limit: float) -> Callable[[str], tuple[
     """argparse type for an envelope axis, ``LO:HI:N`` or one value."""
 
     def parse(text: str) -> tuple[float, ...]:
-        from sim_plant.margins import linspace_grid
+        from sim_plant.offline.margins import linspace_grid
 
         parts = text.split(":")
         try:
@@ -45,7 +45,7 @@ def _grid(kind: str, lo_limit: float, hi_limit: float) -> Callable[[str], tuple[
 
 
 def _add_envelope(p: argparse.ArgumentParser) -> None:
-    from sim_plant import margins as M
+    from sim_plant.offline import margins as M
 
     for flag, kind, (lo, hi, n), limits in (
             ("--v-grid", "speed", M.DEFAULT_SPEEDS, (3.0, 70.0)),
@@ -56,7 +56,7 @@ def _add_envelope(p: argparse.ArgumentParser) -> None:
 
 
 def _envelope(args: argparse.Namespace) -> Any:
-    from sim_plant.margins import Envelope
+    from sim_plant.offline.margins import Envelope
 
     d = Envelope()
     return Envelope(args.v_grid or d.speeds, args.mu_grid or d.frictions, args.mass_grid or d.masses)
@@ -147,7 +147,7 @@ def _margins_table(result: dict[str, Any]) -> str:
 
 
 def _cmd_margins(args: argparse.Namespace) -> int:
-    from sim_plant.margins import envelope_margins
+    from sim_plant.offline.margins import envelope_margins
 
     cfg = replace(mr.ControllerConfig(), q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
                   ts=args.ts, method=args.method, model_delay_steps=args.model_delay)
@@ -158,7 +158,7 @@ def _cmd_margins(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from sim_plant.tuning import tune
+    from sim_plant.offline.tuning import tune
 
     res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
                progress=_progress("tune")).as_dict()

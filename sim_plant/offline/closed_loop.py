@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from firmware_py import model_regulator as mr
-from sim_plant.vehicle import VehicleParams, state_space, zoh_discretize
+from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
 
 CONTROLLERS = ("none", mr.Q_STANDARD, mr.Q_LIMITED)
 

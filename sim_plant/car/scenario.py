@@ -39,7 +39,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from sim_plant.vehicle import MAX_MU, PAPER_MASS, VehicleParams, steering_tf
+from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams, steering_tf
 
 EVENT_KINDS = ("yaw_moment", "steer", "steer_norm", "mu", "speed")
 DRIVER_MODES = ("hold", "model")

@@ -37,11 +37,11 @@ from typing import Callable
 import mrsteer_dbc
 from mrsteer_dbc.busload import frame_bits
 from firmware_py import model_regulator as mr
-from firmware_py import runtime as rt
+from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
-from sim_plant.fault_bridge import Fault
-from sim_plant.processes import Proc, RunError, spawn_preloaded, stop, wait_for_socket, wait_ready, wait_stderr
+from sim_plant.nodes.fault_bridge import Fault
+from sim_plant.harness.processes import Proc, RunError, spawn_preloaded, stop, wait_for_socket, wait_ready, wait_stderr
 
 RATE_HZ = 1.0 / mr.ControllerConfig().ts
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
@@ -113,7 +113,7 @@ COUNTER_WINDOW = mrsteer_dbc.E2EReceiver().max_delta  # the actuator's alive-cou
 # 8-byte frames a 500 kbit/s bus carries per second at most (no stuff bits): a flood at this
 # rate saturates a real bus of the vehicle's kind.
 FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
-CONTROLLER = "firmware_py.runtime:main"
+CONTROLLER = "firmware_py.controller.main:main"
 
 
 @dataclass(frozen=True)
@@ -268,18 +268,18 @@ def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Set
                "--rate-limit", repr(RATE_LIMIT), "--stats-out", str(work / "controller.json"), *secoc]
     try:
         for ch in (ch_a, ch_b) if setup.channels is None else ():
-            procs.append(spawn_preloaded(f"broker {ch}", "sim_plant.vbus:main", ["--channel", ch], work, env))
+            procs.append(spawn_preloaded(f"broker {ch}", "firmware_py.platform.fallback_broker:main", ["--channel", ch], work, env))
             wait_for_socket(ch, procs[-1])
         loggers = []
         for side, ch in (("vehicle", ch_a), ("controller", ch_b)):
-            lg = spawn_preloaded(f"logger {side}", "sim_plant.buslog:main",
+            lg = spawn_preloaded(f"logger {side}", "sim_plant.nodes.logger:main",
                                  [*iface, "--channel", ch, "--out", str(work / f"{side}.log"), "--iface-name", side,
                                   "--stats-out", str(work / f"logger-{side}.json")], work, env, stdout=True)
             procs.append(lg)
             loggers.append(lg)
             wait_ready(lg)
         # The bridge first: it must see every frame the controller ever sends.
-        bridge = spawn_preloaded("bridge", "sim_plant.fault_bridge:main",
+        bridge = spawn_preloaded("bridge", "sim_plant.nodes.fault_bridge:main",
                                  [*iface, "--vehicle", ch_a, "--controller", ch_b, "--fault", json.dumps(asdict(fault)),
                                   "--stats-out", str(work / "bridge.json")], work, env)
         procs.append(bridge)
@@ -290,7 +290,7 @@ def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Set
 
         def start_plant(name: str, seconds: float) -> Proc:
             # A killed plant writes nothing: its statistics and trace are the next one's files.
-            p = spawn_preloaded(name, "sim_plant.plant_node:main",
+            p = spawn_preloaded(name, "sim_plant.nodes.plant:main",
                                 [*iface, "--channel", ch_a, "--mode", "realtime", "--rate-hz", repr(setup.rate_hz),
                                  "--actuator-rate", repr(ACTUATOR_RATE), "--cmd-timeout", repr(setup.cmd_timeout),
                                  "--scenario", "paper-fig9", "--duration", repr(seconds),
@@ -595,11 +595,11 @@ def format_table(results: list[RowResult]) -> str:
 def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     import argparse
 
-    from firmware_py.cli_support import Parser
+    from firmware_py.platform.cli import Parser
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bridge"]:  # the bridge owns its whole argument list, --help included
-        from sim_plant.fault_bridge import main as bridge_main
+        from sim_plant.nodes.fault_bridge import main as bridge_main
 
         return bridge_main(argv[1:], prog=f"{prog} bridge")
     p = Parser(prog=prog, description="Fault injection: the fault matrix, or the bridge on its own.")

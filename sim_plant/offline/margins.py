@@ -24,7 +24,7 @@ the extra pure delay that would take the loop to the stability limit, (arg L + 1
 360 deg) / crossover frequency, since a delay only turns L clockwise; the smallest over
 crossovers, in s and in samples.
 Closed-loop pole radius comes independently from the state matrix of
-``sim_plant.closed_loop.discrete_loop_poles``.
+``sim_plant.offline.closed_loop.discrete_loop_poles``.
 """
 
 from __future__ import annotations
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from firmware_py import model_regulator as mr
-from sim_plant.closed_loop import discrete_loop_poles
-from sim_plant.vehicle import PAPER_MASS, VehicleParams, state_space, zoh_discretize
+from sim_plant.offline.closed_loop import discrete_loop_poles
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams, state_space, zoh_discretize
 
 #: Default operating envelope of ``mrsteer design margins`` (issue 5): speed, friction, mass.
 DEFAULT_SPEEDS = (5.0, 50.0, 10)
@@ -259,6 +259,6 @@ def envelope_margins(config: mr.ControllerConfig, delay_steps: int, envelope: En
 
 def paper_config(ts: float) -> mr.ControllerConfig:
     """The paper's own tuning (K = 10, tau = 6 ms, eq. 22) at step ts, no modelled delay."""
-    from sim_plant.paper import PAPER_CONFIG
+    from sim_plant.offline.paper import PAPER_CONFIG
 
     return replace(PAPER_CONFIG, ts=ts)

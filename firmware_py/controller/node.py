@@ -26,25 +26,20 @@ marked inactive, and exit status 0.
 
 from __future__ import annotations
 
-import argparse
-import array
 import gc
-import json
 import math
-import os
-import sys
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import can
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import (Parser, add_secoc_args, check_output_file, model_delay_help, resolve_model_delay,
-                                     run_node, secoc_key)
+from firmware_py.controller.inputs import Input
+from firmware_py.controller.stats import LoopStats
+from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG_S, SYNC_POLL_S, SYNC_WINDOW, phase_correction
+from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
 
 MSG_STEER = "MRS_DriverSteer"
@@ -66,12 +61,6 @@ SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before C
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
-SENSORS_WATCHDOG_S = 1.0
-DEFAULT_SYNC_OFFSET = 50e-6  # s after the yaw-rate frame's arrival that the cycle aims to start
-SYNC_GAIN = 0.1  # fraction of the phase error corrected per cycle
-SYNC_MAX_SLEW = 0.02  # largest correction per cycle, as a fraction of the period
-SYNC_POLL_S = 20e-6  # polling step inside that window
-SYNC_WINDOW = 0.25  # how long a cycle waits for a late yaw-rate frame, as a fraction of the period  # sensors trigger: wall time without a yaw-rate frame before a cycle runs anyway
 TRIGGERS = ("clock", "sensors")
 
 
@@ -89,108 +78,6 @@ class RuntimeConfig:
     secoc_key: bytes | None = None  # sign the commands, verify the sensor frames (mrsteer_dbc.secoc) when given
     controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
 
-
-class _Input:
-    """Receive state of one sensor message (the C port's per-signal RX record)."""
-
-    __slots__ = ("name", "signal", "missing_cause", "value", "age", "limit", "rejects", "receiver",
-                 "last_counter", "bad_cause")
-
-    def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int, max_delta: int) -> None:
-        self.name = name
-        self.signal = signal_name
-        self.missing_cause = missing_cause
-        self.value = math.nan
-        self.age = limit_cycles + 1  # never received: invalid until the first good frame
-        self.limit = limit_cycles
-        self.rejects = 0
-        self.receiver = mrsteer_dbc.E2EReceiver(max_delta)
-        self.last_counter = 0
-        self.bad_cause = 0
-
-
-class LatenessHistogram:
-    """Cycle-start lateness in fixed 1 us bins up to 50 ms, preallocated: a run of any length
-    costs no memory (a C port keeps the same uint32 array)."""
-
-    BIN_S = 1e-6
-    BINS = 50_000
-
-    def __init__(self) -> None:
-        self.counts = array.array("I", bytes(4 * (self.BINS + 1)))  # the last bin is overflow
-        self.n = 0
-        self.max = 0.0
-
-    def add(self, late: float) -> None:
-        i = int(late / self.BIN_S) if late > 0.0 else 0
-        self.counts[i if i < self.BINS else self.BINS] += 1
-        self.n += 1
-        if late > self.max:
-            self.max = late
-
-    def percentile(self, q: float) -> float:
-        """Upper edge of the bin holding the q-quantile (the max if it lies in the overflow)."""
-        if self.n == 0:
-            return 0.0
-        rank = min(self.n, max(1, math.ceil(q * self.n)))
-        seen = 0
-        for i, c in enumerate(self.counts):
-            seen += c
-            if seen >= rank:
-                return self.max if i == self.BINS else min((i + 1) * self.BIN_S, self.max)
-        return self.max
-
-
-def _rss_kb() -> int:
-    """Resident set size now, in KiB (Linux /proc; 0 where unavailable)."""
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") // 1024)
-    except (OSError, ValueError, IndexError):
-        return 0
-
-
-@dataclass
-class LoopStats:
-    cycles: int = 0
-    overruns: int = 0
-    missed_cycles: int = 0
-    rx_frames: int = 0
-    rx_rejected: int = 0
-    rx_ignored: int = 0
-    syncs_rejected: int = 0  # MRS_SecOCSync frames that failed their MAC or were not newer
-    rx_auth_failed: int = 0  # sensor frames that failed SecOC (also counted in rx_rejected)
-    tx_frames: int = 0
-    faults_entered: int = 0
-    lateness: LatenessHistogram = field(default_factory=LatenessHistogram)
-    rss_kb_loop_start: int = 0
-    rss_kb_loop_end: int = 0
-    platform: dict[str, Any] = field(default_factory=dict)  # what real-time features were applied
-
-    def summary(self) -> dict[str, Any]:
-        lat = self.lateness
-        return {
-            "cycles": self.cycles, "overruns": self.overruns, "missed_cycles": self.missed_cycles,
-            "rx_frames": self.rx_frames, "rx_rejected": self.rx_rejected, "rx_ignored": self.rx_ignored,
-            "syncs_rejected": self.syncs_rejected, "rx_auth_failed": self.rx_auth_failed,
-            "tx_frames": self.tx_frames, "faults_entered": self.faults_entered,
-            "lateness_p50_s": lat.percentile(0.5), "lateness_p99_s": lat.percentile(0.99), "lateness_max_s": lat.max,
-            "rss_kb_loop_start": self.rss_kb_loop_start, "rss_kb_loop_end": self.rss_kb_loop_end,
-            "rss_kb_growth": self.rss_kb_loop_end - self.rss_kb_loop_start, **self.platform,
-        }
-
-
-def phase_correction(arrival: float, cycle_start: float, period: float, offset: float) -> float:
-    """Shift of the next deadline that moves cycle starts toward ``arrival + offset``.
-
-    The error is wrapped into half a period either way (the grid may lock onto the nearest
-    frame), a fraction SYNC_GAIN of it is corrected, at most SYNC_MAX_SLEW of a period per
-    cycle, so sensor jitter cannot drag the loop around.
-    """
-    err = arrival + offset - cycle_start
-    err -= period * round(err / period)
-    limit = SYNC_MAX_SLEW * period
-    return max(-limit, min(limit, SYNC_GAIN * err))
 
 
 class ControllerNode:
@@ -219,11 +106,11 @@ class ControllerNode:
             return max(1, int(math.ceil(cycles * cycle / period - 1e-9)))
 
         self.inputs = {
-            c.frame_id(MSG_STEER): _Input(MSG_STEER, "DriverSteer_Angle", CAUSE_STEER_MISSING, limit(MSG_STEER),
+            c.frame_id(MSG_STEER): Input(MSG_STEER, "DriverSteer_Angle", CAUSE_STEER_MISSING, limit(MSG_STEER),
                                           config.max_counter_delta),
-            c.frame_id(MSG_YAW): _Input(MSG_YAW, "YawRate_YawRate", CAUSE_YAW_MISSING, limit(MSG_YAW),
+            c.frame_id(MSG_YAW): Input(MSG_YAW, "YawRate_YawRate", CAUSE_YAW_MISSING, limit(MSG_YAW),
                                         config.max_counter_delta),
-            c.frame_id(MSG_SPEED): _Input(MSG_SPEED, "VehicleSpeed_Speed", CAUSE_SPEED_MISSING, limit(MSG_SPEED),
+            c.frame_id(MSG_SPEED): Input(MSG_SPEED, "VehicleSpeed_Speed", CAUSE_SPEED_MISSING, limit(MSG_SPEED),
                                           config.max_counter_delta),
         }
         self._steer, self._yaw, self._speed = self.inputs.values()
@@ -282,7 +169,7 @@ class ControllerNode:
             return True
         return False
 
-    def _reject(self, inp: _Input, cause: int) -> bool:
+    def _reject(self, inp: Input, cause: int) -> bool:
         self.stats.rx_rejected += 1
         inp.rejects += 1
         inp.bad_cause = cause
@@ -372,14 +259,14 @@ class ControllerNode:
         gc.freeze()  # keep start-up objects out of the collector's way during the loop
         gc.disable()  # the loop makes no reference cycles: reference counting frees everything
         self.stats.platform["gc_disabled_in_loop"] = True
-        self.stats.rss_kb_loop_start = _rss_kb()
+        self.stats.rss_kb_loop_start = rss_kb()
         try:
             if self.cfg.trigger == "sensors":
                 self._run_on_sensors(end)
             else:
                 self._run_on_clock(end)
         finally:
-            self.stats.rss_kb_loop_end = _rss_kb()
+            self.stats.rss_kb_loop_end = rss_kb()
             gc.enable()
             gc.unfreeze()
         self.finish()
@@ -448,100 +335,3 @@ class ControllerNode:
             self._send_command(0.0, mr.STATUS_INACTIVE)
         except can.CanError:
             pass  # the bus is already gone: nothing more can be said on it
-
-
-def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
-    d = mr.ControllerConfig()
-    p = Parser(prog=prog, description="Run the model-regulator controller on a CAN bus: read driver angle, "
-               "yaw rate and speed, send the auxiliary steering command.")
-    p.add_argument("--interface", help="python-can interface (default: python-can config, else SocketCAN vcan0 "
-                   "if present, else the mrsteer fallback bus)")
-    p.add_argument("--channel", help="channel for the interface (default vcan0 / mrsteer0)")
-    p.add_argument("--rate-hz", type=float, default=DEFAULT_RATE_HZ,
-                   help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains were tuned for)")
-    p.add_argument("--trigger", choices=TRIGGERS, default="clock",
-                   help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
-    p.add_argument("--sync-offset-us", type=float, default=DEFAULT_SYNC_OFFSET * 1e6, metavar="US",
-                   help="clock trigger: start each cycle this long after the yaw-rate frame arrives, by "
-                   f"phase-locking the loop to the frames (default {DEFAULT_SYNC_OFFSET * 1e6:g})")
-    p.add_argument("--no-sync", action="store_true", help="clock trigger: free-running grid, no phase lock")
-    p.add_argument("--timeout-cycles", type=int, default=10,
-                   help="an input missing for more than this many of its own cycle times is a fault (default 10)")
-    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
-                   help="Q filter: limited (eq. 22, default) or standard (eq. 17)")
-    p.add_argument("--k", type=float, default=d.k, help=f"eq. (22) gain K (default {d.k:g})")
-    p.add_argument("--tau", type=float, default=d.tau, help=f"eq. (22) time constant in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=float, default=d.tau_n, help=f"eq. (18) time constant in s (default {d.tau_n:g})")
-    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method)
-    p.add_argument("--model-delay", type=int, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
-    p.add_argument("--rate-limit", type=float, default=0.0, metavar="RAD_S",
-                   help="command rate limit in rad/s (default 0: off)")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
-    p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
-                   help="write loop statistics as JSON here on exit")
-    add_secoc_args(p)
-    p.add_argument("--rt-priority", type=int, default=0, metavar="P",
-                   help="run under SCHED_FIFO at priority P (1..99) where permitted; 0 (default) leaves the "
-                   "scheduler alone; what was applied is reported in --stats-out")
-    p.add_argument("--cpu", type=int, default=None, metavar="N",
-                   help="pin the process to CPU N where permitted (reported in --stats-out)")
-    return p
-
-
-def apply_platform(rt_priority: int, cpu: int | None) -> dict[str, Any]:
-    """Real-time priority and CPU pinning, where the OS permits them; says what happened."""
-    out: dict[str, Any] = {"rt_priority": 0, "cpu_affinity": sorted(os.sched_getaffinity(0))}
-    if rt_priority:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
-            out["rt_priority"] = rt_priority
-        except (OSError, AttributeError) as exc:
-            out["rt_priority_denied"] = str(exc)
-    if cpu is not None:
-        try:
-            os.sched_setaffinity(0, {cpu})
-        except (OSError, ValueError) as exc:
-            out["cpu_denied"] = str(exc)
-        out["cpu_affinity"] = sorted(os.sched_getaffinity(0))
-    return out
-
-
-def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
-    parser = build_parser(prog)
-    args = parser.parse_args(argv)
-    resolve_model_delay(args)
-    if not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
-        parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
-    if args.timeout_cycles < 1:
-        parser.error("--timeout-cycles must be at least 1")
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        parser.error("--duration must be positive")
-    if not 0 <= args.rt_priority <= 99:
-        parser.error(f"--rt-priority must be in 0..99, got {args.rt_priority}")
-    if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
-        parser.error(f"--cpu must be in 0..{(os.cpu_count() or 1) - 1}, got {args.cpu}")
-    try:
-        ctrl = mr.ControllerConfig(q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
-                                   method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz,
-                                   model_delay_steps=args.model_delay)
-        mr.configure(ctrl)
-    except ValueError as exc:
-        parser.error(str(exc))
-    if not (math.isfinite(args.sync_offset_us) and 0.0 <= args.sync_offset_us * 1e-6 < 1.0 / args.rate_hz):
-        parser.error(f"--sync-offset-us must be in [0, one period), got {args.sync_offset_us}")
-    check_output_file(parser, "--stats-out", args.stats_out)
-    cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
-                        sync_offset=None if args.no_sync else args.sync_offset_us * 1e-6,
-                        duration=args.duration, secoc_key=secoc_key(args, parser), controller=ctrl)
-    try:
-        bus = open_bus(args.interface, args.channel)
-    except BusOpenError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
-    node = ControllerNode(bus, cfg)
-    node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
-    auth = ", commands and sensor frames authenticated (SecOC)" if cfg.secoc_key is not None else ""
-    return run_node(prog, bus, node.run, node.stop,
-                    [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2))],
-                    ready=f"running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}")

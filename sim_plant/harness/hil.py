@@ -28,13 +28,13 @@ import numpy as np
 
 import mrsteer_dbc
 from mrsteer_dbc import secoc as secoc_mod
-from firmware_py import bus_open
+from firmware_py.platform import bus_open
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import write_files
-from sim_plant import scenario as scn
-from sim_plant.closed_loop import discrete_loop_poles
-from sim_plant.processes import Proc, RunError, spawn, stop, tail, wait_for_socket, wait_ready, wait_stderr
-from sim_plant.vehicle import VehicleParams
+from firmware_py.platform.files import write_files
+from sim_plant.car import scenario as scn
+from sim_plant.offline.closed_loop import discrete_loop_poles
+from sim_plant.harness.processes import Proc, RunError, spawn, stop, tail, wait_for_socket, wait_ready, wait_stderr
+from sim_plant.car.vehicle import VehicleParams
 
 MODES = ("lockstep", "realtime")
 _LINE = re.compile(r"\((?P<t>[0-9.]+)\)\s+(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<data>[0-9A-Fa-f]*)")
@@ -101,12 +101,12 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             # A private bus for this run: nothing else on it, and it goes away with the run.
             channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
             bus_args = ["--interface", iface, "--channel", channel]
-            procs.append(spawn("bus broker", [sys.executable, "-m", "sim_plant.vbus", "--channel", channel],
+            procs.append(spawn("bus broker", [sys.executable, "-m", "firmware_py.platform.fallback_broker", "--channel", channel],
                                 work, env))
             wait_for_socket(channel, procs[-1])
         say(f"bus: {iface} {channel}")
 
-        logger = spawn("logger", [sys.executable, "-m", "sim_plant.buslog", *bus_args, "--out",
+        logger = spawn("logger", [sys.executable, "-m", "sim_plant.nodes.logger", *bus_args, "--out",
                                    str(work / "traffic.log"), "--iface-name", str(channel),
                                    "--stats-out", str(work / "logger.json")], work, env, stdout=True)
         procs.append(logger)

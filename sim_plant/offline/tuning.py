@@ -6,7 +6,7 @@ firmware's own step() at the given rate and loop delay (``simulate_discrete``; s
 included).  Smaller is better.
 
 Constraints: gain margin >= 6 dB and phase margin >= 45 deg at every point of the operating
-envelope, with a stable closed loop (``sim_plant.margins``).
+envelope, with a stable closed loop (``sim_plant.offline.margins``).
 
 Both controller structures are searched: the plain law (the yaw rate compared with the command
 being computed) and the one that models the known loop delay in the nominal model (compared
@@ -29,10 +29,10 @@ from typing import Any, Callable
 import numpy as np
 
 from firmware_py import model_regulator as mr
-from sim_plant.closed_loop import Experiment, simulate_discrete
-from sim_plant.margins import (Envelope, EnvelopeMargins, LoopResponse, Margins, envelope_margins, law_response,
+from sim_plant.offline.closed_loop import Experiment, simulate_discrete
+from sim_plant.offline.margins import (Envelope, EnvelopeMargins, LoopResponse, Margins, envelope_margins, law_response,
                                point_margins)
-from sim_plant.vehicle import VehicleParams
+from sim_plant.car.vehicle import VehicleParams
 
 GM_MIN_DB = 6.0
 PM_MIN_DEG = 45.0

@@ -31,10 +31,10 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from firmware_py import model_regulator as mr
-from firmware_py.cli_support import write_files
+from firmware_py.platform.files import write_files
 import mrsteer_dbc
 from mrsteer_dbc import secoc
-from sim_plant.vehicle import DiscretePlant, VehicleParams
+from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 Inputs = tuple[float, float, float]  # driver's front-wheel angle, yaw rate, speed
 

@@ -10,8 +10,8 @@ import math
 from dataclasses import replace
 
 from firmware_py import model_regulator as mr
-from sim_plant.closed_loop import Experiment, Trace, simulate_continuous, simulate_discrete
-from sim_plant.vehicle import VehicleParams, steering_tf
+from sim_plant.offline.closed_loop import Experiment, Trace, simulate_continuous, simulate_discrete
+from sim_plant.car.vehicle import VehicleParams, steering_tf
 
 
 def run(exp: Experiment, ts: float = 0.0, delay_steps: int = 1) -> Trace:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from sim_plant.vbus import socket_path
+from firmware_py.platform.fallback_wire import socket_path
 
 
 class RunError(RuntimeError):

@@ -40,11 +40,12 @@ import can
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser, add_secoc_args, check_output_file, run_node, secoc_key
+from firmware_py.platform.bus_open import BusOpenError, open_bus
+from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
+from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
-from sim_plant import scenario as scn
-from sim_plant.vehicle import DiscretePlant
+from sim_plant.car import scenario as scn
+from sim_plant.car.vehicle import DiscretePlant
 
 ACTUATOR_LIMIT = math.radians(3.0)  # rad: the auxiliary actuator saturates at +-3 deg of wheel angle (paper, sec. 4.1)
 MODES = ("realtime", "lockstep")

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_py.cli_support import write_files
-from sim_plant.closed_loop import Trace
-from sim_plant.paper import CONDITIONS, FIG10_CONDITION, PAPER_M_Z, Condition, PaperRun
+from firmware_py.platform.files import write_files
+from sim_plant.offline.closed_loop import Trace
+from sim_plant.offline.paper import CONDITIONS, FIG10_CONDITION, PAPER_M_Z, Condition, PaperRun
 
 CSV_STEP = 1e-3  # s between CSV/plot samples (the reference is solved on a finer grid)
 

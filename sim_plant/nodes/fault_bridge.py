@@ -1,6 +1,6 @@
 """Fault-injecting bridge between the vehicle's bus and the controller's bus.
 
-    python -m sim_plant.fault_bridge --vehicle CH_A --controller CH_B --fault JSON [--stats-out F]
+    python -m sim_plant.nodes.fault_bridge --vehicle CH_A --controller CH_B --fault JSON [--stats-out F]
 
 Every frame seen on one side is forwarded to the other, except where the fault says otherwise,
 inside its time window (seconds after the vehicle's first frame).  Frame contents are
@@ -48,8 +48,9 @@ from typing import Any, Sequence
 import can
 
 import mrsteer_dbc
-from firmware_py.cli_support import Parser, check_output_file, run_node
-from sim_plant.rx_queue import deepen
+from firmware_py.platform.cli import Parser, check_output_file
+from firmware_py.platform.lifecycle import run_node
+from firmware_py.platform.rx_queue import deepen
 
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
          "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")

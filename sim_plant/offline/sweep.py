@@ -17,7 +17,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from firmware_py import model_regulator as mr
-from sim_plant.vehicle import VehicleParams
+from sim_plant.car.vehicle import VehicleParams
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,10 @@ from typing import Any, Sequence, TextIO
 
 import can
 
-from firmware_py.bus_open import BusOpenError, open_bus
-from firmware_py.cli_support import Parser, check_output_file, run_node
-from sim_plant.rx_queue import deepen
+from firmware_py.platform.bus_open import BusOpenError, open_bus
+from firmware_py.platform.cli import Parser, check_output_file
+from firmware_py.platform.lifecycle import run_node
+from firmware_py.platform.rx_queue import deepen
 
 
 def candump_line(msg: can.Message, iface: str) -> str:
@@ -54,7 +55,7 @@ class Logger:
         self.frames += 1
 
 
-def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.buslog") -> int:
+def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.nodes.logger") -> int:
     p = Parser(prog=prog, description="Log every CAN frame to a candump -L file until SIGINT/SIGTERM.")
     p.add_argument("--interface")
     p.add_argument("--channel")

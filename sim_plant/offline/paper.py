@@ -20,9 +20,9 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 from firmware_py import model_regulator as mr
-from sim_plant import experiments
-from sim_plant.closed_loop import Trace, simulate_continuous
-from sim_plant.vehicle import VehicleParams
+from sim_plant.offline import experiments
+from sim_plant.offline.closed_loop import Trace, simulate_continuous
+from sim_plant.car.vehicle import VehicleParams
 
 PAPER_LIMITED_PEAK_DEG = 1.86
 PAPER_STANDARD_PEAK_DEG = 2.24

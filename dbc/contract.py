@@ -1,0 +1,167 @@
+"""The DBC loaded once (strict) with each message's E2E configuration: encoding sets the
+alive counter and the CRC, decoding checks length, CRC, counter value and every signal's range.
+
+Every frame layout, range, cycle time and E2E data ID comes from ``mrsteer.dbc`` through
+cantools; nothing here knows a bit position.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import cantools
+
+from mrsteer_dbc.e2e import COUNTER_MODULO, E2EConfig, E2EStatus, crc8_sae_j1850
+
+DBC_PATH = Path(__file__).with_name("mrsteer.dbc")
+
+
+class ContractError(ValueError):
+    """The DBC does not satisfy what the code requires of it."""
+
+
+@dataclass
+class Decoded:
+    name: str
+    signals: dict[str, float]
+    status: E2EStatus
+    counter: int | None
+
+
+class Contract:
+    """The DBC loaded once (strict), with per-message E2E configuration."""
+
+    def __init__(self, path: Path | str = DBC_PATH) -> None:
+        try:
+            self.db = cantools.database.load_file(str(path), strict=True)
+        except FileNotFoundError:
+            raise ContractError(f"DBC file not found: {path}") from None
+        except Exception as exc:  # cantools raises several parser error types
+            raise ContractError(f"cannot load DBC {path}: {exc}") from None
+        self.path = Path(path)
+        self._by_name = {m.name: m for m in self.db.messages}
+        self._by_id = {m.frame_id: m for m in self.db.messages}
+        self._e2e = {m.name: self._e2e_config(m) for m in self.db.messages}
+        # Signals with a DBC start value (GenSigStartValue) may be left out when encoding: the
+        # optional SecOC fields are 0 unless authentication fills them.
+        self._defaults = {m.name: {s.name: s.initial for s in m.signals if s.initial is not None}
+                          for m in self.db.messages}
+
+    @staticmethod
+    def _e2e_config(msg: Any) -> E2EConfig | None:
+        attrs = msg.dbc.attributes if msg.dbc is not None else {}
+        profile = attrs.get("E2E_Profile")
+        if profile is None or profile.value in ("", None):
+            return None
+        if profile.value != "P01A":
+            raise ContractError(f"{msg.name}: unsupported E2E profile {profile.value!r}")
+        data_id = attrs["E2E_DataID"].value if "E2E_DataID" in attrs else 0
+        crc = [s for s in msg.signals if s.name.endswith("_CRC")]
+        ctr = [s for s in msg.signals if s.name.endswith("_Counter")]
+        if len(crc) != 1 or len(ctr) != 1:
+            raise ContractError(f"{msg.name}: E2E needs exactly one *_CRC and one *_Counter signal")
+        if crc[0].length != 8 or crc[0].start % 8 != 0 or crc[0].byte_order != "little_endian":
+            raise ContractError(f"{msg.name}: the CRC must be one whole byte")
+        if ctr[0].length != 4:
+            raise ContractError(f"{msg.name}: the alive counter must be 4 bits")
+        return E2EConfig(int(data_id), crc[0].name, ctr[0].name, crc[0].start // 8)
+
+    # ------------------------------------------------------------------ lookup
+
+    def message(self, name: str) -> Any:
+        return self._by_name[name]
+
+    def frame_id(self, name: str) -> int:
+        return self._by_name[name].frame_id
+
+    def name_of(self, frame_id: int) -> str | None:
+        msg = self._by_id.get(frame_id)
+        return msg.name if msg is not None else None
+
+    def e2e(self, name: str) -> E2EConfig | None:
+        return self._e2e[name]
+
+    def cycle_time_s(self, name: str, control_period: float | None = None) -> float | None:
+        """The message's cycle in s; a control-loop message runs at ``control_period`` if given."""
+        if control_period is not None and self.is_control_loop(name):
+            return control_period
+        ms = self._by_name[name].cycle_time
+        return ms / 1000.0 if ms else None
+
+    def is_control_loop(self, name: str) -> bool:
+        """Sent once per control period (DBC attribute MRS_ControlLoop = 1)."""
+        msg = self._by_name[name]
+        attr = (msg.dbc.attributes if msg.dbc is not None else {}).get("MRS_ControlLoop")
+        return attr is not None and int(attr.value) == 1
+
+    def signal_range(self, name: str, signal: str) -> tuple[float, float]:
+        sig = self._by_name[name].get_signal_by_name(signal)
+        return float(sig.minimum), float(sig.maximum)
+
+    # ------------------------------------------------------------------ encode
+
+    def e2e_crc(self, name: str, payload: bytes) -> int:
+        cfg = self._e2e[name]
+        assert cfg is not None
+        body = payload[:cfg.crc_byte] + payload[cfg.crc_byte + 1:]
+        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body)
+
+    def encode(self, name: str, values: Mapping[str, float | str], counter: int | None = None,
+               *, strict: bool = True) -> bytes:
+        """Encode physical values; for E2E messages set the counter and the CRC.
+
+        Signals not given take their DBC start value where it has one.  ``strict=False`` lets a
+        test bench send values outside the DBC ranges on purpose.
+        """
+        msg = self._by_name[name]
+        cfg = self._e2e[name]
+        full = {**self._defaults[name], **values}
+        if cfg is not None:
+            if counter is None:
+                raise ValueError(f"{name} is E2E-protected: give the alive counter")
+            full[cfg.counter_signal] = counter
+            full[cfg.crc_signal] = 0
+        data = bytearray(msg.encode(full, strict=strict, scaling=True))
+        if cfg is not None:
+            data[cfg.crc_byte] = self.e2e_crc(name, bytes(data))
+        return bytes(data)
+
+    # ------------------------------------------------------------------ decode
+
+    def decode(self, frame_id: int, data: bytes) -> Decoded | None:
+        """Decode a frame and check its length, CRC and ranges (not its counter sequence:
+        that needs receiver state, see ``E2EReceiver``).  None for frames not in the DBC."""
+        msg = self._by_id.get(frame_id)
+        if msg is None:
+            return None
+        if len(data) != msg.length:
+            return Decoded(msg.name, {}, E2EStatus.BAD_LENGTH, None)
+        cfg = self._e2e[msg.name]
+        if cfg is not None and data[cfg.crc_byte] != self.e2e_crc(msg.name, data):
+            return Decoded(msg.name, {}, E2EStatus.BAD_CRC, None)
+        signals = msg.decode(data, decode_choices=False, scaling=True)
+        counter = int(signals[cfg.counter_signal]) if cfg is not None else None
+        if counter is not None and counter >= COUNTER_MODULO:
+            return Decoded(msg.name, signals, E2EStatus.BAD_COUNTER, counter)
+        for sig in msg.signals:
+            value = signals[sig.name]
+            if not math.isfinite(value) or (sig.minimum is not None and value < sig.minimum) or (
+                    sig.maximum is not None and value > sig.maximum):
+                return Decoded(msg.name, signals, E2EStatus.OUT_OF_RANGE, counter)
+        return Decoded(msg.name, signals, E2EStatus.OK, counter)
+
+
+_default: Contract | None = None
+
+
+def load(path: Path | str | None = None) -> Contract:
+    """The contract from ``path``, or the shipped ``mrsteer.dbc`` (loaded once)."""
+    global _default
+    if path is not None:
+        return Contract(path)
+    if _default is None:
+        _default = Contract()
+    return _default

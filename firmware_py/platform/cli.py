@@ -1,0 +1,53 @@
+"""What every mrsteer command line shares: argument errors in one line with exit status 2, the
+SecOC key options, and output paths refused before any work is done."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import NoReturn
+
+EXIT_USAGE = 2
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def add_secoc_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--secoc", action="store_true",
+                   help="authenticate MRS_AuxSteerCmd and the sensor frames (AUTOSAR SecOC style, AES-CMAC) with the "
+                   "128-bit key in $MRSTEER_SECOC_KEY (32 hex digits); both controller and plant must have it")
+    g.add_argument("--secoc-key", type=str, metavar="FILE",
+                   help="as --secoc, with the key read from FILE (32 hex digits)")
+
+
+def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser | None = None) -> bytes | None:
+    """The key the SecOC options ask for, or None.  A bad or missing key is a usage error of
+    ``parser``; without one, the ``SecOCError`` (a ValueError) is raised."""
+    if not (args.secoc or args.secoc_key):
+        return None
+    from mrsteer_dbc.secoc import SecOCError, load_key
+
+    try:
+        return load_key(args.secoc_key)
+    except SecOCError as exc:
+        if parser is None:
+            raise
+        parser.error(str(exc))
+
+
+def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:
+    """Refuse, before any work is done, an output file that could not be written."""
+    if path is None:
+        return
+    if path.is_dir():
+        parser.error(f"{flag} {path} is a directory")
+    parent = path.parent
+    if not parent.is_dir():
+        parser.error(f"{flag} {path}: {parent} is not an existing directory")
+    if not os.access(parent, os.W_OK):
+        parser.error(f"{flag} {path}: directory {parent} is not writable")

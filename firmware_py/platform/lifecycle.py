@@ -1,0 +1,48 @@
+"""The life of a bus process after its bus is open: signals, the ready line, bus failures,
+shutdown and the outputs written at exit."""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import can
+
+from firmware_py.platform.files import write_atomic
+
+Outputs = Sequence[tuple[Path | None, Callable[[], str | bytes]]]
+
+
+def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[], Any], stop: Callable[..., Any],
+             outputs: Outputs = (), ready: str | None = None) -> int:
+    """The life of a bus process after its bus is open.
+
+    SIGINT and SIGTERM call ``stop`` (the loop ends after its current cycle); ``ready`` is then
+    printed on stderr (a supervisor may signal from that moment on); a bus failure is
+    one line and exit status 1; the bus (or each of them) is always shut down; then each output whose path was
+    given is written whole (``write_atomic``), and one that cannot be is one line and exit 1.
+    """
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    if ready is not None:
+        print(f"{prog}: {ready}", file=sys.stderr, flush=True)
+    code = 0
+    try:
+        run()
+    except can.CanError as exc:
+        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        for b in [bus] if isinstance(bus, can.BusABC) else bus:
+            b.shutdown()
+    for path, render in outputs:
+        if path is None:
+            continue
+        try:
+            write_atomic(path, render())
+        except OSError as exc:
+            print(f"{prog}: error: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
+            code = 1
+    return code
