@@ -1,0 +1,50 @@
+"""The layering the project promises (docs/architecture.md), checked on the code itself."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def test_import_contracts_are_kept() -> None:
+    lint = Path(sys.executable).with_name("lint-imports")
+    proc = subprocess.run([str(lint), "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    contracts = PYPROJECT["tool"]["importlinter"]["contracts"]
+    assert f"Contracts: {len(contracts)} kept, 0 broken." in proc.stdout
+
+
+def test_every_package_is_placed_in_a_layer() -> None:
+    """A new subpackage that no contract names would escape the layering unnoticed."""
+    named = set()
+    for c in PYPROJECT["tool"]["importlinter"]["contracts"]:
+        for entry in c.get("layers", []) + c.get("source_modules", []):
+            named.update(part.strip() for part in entry.replace(":", "|").split("|"))
+    packages = PYPROJECT["tool"]["setuptools"]["packages"]
+    for pkg in packages:
+        top = pkg.split(".")[0]
+        assert top in named, f"{top} is in no layers contract"
+        if pkg.count(".") == 1 and pkg.split(".")[0] in ("firmware_py", "sim_plant"):
+            assert pkg in named, f"{pkg} is in no layers contract"
+
+
+def test_the_porting_reference_imports_the_standard_library_only() -> None:
+    tree = ast.parse((ROOT / "firmware_py" / "model_regulator.py").read_text())
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            imported.add((node.module or "").split(".")[0])
+    assert imported, "no imports found: the check is looking at the wrong file"
+    assert imported <= set(sys.stdlib_module_names) | {"__future__"}, imported - set(sys.stdlib_module_names)
