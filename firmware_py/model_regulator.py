@@ -225,6 +225,8 @@ def reset(s: State) -> None:
     s.fault_flags = 0
 
 
+# One function on purpose (about 90 lines): it is the body that ports/c/mrs_controller.c's
+# mrs_step() transcribes statement for statement, and a port's mrs_step makes no calls.
 def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed: float) -> float:
     """One control period. Returns the auxiliary front-wheel angle command in rad.
 

@@ -22,6 +22,7 @@ import cantools
 from cantools.database.can.c_source import camel_to_snake_case
 
 
+# Long because most of it is the C program's text, kept in one template so it reads as C.
 def harness(dbc: Path, db_name: str) -> str:
     db = cantools.database.load_file(str(dbc), strict=True)
     cases = []
