@@ -48,3 +48,23 @@ def test_the_porting_reference_imports_the_standard_library_only() -> None:
             imported.add((node.module or "").split(".")[0])
     assert imported, "no imports found: the check is looking at the wrong file"
     assert imported <= set(sys.stdlib_module_names) | {"__future__"}, imported - set(sys.stdlib_module_names)
+
+
+def test_the_mrsteer_can_interface_is_registered_for_python_can() -> None:
+    """`python -m can.logger -i mrsteer` and `can.Bus(interface="mrsteer")` find the fallback bus."""
+    from importlib.metadata import entry_points
+
+    import can
+
+    from firmware_py.platform.fallback_bus import FallbackBus
+
+    (ep,) = [e for e in entry_points(group="can.interface") if e.name == "mrsteer"]
+    assert ep.load() is FallbackBus
+    assert can.util.load_config(config={"interface": "mrsteer", "channel": "x"})["interface"] == "mrsteer"
+
+
+def test_the_process_entry_points_keep_their_names() -> None:
+    for module, words in (("firmware_py", "controller"), ("sim_plant", "car")):
+        proc = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        assert f"python -m {module}" in proc.stdout and words in proc.stdout
