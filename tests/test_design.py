@@ -17,13 +17,36 @@ from mrsteer_dbc.busload import bus_load, frame_bits, max_rate_hz
 from sim_plant.offline import margins as M
 from sim_plant.offline import tuning as T
 from sim_plant.offline.closed_loop import discrete_loop_poles
-from sim_plant.car.vehicle import VehicleParams
+from sim_plant.car.vehicle import VehicleParams, state_space
 
 SMALL = M.Envelope(speeds=(5.0, 20.0, 50.0), frictions=(0.3, 1.0), masses=(1296.0, 1800.0))
 
 
 def _radius(p: VehicleParams, cfg: mr.ControllerConfig, n: int, gain: complex = 1.0) -> float:
     return float(np.max(np.abs(discrete_loop_poles(p, mr.configure(cfg), n, gain))))
+
+
+def _delayed_loop(p: VehicleParams, c: mr.Coefficients, n: int, extra: float, z: complex) -> complex:
+    """L(z) with ``extra`` more samples of continuous-time delay before the ZOH plant, built
+    independently of the loop matrix: the modified z-transform of the plant, from expm."""
+    from scipy.linalg import expm
+
+    ss = state_space(p)
+    whole, frac = divmod(extra, 1.0)
+
+    def held(seconds: float) -> tuple[np.ndarray, np.ndarray]:  # (e^{A s}, int_0^s e^{A x} dx B)
+        aug = np.zeros((3, 3))
+        aug[:2, :2], aug[:2, 2] = ss.A, ss.B[:, 0]
+        e = expm(aug * seconds)
+        return e[:2, :2], e[:2, 2]
+
+    phi, _ = held(c.ts)
+    phi_late, g_late = held((1.0 - frac) * c.ts)
+    g_early = phi_late @ held(frac * c.ts)[1]
+    x = np.linalg.solve(z * np.eye(2) - phi, g_late + g_early / z)
+    plant = (ss.C[0, :2] @ x) * z ** (-(n + int(whole)))
+    inverse_kn = c.wheelbase / p.v + c.k_us * p.v  # 1/K_n(v), eq. (15)
+    return M.law_response(c, z) * plant * inverse_kn
 
 
 @pytest.mark.parametrize("model_delay", [0, 1, 2])
@@ -56,10 +79,15 @@ def test_margins_are_where_the_perturbed_loop_reaches_the_stability_limit(cfg: m
     # Phase margin: L turned by PM (one way or the other) touches -1 on the unit circle.
     turned = [_radius(p, cfg, delay, cmath.exp(s * 1j * math.radians(m.phase_margin_deg))) for s in (1, -1)]
     assert min(abs(r - 1.0) for r in turned) < 1e-7
-    # Delay margin: a pure delay of that length is a clockwise turn by w_c * delay.
-    w_c = 2.0 * math.pi * m.delay_crossover_hz
-    assert _radius(p, cfg, delay, cmath.exp(-1j * w_c * m.delay_margin_s)) == pytest.approx(1.0, abs=1e-7)
-    assert m.delay_margin_samples == pytest.approx(m.delay_margin_s / cfg.ts)
+    # Delay margin: the loop with that much more delay has a pole on the unit circle, at the
+    # reported frequency, where |L| of the delayed loop is 1 (a gain crossover of it).
+    d = m.delay_margin_samples
+    assert m.delay_margin_s == pytest.approx(d * cfg.ts)
+    coeffs = mr.configure(cfg)
+    for extra, inside in ((d - 1e-3, True), (d + 1e-3, False)):
+        assert bool(np.max(np.abs(discrete_loop_poles(p, coeffs, delay, extra_delay=extra))) < 1.0) is inside
+    z_c = cmath.exp(2j * math.pi * m.delay_crossover_hz * cfg.ts)
+    assert abs(_delayed_loop(p, coeffs, delay, d, z_c)) == pytest.approx(1.0, abs=1e-3)
 
 
 def test_paper_tuning_holds_at_1khz_with_one_sample_of_delay_but_not_at_500hz() -> None:
@@ -79,7 +107,7 @@ def test_worst_case_names_its_operating_point() -> None:
 
 
 def test_shipped_default_keeps_its_margins_over_the_whole_default_envelope() -> None:
-    res = M.envelope_margins(mr.ControllerConfig(), 1)
+    res = M.envelope_margins(mr.ControllerConfig(), 1, with_delay_margin=False)
     w = res.worst()
     assert res.stable
     assert w["gain_margin_db"] >= T.GM_MIN_DB - 1e-6
@@ -99,7 +127,7 @@ def test_tuning_beats_every_feasible_point_of_a_plain_grid_search() -> None:
         for tau in (0.01, 0.03, 0.1, 0.3):
             for m in (0, 1):
                 cfg = replace(mr.ControllerConfig(), ts=ts, k=k, tau=tau, tau_n=0.02, model_delay_steps=m)
-                em = M.envelope_margins(cfg, delay, env)
+                em = M.envelope_margins(cfg, delay, env, with_delay_margin=False)
                 w = em.worst()
                 if em.stable and w["gain_margin_db"] >= 6.0 and w["phase_margin_deg"] >= 45.0:
                     best = min(best, T.objective(cfg, delay))
@@ -162,3 +190,24 @@ def test_design_cli_rejects_bad_input_with_one_line(argv: list[str], needle: str
         code = exc.code
     err = capsys.readouterr().err
     assert code == 2 and needle in err
+
+
+def test_delay_margin_of_the_shipped_design_counts_the_crossover_near_nyquist() -> None:
+    """At 5 m/s on dry road the loop gain is 1.27 at Nyquist with 0 deg phase.  One more whole
+    sample of delay is unstable there, so the margin is below one sample: 0.90, not the 1.48
+    that phase margin over crossover frequency gives.  At (5, 0.8, 1800) it is 0.99."""
+    cfg = mr.ControllerConfig()
+    for point, expected in (((5.0, 1.0, 1296.0), 0.897), ((5.0, 0.8, 1800.0), 0.993)):
+        p = VehicleParams(v=point[0], mu=point[1], mass=point[2])
+        m = M.point_margins(p, cfg, 1)
+        assert m.delay_margin_samples == pytest.approx(expected, abs=2e-3)
+        assert m.delay_crossover_hz == pytest.approx(0.5 / cfg.ts)  # the pole leaves at z = -1
+        assert _radius(p, cfg, 2) > 1.0  # one more whole sample: unstable, as the margin says
+
+
+def test_a_whole_sample_of_extra_delay_is_the_same_loop_as_one_more_delay_step() -> None:
+    c = mr.configure(mr.ControllerConfig())
+    p = VehicleParams(v=12.0, mu=0.5)
+    a = np.sort_complex(discrete_loop_poles(p, c, 3))
+    b = np.sort_complex(discrete_loop_poles(p, c, 1, extra_delay=2.0))
+    assert np.max(np.abs(a - b)) < 1e-12

@@ -17,6 +17,7 @@ poles, from which the ``stable`` verdicts come.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass, replace
@@ -276,13 +277,29 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace
 
 
 def discrete_loop_poles(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
-                        loop_gain: complex = 1.0) -> np.ndarray:
-    """Poles of the sampled loop (ZOH plant, firmware law unsaturated, N samples of delay)."""
-    return np.linalg.eigvals(discrete_loop_matrix(params, coeffs, delay_steps, loop_gain)[0])
+                        loop_gain: complex = 1.0, extra_delay: float = 0.0) -> np.ndarray:
+    """Poles of the sampled loop (ZOH plant, firmware law unsaturated, N samples of delay, and
+    ``extra_delay`` samples of further continuous-time delay)."""
+    return np.linalg.eigvals(discrete_loop_matrix(params, coeffs, delay_steps, loop_gain, extra_delay)[0])
+
+
+@functools.lru_cache(maxsize=1024)
+def _sampled_plant(params: VehicleParams, ts: float, frac: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Phi, Gamma, Gamma_late, Gamma_early) of the ZOH plant with a delay of ``frac`` of a
+    sample before it (steering columns; Gamma_late = Gamma and Gamma_early = 0 at frac = 0).
+    Cached: a margin search asks for the same few fractions at one operating point many times.
+    The arrays are shared between callers and must not be written to."""
+    ss = state_space(params)
+    phi, gamma = zoh_discretize(ss.A, ss.B, ts)
+    if frac == 0.0:
+        return phi, gamma, gamma[:, 0], np.zeros(2)
+    phi_late, gamma_late = zoh_discretize(ss.A, ss.B[:, :1], (1.0 - frac) * ts)
+    gamma_early = phi_late @ zoh_discretize(ss.A, ss.B[:, :1], frac * ts)[1]
+    return phi, gamma, gamma_late[:, 0], gamma_early[:, 0]
 
 
 def discrete_loop_matrix(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
-                         loop_gain: complex = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                         loop_gain: complex = 1.0, extra_delay: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """(F, g): the sampled loop x+ = F x + g M_z, delta_d = 0, the firmware law unsaturated.
 
     State: [beta, r, z, q_1 .. q_D] with q_i the command computed i samples ago and
@@ -290,13 +307,22 @@ def discrete_loop_matrix(params: VehicleParams, coeffs: mr.Coefficients, delay_s
     M = 0: u = (z - g_r0 rho) / (1 - g_w0), w = u;   M >= 1: u = z - g_r0 rho + g_w0 q_M, w = q_M;
     z+ = g_w1 w - g_r1 rho + a u, rho = r / K_n(v); the plant gets q_N (u itself when N = 0).
     ``loop_gain`` multiplies the command on its way into the plant (a real or complex
-    perturbation of the loop, for checking margins).
+    perturbation of the loop, for checking margins).  ``extra_delay`` (in samples, >= 0, any
+    real value) is a further pure delay in continuous time between the hold and the plant: with
+    k + f samples of it (0 <= f < 1) a command acts for the last (1 - f) T of the sample
+    k samples after the nominal one and for the first f T of the next, so the plant's input
+    matrix splits into Gamma_late = int_0^{(1-f)T} e^{As} ds B and
+    Gamma_early = e^{A(1-f)T} int_0^{fT} e^{As} ds B (the modified z-transform).
     """
-    ss = state_space(params)
-    phi, gamma = zoh_discretize(ss.A, ss.B, coeffs.ts)
+    if not (math.isfinite(extra_delay) and extra_delay >= 0.0):
+        raise ValueError(f"extra_delay must be >= 0 samples, got {extra_delay!r}")
+    whole, frac = divmod(extra_delay, 1.0)
+    phi, gamma, late, early = _sampled_plant(params, coeffs.ts, frac)
+    applied_at = delay_steps + int(whole)  # the queue slot whose command acts over the sample's end
+    parts = [(applied_at, late)] if frac == 0.0 else [(applied_at, late), (applied_at + 1, early)]
     ikn = coeffs.wheelbase / params.v + coeffs.k_us * params.v
     m = coeffs.model_delay
-    depth = max(delay_steps, m)
+    depth = max(parts[-1][0], m)
     n = 3 + depth
     u_row = np.zeros(n)  # u[k] as a function of the state
     w_row = np.zeros(n)  # w[k] (the command the law compares the yaw rate with)
@@ -312,11 +338,12 @@ def discrete_loop_matrix(params: VehicleParams, coeffs: mr.Coefficients, delay_s
         w_row[2 + m] = 1.0
     F = np.zeros((n, n), dtype=complex if isinstance(loop_gain, complex) else float)
     F[:2, :2] = phi
-    b = gamma[:, 0] * loop_gain
-    if delay_steps == 0:
-        F[:2, :] += np.outer(b, u_row)
-    else:
-        F[:2, 2 + delay_steps] += b  # the command queued N samples ago is applied now
+    for slot, column in parts:
+        b = column * loop_gain
+        if slot == 0:
+            F[:2, :] += np.outer(b, u_row)
+        else:
+            F[:2, 2 + slot] += b  # the command queued this many samples ago is applied now
     if depth > 0:
         F[3, :] = u_row  # newest queue slot gets this sample's command
         for i in range(1, depth):

@@ -20,9 +20,10 @@ Gain margin: at every phase crossover (L real and negative) the factor 1/|L| by 
 gain may change before -1 is reached; the one nearest 0 dB is reported (negative when a gain
 *reduction* destabilises).  Phase margin: 180 deg - |arg L| at every gain crossover (|L| = 1), the angle
 by which L may turn either way before it reaches -1; the smallest is reported.  Delay margin:
-the extra pure delay that would take the loop to the stability limit, (arg L + 180 deg mod
-360 deg) / crossover frequency, since a delay only turns L clockwise; the smallest over
-crossovers, in s and in samples.
+the smallest extra pure delay that takes the loop to the stability limit, in s and in samples,
+found on the poles of the loop with that delay in it (``sim_plant.offline.delay_margin``: a
+delay of a fraction of a sample changes the sampled plant's gain too, so phase margin over
+crossover frequency is not the delay margin of a sampled loop).
 Closed-loop pole radius comes independently from the state matrix of
 ``sim_plant.offline.closed_loop.discrete_loop_poles``.
 """
@@ -37,6 +38,7 @@ import numpy as np
 
 from firmware_py import model_regulator as mr
 from sim_plant.offline.closed_loop import discrete_loop_poles
+from sim_plant.offline.delay_margin import DelayMargin, delay_margin
 from sim_plant.car.vehicle import PAPER_MASS, VehicleParams, state_space, zoh_discretize
 
 #: Default operating envelope of ``mrsteer design margins`` (issue 5): speed, friction, mass.
@@ -88,9 +90,10 @@ class Margins:
     gain_crossover_hz: float | None  # frequency of the reported gain margin (phase crossover)
     phase_margin_deg: float | None
     phase_crossover_hz: float | None  # frequency of the reported phase margin (gain crossover)
+    # Extra delay to the stability limit (None: not computed, or stable beyond the searched limit).
     delay_margin_s: float | None
     delay_margin_samples: float | None
-    delay_crossover_hz: float | None  # gain crossover at which the delay margin is smallest
+    delay_crossover_hz: float | None  # frequency of the pole that reaches the unit circle
 
     @property
     def stable(self) -> bool:
@@ -171,32 +174,30 @@ def frequency_margins(loop: LoopResponse) -> dict[str, float | None]:
 
     # Gain crossovers: |L| = 1.
     gain_x = _crossings(lambda x: math.log(abs(loop(x))), w, np.log(np.abs(L)))
-    pm_deg, pm_w, dm, dm_w = None, None, None, None
+    pm_deg, pm_w = None, None
     for x in gain_x:
-        phase = math.degrees(np.angle(loop(x)))  # (-180, 180]
-        pm = 180.0 - abs(phase)  # angular distance to -1, either way round
+        pm = 180.0 - abs(math.degrees(np.angle(loop(x))))  # angular distance to -1, either way round
         if pm_deg is None or pm < pm_deg:
             pm_deg, pm_w = pm, x
-        # A delay only lags: it turns L clockwise, by (phase + 180) mod 360 before -1.
-        delay = math.radians((phase + 180.0) % 360.0) / x
-        if dm is None or delay < dm:
-            dm, dm_w = delay, x
     return {
         "gain_margin_db": gm_db,
         "gain_crossover_hz": None if gm_w is None else gm_w / (2.0 * math.pi),
         "phase_margin_deg": pm_deg,
         "phase_crossover_hz": None if pm_w is None else pm_w / (2.0 * math.pi),
-        "delay_margin_s": dm,
-        "delay_margin_samples": None if dm is None else dm / loop.ts,
-        "delay_crossover_hz": None if dm_w is None else dm_w / (2.0 * math.pi),
     }
 
 
-def point_margins(params: VehicleParams, config: mr.ControllerConfig, delay_steps: int) -> Margins:
+def point_margins(params: VehicleParams, config: mr.ControllerConfig, delay_steps: int,
+                  with_delay_margin: bool = True) -> Margins:
+    """Margins of one operating point; the delay margin (a pole search, the costly part) only
+    when asked for, else None."""
     coeffs = mr.configure(config)
     radius = float(np.max(np.abs(discrete_loop_poles(params, coeffs, delay_steps))))
     fm = frequency_margins(LoopResponse(params, coeffs, delay_steps))
-    return Margins(v=params.v, mu=params.mu, mass=params.mass, max_pole_radius=radius, **fm)
+    dm = delay_margin(params, coeffs, delay_steps) if with_delay_margin else DelayMargin(None, None)
+    return Margins(v=params.v, mu=params.mu, mass=params.mass, max_pole_radius=radius, **fm,
+                   delay_margin_s=dm.seconds(coeffs.ts), delay_margin_samples=dm.samples,
+                   delay_crossover_hz=dm.crossover_hz)
 
 
 @dataclass(frozen=True)
@@ -243,7 +244,8 @@ class EnvelopeMargins:
 
 
 def envelope_margins(config: mr.ControllerConfig, delay_steps: int, envelope: Envelope = Envelope(),
-                     base: VehicleParams = VehicleParams(), progress=None) -> EnvelopeMargins:
+                     base: VehicleParams = VehicleParams(), progress=None,
+                     with_delay_margin: bool = True) -> EnvelopeMargins:
     """``point_margins`` at every point of the envelope; ``progress(done, total)`` if given."""
     mr.configure(config)  # validate once, before the sweep
     if delay_steps < 0:
@@ -251,7 +253,7 @@ def envelope_margins(config: mr.ControllerConfig, delay_steps: int, envelope: En
     pts = envelope.points(base)
     out = []
     for i, p in enumerate(pts):
-        out.append(point_margins(p, config, delay_steps))
+        out.append(point_margins(p, config, delay_steps, with_delay_margin))
         if progress is not None:
             progress(i + 1, len(pts))
     return EnvelopeMargins(config, delay_steps, out)
