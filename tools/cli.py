@@ -26,6 +26,7 @@ from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 SPEED_RANGE = (3.0, 70.0)  # m/s: where the firmware is active and the model is used
 MASS_RANGE = (300.0, 10000.0)
 MAX_DURATION = 60.0
+PAPER_OUT = Path("out/paper")
 
 
 class UsageError(Exception):
@@ -89,8 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sim_sub.add_parser("paper", help="regenerate Figures 8-10 and compare with the paper's numbers",
                            description="Regenerate Figures 8, 9, 10 (PNG and CSV) at the six operating "
                            "conditions and print our numbers beside the paper's.")
-    p.add_argument("--out", type=Path, default=Path("out/paper"), metavar="DIR",
-                   help="directory for the figures (default out/paper)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help=f"directory for the figures (default {PAPER_OUT}; with --json, none unless given)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.set_defaults(handler=_cmd_paper)
 
@@ -309,20 +310,27 @@ def _cmd_threshold(args: argparse.Namespace) -> int:
 def _cmd_paper(args: argparse.Namespace) -> int:
     from sim_plant.offline import paper
 
-    try:
-        from sim_plant.offline import figures
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
-    if args.out.exists() and not args.out.is_dir():
-        raise UsageError(f"--out {args.out} exists and is not a directory")
+    # The figures go to --out, by default out/paper with the table; with --json, only to an --out
+    # given, so that the numbers alone need no plotting library.
+    out = args.out if args.out is not None else None if args.json else PAPER_OUT
+    if out is not None:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
+        if out.exists() and not out.is_dir():
+            raise UsageError(f"--out {out} exists and is not a directory")
     run = paper.reproduce(progress=lambda msg: print(msg, file=sys.stderr, flush=True))
-    written = figures.write_all(run, args.out)
+    written: list[Path] = []
+    if out is not None:
+        from sim_plant.offline import figures
+
+        written = figures.write_all(run, out)
     if args.json:
         print(json.dumps({**run.numbers(), "files": [str(p) for p in written]}, indent=2))
     else:
         print(paper.format_table(run))
-        print(f"\nwrote {len(written)} files to {args.out}/")
+        print(f"\nwrote {len(written)} files to {out}/")
     return 0
 
 
