@@ -212,36 +212,26 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_hil_demo(args: argparse.Namespace) -> int:
+    from mrsteer_cli import hil_demo
+    from sim_plant.car import scenario as scn
     from sim_plant.harness import hil
 
-    results = {}
+    runs = {}
     for ctrl in (mr.Q_LIMITED, "none"):
-        cfg = _hil_config(args, scenario="paper-fig9", controller=ctrl,
+        cfg = _hil_config(args, scenario=hil_demo.SCENARIO, controller=ctrl,
                           out=args.out / ("with-controller" if ctrl != "none" else "without-controller"))
         try:
-            results[ctrl] = hil.run(cfg, progress=_say).summary
+            runs[ctrl] = hil.run(cfg, progress=_say)
         except hil.HilError as exc:
             print(f"mrsteer hil demo: error: {exc}", file=sys.stderr)
             return 1
-    on, off = results[mr.Q_LIMITED], results["none"]
+    on, off = runs[mr.Q_LIMITED].summary, runs["none"].summary
+    sc = scn.load(hil_demo.SCENARIO)
     offline = experiments.run(experiments.disturbance(VehicleParams(v=on["v"], mu=on["mu"]), on["m_z"], mr.Q_LIMITED,
                                                       replace(mr.ControllerConfig(), ts=1.0 / on["rate_hz"]), 3.0),
                               1.0 / on["rate_hz"], on["delay_steps"]).summary()
-    cut = 1.0 - on["peak_yaw_rate_rad_s"] / off["peak_yaw_rate_rad_s"]
-    match = abs(on["peak_yaw_rate_rad_s"] / offline["peak_yaw_rate_rad_s"] - 1.0)
-    print(f"""
-A {on['m_z']:.0f} Nm yaw moment hits the car at {on['v']:g} m/s on a road with mu = {on['mu']:g}, the
-driver's wheel held still (the paper's Figure 9), with the controller and the car as separate
-processes talking over CAN ({on['mode']}, {on['rate_hz']:g} Hz).
-
-  without the controller the car yaws at up to {off['peak_yaw_rate_rad_s']:.3f} rad/s;
-  with it, at up to {on['peak_yaw_rate_rad_s']:.4f} rad/s: {cut:.0%} less,
-  using at most {on['peak_aux_steer_deg']:.2f} deg of the +-3 deg auxiliary steering
-  (it settles at {on['final_aux_steer_deg']:.2f} deg; the driver takes over the rest).
-
-The bus run agrees with the offline simulation of the same firmware to {match:.2%} in peak yaw rate.
-Logs, decoded signals, plots and summaries: {args.out}/with-controller and {args.out}/without-controller
-(inspect with: cantools decode dbc/mrsteer.dbc < {args.out}/with-controller/traffic.log).""")
+    hil_demo.write_figure(runs[mr.Q_LIMITED], runs["none"], sc, args.out)
+    print(hil_demo.explain(sc, on, off, offline["peak_yaw_rate_rad_s"], args.out))
     return 0
 
 
