@@ -63,6 +63,31 @@ def test_paper_figure10_csv_holds_the_quoted_peaks(paper_run: tuple[dict, Path, 
         assert max(abs(r[i]) for r in data) == pytest.approx(paper, rel=0.02)
 
 
+# Runs the CLI in-process with matplotlib unimportable (a None entry in sys.modules makes
+# every `import matplotlib` raise ImportError).
+_WITHOUT_MATPLOTLIB = ("import sys\nsys.modules['matplotlib'] = None\nfrom mrsteer_cli.cli import main\n"
+                       "sys.exit(main(sys.argv[1:]))")
+
+
+def _run_without_matplotlib(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-c", _WITHOUT_MATPLOTLIB, *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def test_paper_json_needs_no_plotting_library(tmp_path: Path) -> None:
+    proc = _run_without_matplotlib(tmp_path, "sim", "paper", "--json")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert result["limited_peak_aux_steer_deg"] == pytest.approx(1.86, rel=0.02)
+    assert result["files"] == [] and list(tmp_path.iterdir()) == []  # no figures unless --out asks
+
+
+def test_paper_figures_without_plotting_library_are_one_clear_error(tmp_path: Path) -> None:
+    proc = _run_without_matplotlib(tmp_path, "sim", "paper", "--json", "--out", "figs")
+    assert proc.returncode == 2 and "matplotlib" in proc.stderr and proc.stdout == ""
+    assert not (tmp_path / "figs").exists()
+
+
 def test_paper_text_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sim", "paper", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -3,8 +3,11 @@ faults, shutdown and crash handling."""
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -17,6 +20,9 @@ import pytest
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
+from sim_plant.car import scenario as scn
+from sim_plant.harness import hil_plot
+from sim_plant.harness.hil_steps import read_steps_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -80,7 +86,8 @@ def test_lockstep_with_secoc_authenticates_every_command_and_changes_nothing(
 
 def test_outputs_are_written_and_the_log_decodes_with_cantools(lockstep_run: tuple[dict, Path]) -> None:
     _, out = lockstep_run
-    assert sorted(p.name for p in out.iterdir()) == ["plot.png", "signals.csv", "summary.json", "traffic.log"]
+    assert sorted(p.name for p in out.iterdir()) == ["plot.png", "signals.csv", "steps.csv", "summary.json",
+                                                     "traffic.log"]
     log = (out / "traffic.log").read_text()
     first = log.splitlines()[0]
     assert first.startswith("(") and "#" in first  # candump -L
@@ -92,6 +99,59 @@ def test_outputs_are_written_and_the_log_decodes_with_cantools(lockstep_run: tup
     assert "Unknown frame id" not in dec.stdout
     header = (out / "signals.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["t_s", "message", "e2e"] and "YawRate_YawRate" in header
+
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_step_table_spans_the_scenario_and_the_plot_is_drawn_from_it(lockstep_run: tuple[dict, Path]) -> None:
+    hil, out = lockstep_run
+    steps = read_steps_csv(out / "steps.csv")
+    ts = 1.0 / hil["rate_hz"]
+    assert abs(len(steps) - (hil["duration"] / ts + 1)) <= 1 and hil["steps"] == len(steps)
+    assert steps[0].t_s == 0.0 and abs(steps[-1].t_s - hil["duration"]) <= ts
+    assert all(b.t_s - a.t_s == pytest.approx(ts, abs=1e-6) for a, b in zip(steps, steps[1:]))
+    assert all(b.wall_s > a.wall_s for a, b in zip(steps, steps[1:]))
+    # Scenario time, not wall time: the 3000 Nm step is at the scenario's 0.5 s.
+    onset = next(s.t_s for s in steps if s.m_z_nm != 0.0)
+    assert onset == pytest.approx(scn.load("paper-fig9").first_disturbance_time) and steps[-1].m_z_nm == 3000.0
+    assert all(s.ctrl_state in ("ACTIVE", "SATURATED") for s in steps)  # every step answered, none faulted
+    assert {s.ctrl_cause for s in steps[-100:]} == {0}
+    # The table agrees with the bus summary, and nothing after the scenario is in it: the
+    # controller's final zero command (in the log) is no step's command.
+    assert math.degrees(max(abs(s.aux_cmd_rad) for s in steps)) == pytest.approx(hil["peak_aux_steer_deg"], rel=1e-6)
+    assert math.degrees(steps[-1].aux_cmd_rad) == pytest.approx(hil["final_aux_steer_deg"], rel=1e-6)
+    assert steps[-1].yaw_rate_rad_s == pytest.approx(hil["final_yaw_rate_rad_s"], abs=1e-6)  # the DBC's resolution
+    with (out / "signals.csv").open() as f:
+        last_cmd = [r for r in csv.DictReader(f) if r["message"] == "MRS_AuxSteerCmd"][-1]
+    assert float(last_cmd["AuxSteerCmd_Angle"]) == 0.0 and float(last_cmd["t_s"]) > steps[-1].wall_s
+    assert (out / "plot.png").read_bytes()[:8] == PNG
+    png = hil_plot.run_png(steps, hil_plot.event_marks(scn.load("paper-fig9")), "from steps.csv")
+    assert png is not None and png[:8] == PNG
+
+
+def test_signals_csv_keeps_the_logs_microsecond_times(lockstep_run: tuple[dict, Path]) -> None:
+    _, out = lockstep_run
+    logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]
+    with (out / "signals.csv").open() as f:
+        written = [r["t_s"] for r in csv.DictReader(f)]
+    assert written == logged and all(re.fullmatch(r"\d+\.\d{6}", t) for t in written)
+    times = [float(t) for t in written]
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert len(set(written)) > 0.99 * len(written)  # distinct: not one 8-digit value for every row
+
+
+def test_demo_overlays_both_runs_and_tells_a_held_wheel_story(tmp_path: Path) -> None:
+    proc = mrsteer("hil", "demo", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert "wheel held" in proc.stdout and "takes over" not in proc.stdout
+    on, off = (json.loads((tmp_path / run / "summary.json").read_text())
+               for run in ("with-controller", "without-controller"))
+    cut = round(100 * (1 - on["peak_yaw_rate_rad_s"] / off["peak_yaw_rate_rad_s"]))
+    assert f"{cut}% less" in proc.stdout and f"keeps up its {on['final_aux_steer_deg']:.2f} deg" in proc.stdout
+    assert (tmp_path / "plot.png").read_bytes()[:8] == PNG
+    for run in ("with-controller", "without-controller"):
+        assert len(read_steps_csv(tmp_path / run / "steps.csv")) == on["steps"]
 
 
 def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:

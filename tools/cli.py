@@ -26,6 +26,7 @@ from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 SPEED_RANGE = (3.0, 70.0)  # m/s: where the firmware is active and the model is used
 MASS_RANGE = (300.0, 10000.0)
 MAX_DURATION = 60.0
+PAPER_OUT = Path("out/paper")
 
 
 class UsageError(Exception):
@@ -89,8 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sim_sub.add_parser("paper", help="regenerate Figures 8-10 and compare with the paper's numbers",
                            description="Regenerate Figures 8, 9, 10 (PNG and CSV) at the six operating "
                            "conditions and print our numbers beside the paper's.")
-    p.add_argument("--out", type=Path, default=Path("out/paper"), metavar="DIR",
-                   help="directory for the figures (default out/paper)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help=f"directory for the figures (default {PAPER_OUT}; with --json, none unless given)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.set_defaults(handler=_cmd_paper)
 
@@ -211,36 +212,26 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_hil_demo(args: argparse.Namespace) -> int:
+    from mrsteer_cli import hil_demo
+    from sim_plant.car import scenario as scn
     from sim_plant.harness import hil
 
-    results = {}
+    runs = {}
     for ctrl in (mr.Q_LIMITED, "none"):
-        cfg = _hil_config(args, scenario="paper-fig9", controller=ctrl,
+        cfg = _hil_config(args, scenario=hil_demo.SCENARIO, controller=ctrl,
                           out=args.out / ("with-controller" if ctrl != "none" else "without-controller"))
         try:
-            results[ctrl] = hil.run(cfg, progress=_say).summary
+            runs[ctrl] = hil.run(cfg, progress=_say)
         except hil.HilError as exc:
             print(f"mrsteer hil demo: error: {exc}", file=sys.stderr)
             return 1
-    on, off = results[mr.Q_LIMITED], results["none"]
+    on, off = runs[mr.Q_LIMITED].summary, runs["none"].summary
+    sc = scn.load(hil_demo.SCENARIO)
     offline = experiments.run(experiments.disturbance(VehicleParams(v=on["v"], mu=on["mu"]), on["m_z"], mr.Q_LIMITED,
                                                       replace(mr.ControllerConfig(), ts=1.0 / on["rate_hz"]), 3.0),
                               1.0 / on["rate_hz"], on["delay_steps"]).summary()
-    cut = 1.0 - on["peak_yaw_rate_rad_s"] / off["peak_yaw_rate_rad_s"]
-    match = abs(on["peak_yaw_rate_rad_s"] / offline["peak_yaw_rate_rad_s"] - 1.0)
-    print(f"""
-A {on['m_z']:.0f} Nm yaw moment hits the car at {on['v']:g} m/s on a road with mu = {on['mu']:g}, the
-driver's wheel held still (the paper's Figure 9), with the controller and the car as separate
-processes talking over CAN ({on['mode']}, {on['rate_hz']:g} Hz).
-
-  without the controller the car yaws at up to {off['peak_yaw_rate_rad_s']:.3f} rad/s;
-  with it, at up to {on['peak_yaw_rate_rad_s']:.4f} rad/s: {cut:.0%} less,
-  using at most {on['peak_aux_steer_deg']:.2f} deg of the +-3 deg auxiliary steering
-  (it settles at {on['final_aux_steer_deg']:.2f} deg; the driver takes over the rest).
-
-The bus run agrees with the offline simulation of the same firmware to {match:.2%} in peak yaw rate.
-Logs, decoded signals, plots and summaries: {args.out}/with-controller and {args.out}/without-controller
-(inspect with: cantools decode dbc/mrsteer.dbc < {args.out}/with-controller/traffic.log).""")
+    hil_demo.write_figure(runs[mr.Q_LIMITED], runs["none"], sc, args.out)
+    print(hil_demo.explain(sc, on, off, offline["peak_yaw_rate_rad_s"], args.out))
     return 0
 
 
@@ -309,20 +300,27 @@ def _cmd_threshold(args: argparse.Namespace) -> int:
 def _cmd_paper(args: argparse.Namespace) -> int:
     from sim_plant.offline import paper
 
-    try:
-        from sim_plant.offline import figures
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
-    if args.out.exists() and not args.out.is_dir():
-        raise UsageError(f"--out {args.out} exists and is not a directory")
+    # The figures go to --out, by default out/paper with the table; with --json, only to an --out
+    # given, so that the numbers alone need no plotting library.
+    out = args.out if args.out is not None else None if args.json else PAPER_OUT
+    if out is not None:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
+        if out.exists() and not out.is_dir():
+            raise UsageError(f"--out {out} exists and is not a directory")
     run = paper.reproduce(progress=lambda msg: print(msg, file=sys.stderr, flush=True))
-    written = figures.write_all(run, args.out)
+    written: list[Path] = []
+    if out is not None:
+        from sim_plant.offline import figures
+
+        written = figures.write_all(run, out)
     if args.json:
         print(json.dumps({**run.numbers(), "files": [str(p) for p in written]}, indent=2))
     else:
         print(paper.format_table(run))
-        print(f"\nwrote {len(written)} files to {args.out}/")
+        print(f"\nwrote {len(written)} files to {out}/")
     return 0
 
 

@@ -103,7 +103,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
                      "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
-                     "--stats-out", str(work / "plant.json"), *secoc]
+                     "--stats-out", str(work / "plant.json"), "--trace-out", str(work / "plant_trace.csv"), *secoc]
         for flag, value in (("--v", cfg.v), ("--mu", cfg.mu), ("--mz", cfg.mz)):
             if value is not None:
                 plant_cmd += [flag, repr(value)]

@@ -1,5 +1,7 @@
-"""What a HIL run produced, from its logged traffic: the decoded frames, the summary with the
-keys of ``mrsteer sim disturbance``, the CSV of signals and the plot."""
+"""What a HIL run produced: from its logged traffic the decoded frames (``signals.csv``) and the
+summary with the keys of ``mrsteer sim disturbance`` (``summary.json``); joined with the
+plant's trace, one row per plant step (``steps.csv``, see ``hil_steps``) and the plot drawn
+from those rows (``plot.png``).  Summary, table and plot cover the scenario's steps only."""
 
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
 from sim_plant.car.vehicle import VehicleParams
+from sim_plant.harness import hil_plot
+from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, step_table, steps_csv
 from sim_plant.harness.processes import RunError as HilError
 from sim_plant.offline.closed_loop import discrete_loop_poles
 
@@ -35,6 +39,8 @@ class HilRun:
     summary: dict[str, Any]
     out: Path
     files: list[Path] = field(default_factory=list)
+    steps: list[Step] = field(default_factory=list)  # one per plant step, as in steps.csv
+    scenario: scn.Scenario | None = None
 
 
 @dataclass
@@ -55,10 +61,16 @@ def read_candump(path: Path) -> list[Frame]:
 
 def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: Path,
             say: Callable[[str], None]) -> HilRun:
+    """Write the run's files from the work directory (``traffic.log``, ``plant_trace.csv`` and
+    each process's statistics) to ``cfg.out``."""
     contract = mrsteer_dbc.load()
     frames = read_candump(work / "traffic.log")
     stats = {name: _load_json(work / f"{name}.json") for name in ("plant", "controller", "logger")}
-    rows, summary = summarize(frames, contract, cfg, sc, ctrl)
+    rows = decode(frames, contract)
+    traffic = Traffic.of(rows, cfg.rate_hz)
+    summary = summarize(traffic, cfg, sc, ctrl)
+    steps = step_table(read_plant_trace(work / "plant_trace.csv"), traffic, cfg.mode == "lockstep", contract)
+    summary["steps"] = len(steps)
     summary["frames"] = {
         "on_bus_logged": stats["logger"].get("frames", len(frames)),
         "sent_plant": stats["plant"].get("tx_frames"),
@@ -73,14 +85,21 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
     files = {
         "traffic.log": (work / "traffic.log").read_bytes(),
         "signals.csv": _signals_csv(rows),
+        "steps.csv": steps_csv(steps),
         "summary.json": (json.dumps(summary, indent=2) + "\n").encode(),
     }
-    png = _plot(rows, summary)
+    png = hil_plot.run_png(steps, hil_plot.event_marks(sc), title(summary))
     if png is not None:
         files["plot.png"] = png
     written = write_files(cfg.out, files)
     say(f"wrote {', '.join(files)} to {cfg.out}/")
-    return HilRun(summary, cfg.out, written)
+    return HilRun(summary, cfg.out, written, steps, sc)
+
+
+def title(summary: dict[str, Any]) -> str:
+    """A run's figure title, from its summary."""
+    return (f"HIL {summary['scenario']} ({summary['mode']}, {summary['rate_hz']:g} Hz, "
+            f"controller {summary['controller']})")
 
 
 def _load_json(path: Path) -> dict[str, Any]:
@@ -90,9 +109,8 @@ def _load_json(path: Path) -> dict[str, Any]:
         return {}
 
 
-def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: "HilConfig", sc: scn.Scenario,
-              ctrl: mr.ControllerConfig) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Decoded rows for the CSV, and the summary with the keys of ``mrsteer sim disturbance``."""
+def decode(frames: list[Frame], contract: mrsteer_dbc.Contract) -> list[dict[str, Any]]:
+    """Every logged frame decoded, with its E2E verdict: the rows of ``signals.csv``."""
     rows = []
     for f in frames:
         d = contract.decode(f.frame_id, f.data)
@@ -100,25 +118,20 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: "HilConf
             rows.append({"t_s": f.t, "message": f"0x{f.frame_id:X}", "e2e": "unknown"})
             continue
         rows.append({"t_s": f.t, "message": d.name, "e2e": d.status.value, **d.signals})
-    yaw = [r for r in rows if r["message"] == "MRS_YawRate" and "YawRate_YawRate" in r]
-    cmds = [r for r in rows if r["message"] == "MRS_AuxSteerCmd" and "AuxSteerCmd_Angle" in r]
+    return rows
+
+
+def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig) -> dict[str, Any]:
+    """The summary with the keys of ``mrsteer sim disturbance``, from the scenario's frames only:
+    the plant's measurements and, in lockstep, the commands answering them; in realtime, the
+    commands sent while the plant ran."""
+    yaw, cmds = traffic.yaw, traffic.commands
     if not yaw:
         raise HilError("no yaw-rate frames on the bus: the plant never published")
     t0, t_end = yaw[0]["t_s"], yaw[-1]["t_s"]
-    # Commands that belong to the plant's run: each answers a yaw-rate frame (matched by counter).
-    answered, latencies = [], []
-    j = 0
-    for i, y in enumerate(yaw):
-        nxt = yaw[i + 1]["t_s"] if i + 1 < len(yaw) else math.inf
-        while j < len(cmds) and cmds[j]["t_s"] < y["t_s"]:
-            j += 1
-        k = j
-        while k < len(cmds) and cmds[k]["t_s"] < nxt + 0.5 / cfg.rate_hz:
-            if int(cmds[k]["AuxSteerCmd_MeasCounter"]) == int(y["YawRate_Counter"]):
-                answered.append(cmds[k])
-                latencies.append(cmds[k]["t_s"] - y["t_s"])
-                break
-            k += 1
+    pairs = [(y, cmds[a]) for y, a in zip(yaw, traffic.answers) if a is not None]
+    answered = [c for _, c in pairs]
+    latencies = [c["t_s"] - y["t_s"] for y, c in pairs]
     in_run = [c for c in cmds if t0 <= c["t_s"] <= t_end + 1.0 / cfg.rate_hz]
     aux = np.array([c["AuxSteerCmd_Angle"] for c in (answered if cfg.mode == "lockstep" else in_run)] or [0.0])
     r = np.array([y["YawRate_YawRate"] for y in yaw])
@@ -137,7 +150,7 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: "HilConf
         poles = discrete_loop_poles(params, mr.configure(replace(ctrl, ts=ts)), delay)
         stable = bool(np.all(np.abs(poles) < 1.0))
     limit = mr.ControllerConfig().aux_limit
-    summary = {
+    return {
         "peak_aux_steer_deg": math.degrees(float(np.max(np.abs(aux)))),
         "final_aux_steer_deg": math.degrees(float(aux[-1])),
         "peak_yaw_rate_rad_s": float(np.max(np.abs(r))),
@@ -159,7 +172,6 @@ def summarize(frames: list[Frame], contract: mrsteer_dbc.Contract, cfg: "HilConf
         "commands_answering_measurements": len(answered),
         "measurements": len(yaw),
     }
-    return rows, summary
 
 
 def _signals_csv(rows: list[dict[str, Any]]) -> bytes:
@@ -172,33 +184,7 @@ def _signals_csv(rows: list[dict[str, Any]]) -> bytes:
     w = csv.DictWriter(buf, columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: (f"{v:.9g}" if isinstance(v, float) else v) for k, v in r.items()})
+        # Epoch times need all their digits to the microsecond (the log's resolution).
+        w.writerow({k: (f"{v:.6f}" if k == "t_s" else f"{v:.9g}" if isinstance(v, float) else v)
+                    for k, v in r.items()})
     return buf.getvalue().encode()
-
-
-def _plot(rows: list[dict[str, Any]], summary: dict[str, Any]) -> bytes | None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return None
-    yaw = [r for r in rows if r["message"] == "MRS_YawRate" and "YawRate_YawRate" in r]
-    cmd = [r for r in rows if r["message"] == "MRS_AuxSteerCmd" and "AuxSteerCmd_Angle" in r]
-    t0 = yaw[0]["t_s"] if yaw else 0.0
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    a1.plot([r["t_s"] - t0 for r in yaw], [r["YawRate_YawRate"] for r in yaw])
-    a1.set_ylabel("yaw rate [rad/s]")
-    a1.grid(True, alpha=0.3)
-    a2.plot([r["t_s"] - t0 for r in cmd], [math.degrees(r["AuxSteerCmd_Angle"]) for r in cmd], color="C1")
-    a2.set_ylabel("aux steering [deg]")
-    a2.set_xlabel("time since first measurement [s]")
-    a2.grid(True, alpha=0.3)
-    fig.suptitle(f"HIL {summary['scenario']} ({summary['mode']}, {summary['rate_hz']:g} Hz, "
-                 f"controller {summary['controller']})")
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    return buf.getvalue()

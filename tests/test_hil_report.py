@@ -1,0 +1,79 @@
+"""The HIL report without processes: joining the plant's steps with the controller's frames,
+the per-step CSV, and the demo's wording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import mrsteer_dbc
+from mrsteer_cli import hil_demo
+from sim_plant.car import scenario as scn
+from sim_plant.harness.hil_steps import Traffic, read_steps_csv, step_table, steps_csv
+from sim_plant.nodes.plant import PlantNode
+
+RATE = 500.0
+C = mrsteer_dbc.load()
+
+
+def _yaw(t: float, counter: int) -> dict[str, Any]:
+    return {"t_s": t, "message": "MRS_YawRate", "YawRate_YawRate": 0.01, "YawRate_Counter": counter}
+
+
+def _cmd(t: float, meas: int, state: int, angle: float = -0.01) -> dict[str, Any]:
+    return {"t_s": t, "message": "MRS_AuxSteerCmd", "AuxSteerCmd_Angle": angle, "AuxSteerCmd_MeasCounter": meas,
+            "AuxSteerCmd_State": state}
+
+
+def _status(t: float, cause: int) -> dict[str, Any]:
+    return {"t_s": t, "message": "MRS_CtrlStatus", "CtrlStatus_Cause": cause}
+
+
+def _trace(walls: list[float]) -> list[dict[str, float]]:
+    return [{**dict.fromkeys(PlantNode.TRACE_COLUMNS, 0.0), "t_s": k / RATE, "wall_s": w} for k, w in enumerate(walls)]
+
+
+# Three plant steps.  Step 1's answer (MeasCounter 1) is followed by a status frame and by a
+# stray command for an older measurement; after the scenario the controller times out and
+# sends zero commands a second later.
+ROWS = [
+    _yaw(10.0000, 0), _cmd(10.0003, 0, 1),
+    _yaw(10.0020, 1), _cmd(10.0023, 1, 1), _status(10.00232, 0x08), _cmd(10.0024, 0, 3),
+    _yaw(10.0040, 2), _cmd(10.0043, 2, 2),
+    _cmd(11.0043, 2, 0, 0.0), _status(11.00432, 0x02), _cmd(11.0053, 2, 0, 0.0),
+]
+TRACE = _trace([10.0005, 10.0025, 10.0045])
+
+
+def test_lockstep_steps_take_the_command_answering_their_measurement() -> None:
+    steps = step_table(TRACE, Traffic.of(ROWS, RATE), lockstep=True, contract=C)
+    assert [s.ctrl_state for s in steps] == ["ACTIVE", "ACTIVE", "SATURATED"]
+    assert [s.ctrl_cause for s in steps] == [None, 0x08, 0x08]  # unknown before the first status
+
+
+def test_realtime_steps_take_the_newest_command_when_the_plant_recorded_them() -> None:
+    steps = step_table(TRACE, Traffic.of(ROWS, RATE), lockstep=False, contract=C)
+    assert [s.ctrl_state for s in steps] == ["ACTIVE", "FAULT", "SATURATED"]  # the stray one, for step 1
+
+
+def test_steps_csv_round_trips_with_microsecond_times(tmp_path: Path) -> None:
+    steps = step_table(TRACE, Traffic.of(ROWS, RATE), lockstep=True, contract=C)
+    (tmp_path / "steps.csv").write_bytes(steps_csv(steps))
+    lines = (tmp_path / "steps.csv").read_text().splitlines()
+    assert lines[1].split(",")[1] == "0.000000" and lines[2].endswith(",10.002500")
+    assert read_steps_csv(tmp_path / "steps.csv") == steps
+
+
+def _summary(peak: float, final: float, aux_final: float = 0.0) -> dict[str, Any]:
+    return {"peak_yaw_rate_rad_s": peak, "final_yaw_rate_rad_s": final, "peak_aux_steer_deg": 2.45,
+            "final_aux_steer_deg": aux_final, "m_z": 4000.0, "v": 20.0, "mu": 1.0, "mode": "lockstep",
+            "rate_hz": 500.0}
+
+
+def test_demo_wording_follows_the_scenarios_driver(tmp_path: Path) -> None:
+    on, off = _summary(0.02, 0.005, -1.95), _summary(0.228, 0.223)
+    held = hil_demo.explain(scn.load("paper-fig9"), on, off, 0.02, tmp_path)
+    assert "wheel held" in held and "keeps up its -1.95 deg" in held and "91% less" in held
+    assert "driver takes over" not in held and "reaction" not in held
+    driven = hil_demo.explain(scn.load("handover"), on, off, 0.02, tmp_path)
+    assert "1 s reaction time the driver steers against the rest" in driven and "wheel held" not in driven
