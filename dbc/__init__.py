@@ -1,12 +1,18 @@
 """The bus contract: ``mrsteer.dbc`` and its executable form (installed as ``mrsteer_dbc``).
 
 Every frame layout, range, cycle time and E2E data ID comes from the DBC through cantools;
-nothing here knows a bit position.  E2E protection is in the style of AUTOSAR E2E profile 1,
-variant 1A (``E2E_Profile "P01A"`` in the DBC):
+nothing here knows a bit position.  E2E protection is AUTOSAR E2E profile 1, variant 1A
+(``E2E_Profile "P01A"`` in the DBC; the receiver's counter check differs from E2E_P01Check
+where docs/can-runtime.md says so):
 
-* a CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, final XOR 0xFF; check value 0x4B for "123456789")
-  in the message's ``*_CRC`` signal, computed over the data ID's low byte, its high byte,
-  then every payload byte except the CRC byte;
+* the profile-1 CRC as AUTOSAR R4 computes it (E2E_P01Protect, E2E_P01_DATAID_BOTH) in the
+  message's ``*_CRC`` signal: ``Crc_CalculateCRC8`` (CRC-8/SAE-J1850, poly 0x1D) chained with
+  start value 0xFF and IsFirstCall = FALSE over the data ID's low byte, its high byte, then
+  every payload byte except the CRC byte, and the result XORed with 0xFF.  The chaining
+  cancels the library's init and output XORs, so this is the bare polynomial with register
+  start 0x00 and no final XOR (``e2e_crc``).  Example: MRS_YawRate (data ID 4353 = 0x1101)
+  with bytes 1..6 all zero is ``BB 00 00 00 00 00 00`` (a single CRC-8/SAE-J1850 pass with
+  init and final XOR 0xFF, what mrsteer used before, gives 0x52 instead).
 * a 4-bit alive counter 0..14 in the ``*_Counter`` signal, incremented per frame sent.
 """
 
@@ -41,9 +47,15 @@ class _Crc8Table(Crc8SaeJ1850):
 _CRC8_TABLE = bytes(_Crc8Table.calc(bytes((i,))) for i in range(256))
 
 
-def crc8_sae_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850 (equal to ``crccheck.crc.Crc8SaeJ1850.calc``, table-driven)."""
-    crc = 0xFF
+def crc8_sae_j1850(data: bytes, start_value: int = 0xFF, first_call: bool = True) -> int:
+    """AUTOSAR ``Crc_CalculateCRC8`` (CRC-8/SAE-J1850), table-driven.
+
+    With ``first_call`` (the default) ``start_value`` is ignored and this is the plain
+    CRC-8/SAE-J1850 (init 0xFF, final XOR 0xFF; ``crccheck.crc.Crc8SaeJ1850.calc``).  Otherwise
+    ``start_value`` is the previous call's result: the register resumes at ``start_value ^ 0xFF``,
+    so chained calls equal one call over the concatenated data.
+    """
+    crc = 0xFF if first_call else start_value ^ 0xFF
     table = _CRC8_TABLE
     for b in data:
         crc = table[crc ^ b]
@@ -155,10 +167,13 @@ class Contract:
     # ------------------------------------------------------------------ encode
 
     def e2e_crc(self, name: str, payload: bytes) -> int:
+        """AUTOSAR R4 E2E_P01 CRC, data ID mode BOTH (the only mode the contract selects):
+        ``Crc_CalculateCRC8`` chained from start value 0xFF with IsFirstCall = FALSE over
+        (data ID low byte, data ID high byte, payload without the CRC byte), then XOR 0xFF."""
         cfg = self._e2e[name]
         assert cfg is not None
         body = payload[:cfg.crc_byte] + payload[cfg.crc_byte + 1:]
-        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body)
+        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body, 0xFF, False) ^ 0xFF
 
     def encode(self, name: str, values: Mapping[str, float | str], counter: int | None = None,
                *, strict: bool = True) -> bytes:
