@@ -181,6 +181,19 @@ def test_which_data_ids_have_a_zero_low_byte() -> None:
                                                                           "MRS_BenchInject"]
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.binary(min_size=4, max_size=7))
+def test_no_frame_passes_as_another_message(body: bytes) -> None:
+    """The same bytes 1..n-1 under the five data IDs: five different library CRCs."""
+    ids = [C.e2e(n).data_id for n in E2E_MESSAGES]
+    crcs = set()
+    for did in ids:
+        buf = bytearray(b"\x00" + body)
+        e2e_p01.e2e_p01_protect(buf, did, increment_counter=False)
+        crcs.add(buf[0])
+    assert len(crcs) == len(ids)
+
+
 @pytest.mark.parametrize("variant", ["P01B", "P01C"])
 def test_the_contract_selects_no_other_variant(tmp_path, variant: str) -> None:
     path = tmp_path / "bus.dbc"
