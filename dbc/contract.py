@@ -104,10 +104,13 @@ class Contract:
     # ------------------------------------------------------------------ encode
 
     def e2e_crc(self, name: str, payload: bytes) -> int:
+        """AUTOSAR R4 E2E_P01 CRC, data ID mode BOTH (the only mode the contract selects):
+        ``Crc_CalculateCRC8`` chained from start value 0xFF with IsFirstCall = FALSE over
+        (data ID low byte, data ID high byte, payload without the CRC byte), then XOR 0xFF."""
         cfg = self._e2e[name]
         assert cfg is not None
         body = payload[:cfg.crc_byte] + payload[cfg.crc_byte + 1:]
-        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body)
+        return crc8_sae_j1850(bytes((cfg.data_id & 0xFF, cfg.data_id >> 8)) + body, 0xFF, False) ^ 0xFF
 
     def encode(self, name: str, values: Mapping[str, float | str], counter: int | None = None,
                *, strict: bool = True) -> bytes:

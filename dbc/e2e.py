@@ -1,9 +1,15 @@
-"""E2E protection in the style of AUTOSAR E2E profile 1, variant 1A: the CRC, the alive
-counter on the sender's side and the counter-sequence check on the receiver's.
+"""E2E protection as AUTOSAR E2E profile 1, variant 1A: the CRC, the alive counter on the
+sender's side and the counter-sequence check on the receiver's (which differs from
+E2E_P01Check where docs/can-runtime.md says so).
 
-* a CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, final XOR 0xFF; check value 0x4B for "123456789")
-  in the message's ``*_CRC`` signal, computed over the data ID's low byte, its high byte,
-  then every payload byte except the CRC byte;
+* the profile-1 CRC as AUTOSAR R4 computes it (E2E_P01Protect, E2E_P01_DATAID_BOTH) in the
+  message's ``*_CRC`` signal: ``Crc_CalculateCRC8`` (CRC-8/SAE-J1850, poly 0x1D) chained with
+  start value 0xFF and IsFirstCall = FALSE over the data ID's low byte, its high byte, then
+  every payload byte except the CRC byte, and the result XORed with 0xFF.  The chaining
+  cancels the library's init and output XORs, so this is the bare polynomial with register
+  start 0x00 and no final XOR (``Contract.e2e_crc``).  Example: MRS_YawRate (data ID 4353 =
+  0x1101) with bytes 1..6 all zero is ``BB 00 00 00 00 00 00`` (a single CRC-8/SAE-J1850 pass
+  with init and final XOR 0xFF, what mrsteer used before, gives 0x52 instead);
 * a 4-bit alive counter 0..14 in the ``*_Counter`` signal, incremented per frame sent.
 
 Which messages are protected, their data IDs and where the CRC and counter sit come from the
@@ -32,9 +38,15 @@ class _Crc8Table(Crc8SaeJ1850):
 _CRC8_TABLE = bytes(_Crc8Table.calc(bytes((i,))) for i in range(256))
 
 
-def crc8_sae_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850 (equal to ``crccheck.crc.Crc8SaeJ1850.calc``, table-driven)."""
-    crc = 0xFF
+def crc8_sae_j1850(data: bytes, start_value: int = 0xFF, first_call: bool = True) -> int:
+    """AUTOSAR ``Crc_CalculateCRC8`` (CRC-8/SAE-J1850), table-driven.
+
+    With ``first_call`` (the default) ``start_value`` is ignored and this is the plain
+    CRC-8/SAE-J1850 (init 0xFF, final XOR 0xFF; ``crccheck.crc.Crc8SaeJ1850.calc``).  Otherwise
+    ``start_value`` is the previous call's result: the register resumes at ``start_value ^ 0xFF``,
+    so chained calls equal one call over the concatenated data.
+    """
+    crc = 0xFF if first_call else start_value ^ 0xFF
     table = _CRC8_TABLE
     for b in data:
         crc = table[crc ^ b]

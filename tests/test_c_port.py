@@ -160,3 +160,30 @@ def test_c_alive_counter_and_receiver_match_python(tmp_path: Path) -> None:
         assert nxt == alive.next()
         seen.add(expected.name)
     assert seen == set(codes.values())
+
+
+def test_c_e2e_crc_equals_the_autosar_e2e_library(tmp_path: Path) -> None:
+    """mrs_e2e_crc against the independent `autosar-e2e` package (e2e_p01_protect, data ID mode
+    BOTH) on random bytes of every E2E message, with the CRC byte's old content random too."""
+    import e2e.p01 as e2e_p01  # autosar-e2e, in the test extra
+    exe = _cc(tmp_path / "e2e_check", str(PORT / "e2e_check.c"), str(PORT / "mrs_e2e.c"))
+    c = mrsteer_dbc.load()
+    rng = random.Random(17)
+    lines, expected = [], []
+    for msg in c.db.messages:
+        e2e = c.e2e(msg.name)
+        if e2e is None:
+            continue
+        for _ in range(300):
+            data = bytearray(rng.randbytes(msg.length))
+            data[1] = (data[1] & 0xF0) | rng.randrange(15)
+            lines.append(f"{e2e.data_id} {e2e.crc_byte} {data.hex()}")
+            e2e_p01.e2e_p01_protect(data, e2e.data_id, increment_counter=False)
+            expected.append(data[e2e.crc_byte])
+    proc = subprocess.run([str(exe)], input="crc\n" + "\n".join(lines) + "\n", capture_output=True, text=True,
+                          timeout=60, check=True)
+    got = [int(x) for x in proc.stdout.split()]
+    assert len(got) == len(expected) == 5 * 300
+    assert got == expected
+    assert int(subprocess.run([str(exe)], input="crc\n4353 0 52000000000000\n", capture_output=True, text=True,
+                              check=True).stdout) == 0xBB  # issue 17's demo frame

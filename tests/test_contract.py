@@ -14,14 +14,14 @@ from firmware_py import model_regulator as mr
 from mrsteer_dbc import E2EReceiver, E2EStatus
 
 
-def _crc8_j1850_bitwise(data: bytes) -> int:
-    """Independent CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, final XOR 0xFF."""
-    crc = 0xFF
+def _crc8_j1850_bitwise(data: bytes, init: int = 0xFF, xor_out: int = 0xFF) -> int:
+    """Independent CRC-8 with poly 0x1D, no reflection; CRC-8/SAE-J1850 with the defaults."""
+    crc = init
     for byte in data:
         crc ^= byte
         for _ in range(8):
             crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+    return crc ^ xor_out
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +61,45 @@ def test_crc8_known_vectors(data: bytes, expected: int) -> None:
 def test_e2e_crc_covers_data_id_and_payload(contract: mrsteer_dbc.Contract) -> None:
     data = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1234}, counter=7)
     did = contract.e2e("MRS_YawRate").data_id
-    assert data[0] == _crc8_j1850_bitwise(bytes((did & 0xFF, did >> 8)) + data[1:])
+    # AUTOSAR R4 profile 1: polynomial 0x1D from register 0x00, no final XOR, over
+    # (data ID low, data ID high, bytes 1..n-1).
+    assert data[0] == _crc8_j1850_bitwise(bytes((did & 0xFF, did >> 8)) + data[1:], init=0x00, xor_out=0x00)
+    assert data[0] != _crc8_j1850_bitwise(bytes((did & 0xFF, did >> 8)) + data[1:])  # not the old single pass
     assert data[1] & 0x0F == 7
+
+
+# E2E_P01 CRCs (data ID mode BOTH), each computed by the independent `autosar-e2e` package
+# (e2e.p01.e2e_p01_protect(..., increment_counter=False)); the first is issue 17's demo frame.
+P01_FRAMES = [
+    ("MRS_YawRate", "52000000000000", 0xBB),
+    ("MRS_YawRate", "00033132333435", 0x17),
+    ("MRS_AuxSteerCmd", "0000000000000000", 0x99),
+    ("MRS_DriverSteer", "0000000000", 0x84),
+    ("MRS_VehicleSpeed", "00FFFFFFFF", 0x25),
+    ("MRS_BenchInject", "0007D00700", 0x8F),
+]
+
+
+@pytest.mark.parametrize("name,frame,expected", P01_FRAMES)
+def test_e2e_crc_known_profile_1_values(contract: mrsteer_dbc.Contract, name: str, frame: str,
+                                        expected: int) -> None:
+    data = bytes.fromhex(frame)
+    assert contract.e2e_crc(name, data) == expected
+    fid = contract.frame_id(name)
+    # The receiver takes that CRC (a frame may still fail later checks, e.g. counter 15) ...
+    assert contract.decode(fid, bytes((expected,)) + data[1:]).status is not E2EStatus.BAD_CRC
+    # ... and no other.
+    assert contract.decode(fid, bytes((expected ^ 0x01,)) + data[1:]).status is E2EStatus.BAD_CRC
+
+
+def test_crc8_chains_like_crc_calculate_crc8() -> None:
+    """Crc_CalculateCRC8 semantics: a later call resumes from the previous result, and the
+    profile-1 chain from start value 0xFF is the bare polynomial from register 0x00."""
+    data = b"123456789"
+    first = mrsteer_dbc.crc8_sae_j1850(data[:4])
+    assert mrsteer_dbc.crc8_sae_j1850(data[4:], first, False) == 0x4B
+    assert mrsteer_dbc.crc8_sae_j1850(data, 0x00, True) == 0x4B  # the start value is ignored on a first call
+    assert mrsteer_dbc.crc8_sae_j1850(data, 0xFF, False) ^ 0xFF == _crc8_j1850_bitwise(data, 0x00, 0x00)
 
 
 def test_round_trip_every_protected_message(contract: mrsteer_dbc.Contract) -> None:
@@ -160,3 +197,8 @@ def test_table_crc_equals_crccheck(data: bytes) -> None:
     from crccheck.crc import Crc8SaeJ1850
 
     assert mrsteer_dbc.crc8_sae_j1850(data) == Crc8SaeJ1850.calc(data)
+
+
+@given(st.binary(max_size=16), st.integers(0, 255))
+def test_chained_crc_equals_the_bitwise_reference(data: bytes, start: int) -> None:
+    assert mrsteer_dbc.crc8_sae_j1850(data, start, False) == _crc8_j1850_bitwise(data, init=start ^ 0xFF)

@@ -1,9 +1,9 @@
 /* E2E CRC and alive counter, C99 port of dbc/__init__.py. */
 #include "mrs_e2e.h"
 
-uint8_t mrs_crc8_sae_j1850(const uint8_t *data, size_t len)
+uint8_t mrs_crc_calculate_crc8(const uint8_t *data, size_t len, uint8_t start_value, int is_first_call)
 {
-    uint8_t crc = 0xFFu;
+    uint8_t crc = is_first_call ? 0xFFu : (uint8_t)(start_value ^ 0xFFu);
     size_t i;
     for (i = 0u; i < len; ++i) {
         int bit;
@@ -15,21 +15,25 @@ uint8_t mrs_crc8_sae_j1850(const uint8_t *data, size_t len)
     return (uint8_t)(crc ^ 0xFFu);
 }
 
+uint8_t mrs_crc8_sae_j1850(const uint8_t *data, size_t len)
+{
+    return mrs_crc_calculate_crc8(data, len, 0xFFu, 1);
+}
+
 uint8_t mrs_e2e_crc(uint16_t data_id, const uint8_t *payload, size_t len, size_t crc_byte)
 {
-    uint8_t buf[2u + 64u];
-    size_t i, n = 0u;
-    if (len > 64u) {
-        return 0u;
+    /* E2E_P01Protect, E2E_P01_DATAID_BOTH: chain from start value 0xFF, never a first call. */
+    const uint8_t id[2] = {(uint8_t)(data_id & 0xFFu), (uint8_t)(data_id >> 8)};
+    uint8_t crc = mrs_crc_calculate_crc8(&id[0], 1u, 0xFFu, 0);
+    crc = mrs_crc_calculate_crc8(&id[1], 1u, crc, 0);
+    if (crc_byte > len) {
+        crc_byte = len;
     }
-    buf[n++] = (uint8_t)(data_id & 0xFFu);
-    buf[n++] = (uint8_t)(data_id >> 8);
-    for (i = 0u; i < len; ++i) {
-        if (i != crc_byte) {
-            buf[n++] = payload[i];
-        }
+    crc = mrs_crc_calculate_crc8(payload, crc_byte, crc, 0);
+    if (crc_byte < len) {
+        crc = mrs_crc_calculate_crc8(payload + crc_byte + 1u, len - crc_byte - 1u, crc, 0);
     }
-    return mrs_crc8_sae_j1850(buf, n);
+    return (uint8_t)(crc ^ 0xFFu);
 }
 
 uint8_t mrs_e2e_next_counter(uint8_t counter)
