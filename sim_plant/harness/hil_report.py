@@ -7,7 +7,6 @@ import csv
 import io
 import json
 import math
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
@@ -20,12 +19,11 @@ from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.processes import RunError as HilError
+from sim_plant.nodes.candump_log import Frame, read_candump
 from sim_plant.offline.closed_loop import discrete_loop_poles
 
 if TYPE_CHECKING:
     from sim_plant.harness.hil import HilConfig
-
-_LINE = re.compile(r"\((?P<t>[0-9.]+)\)\s+(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<data>[0-9A-Fa-f]*)")
 
 
 @dataclass
@@ -35,22 +33,6 @@ class HilRun:
     summary: dict[str, Any]
     out: Path
     files: list[Path] = field(default_factory=list)
-
-
-@dataclass
-class Frame:
-    t: float
-    frame_id: int
-    data: bytes
-
-
-def read_candump(path: Path) -> list[Frame]:
-    frames = []
-    for line in path.read_text().splitlines():
-        m = _LINE.match(line.strip())
-        if m:
-            frames.append(Frame(float(m["t"]), int(m["id"], 16), bytes.fromhex(m["data"])))
-    return frames
 
 
 def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: Path,
