@@ -7,7 +7,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -19,6 +18,7 @@ import numpy as np
 
 import mrsteer_dbc
 from firmware_py.controller import node as rt
+from sim_plant.harness import launch
 
 READY_TIMEOUT_S = 60.0
 
@@ -101,26 +101,24 @@ def bare_loop_lateness(rate_hz: float, seconds: float) -> dict[str, float]:
 
 def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, Any]:
     """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus."""
-    py = sys.executable
     with tempfile.TemporaryDirectory(prefix="mrsteer-bench-") as tmp:
         work = Path(tmp)
         env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
+        bus = launch.BusArgs("mrsteer", env_channel)
         procs: list[subprocess.Popen] = []
         try:
-            broker = _spawn([py, "-m", "firmware_py.platform.fallback_broker", "--channel", env_channel], work / "bus.err")
+            broker = _spawn(launch.broker(env_channel).command(), work / "bus.err")
             procs.append(broker)
             _wait_for(work / "bus.err", "serving", broker)
             ncpu = os.cpu_count() or 1
-            pin_args = ["--cpu", str(ncpu - 1)] if pin and ncpu > 1 else []
-            ctl = _spawn([py, "-m", "firmware_py", "--interface", "mrsteer", "--channel", env_channel,
-                          "--rate-hz", repr(rate_hz), "--duration", repr(seconds), "--rt-priority", "50",
-                          *pin_args, "--stats-out", str(work / "ctl.json")], work / "ctl.err")
+            ctl = _spawn(launch.controller(bus, launch.ControllerSettings(
+                rate_hz, duration=seconds, rt_priority=50, cpu=ncpu - 1 if pin and ncpu > 1 else None,
+                stats_out=work / "ctl.json")).command(), work / "ctl.err")
             procs.append(ctl)
             _wait_for(work / "ctl.err", "running at", ctl)
             probe = _LatencyProbe(env_channel)
-            plant = _spawn([py, "-m", "sim_plant", "--interface", "mrsteer", "--channel", env_channel,
-                            "--mode", "realtime", "--rate-hz", repr(rate_hz), "--scenario", "paper-fig9",
-                            "--duration", repr(seconds + 2.0)], work / "plant.err")
+            plant = _spawn(launch.plant(bus, launch.PlantSettings(rate_hz, "realtime", "paper-fig9",
+                                                                 duration=seconds + 2.0)).command(), work / "plant.err")
             procs.append(plant)
             if ctl.wait(seconds + 120) != 0:
                 raise RuntimeError(f"controller failed: {(work / 'ctl.err').read_text()[-500:]}")

@@ -22,7 +22,9 @@ from mrsteer_dbc import E2EStatus
 from sim_plant.nodes.fault_bridge import Bridge, Fault
 from sim_plant.harness import faults as F
 from sim_plant.harness.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
+from sim_plant.harness.faults.verdicts import faulted_after_bad_frames
 from sim_plant.harness.processes import RunError
+from sim_plant.nodes.candump_log import Frame
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -54,33 +56,33 @@ def bridge(channel: str):
                                          ("out_of_range", E2EStatus.OUT_OF_RANGE)])
 def test_corruptions_are_the_ones_named(bridge, kind: str, status: E2EStatus) -> None:
     b = bridge(kind, 5.0)
-    (when, out), = b._transform(_yaw(3), 101.5)
+    (when, out), = b.transform(_yaw(3), 101.5)
     assert when == 101.5 and C.decode(YAW, bytes(out.data)).status is status
-    (_, untouched), = b._transform(_yaw(4), 102.5)  # outside the window
+    (_, untouched), = b.transform(_yaw(4), 102.5)  # outside the window
     assert C.decode(YAW, bytes(untouched.data)).status is E2EStatus.OK
     assert b.stats.affected == 1
 
 
 def test_timing_faults(bridge) -> None:
-    assert bridge("drop", 1.0)._transform(_yaw(1), 101.0) == []
-    (when, _), = bridge("delay", 0.004)._transform(_yaw(1), 101.0)
+    assert bridge("drop", 1.0).transform(_yaw(1), 101.0) == []
+    (when, _), = bridge("delay", 0.004).transform(_yaw(1), 101.0)
     assert when == pytest.approx(101.004)
-    assert len(bridge("duplicate")._transform(_yaw(1), 101.0)) == 2
+    assert len(bridge("duplicate").transform(_yaw(1), 101.0)) == 2
     r = bridge("reorder")
-    assert r._transform(_yaw(1), 101.0) == []
-    (_, first), (_, second) = r._transform(_yaw(2), 101.002)
+    assert r.transform(_yaw(1), 101.0) == []
+    (_, first), (_, second) = r.transform(_yaw(2), 101.002)
     assert [C.decode(YAW, bytes(m.data)).counter for m in (first, second)] == [2, 1]
     p = bridge("replay", 1.0)
-    p._transform(_yaw(5), 100.5)  # before the window: recorded
-    (_, real), (_, old) = p._transform(_yaw(6), 101.0)
+    p.transform(_yaw(5), 100.5)  # before the window: recorded
+    (_, real), (_, old) = p.transform(_yaw(6), 101.0)
     assert C.decode(YAW, bytes(real.data)).counter == 6 and C.decode(YAW, bytes(old.data)).counter == 5
 
 
 def test_substitution_sends_the_old_frame_instead(bridge) -> None:
     b = bridge("substitute", 15.0)
     for counter in range(15):
-        b._transform(_yaw(counter, 0.01 * counter), 100.0 + 0.002 * counter)  # recorded
-    (_, out), = b._transform(_yaw(0, 0.5), 101.0)  # the 16th frame: counter 0 again after 0..14
+        b.transform(_yaw(counter, 0.01 * counter), 100.0 + 0.002 * counter)  # recorded
+    (_, out), = b.transform(_yaw(0, 0.5), 101.0)  # the 16th frame: counter 0 again after 0..14
     old = C.decode(YAW, bytes(out.data))
     assert old.status is E2EStatus.OK and old.counter == 0 and old.signals["YawRate_YawRate"] == 0.0
 
@@ -94,7 +96,7 @@ def test_the_forger_takes_the_next_counters_with_a_valid_crc(channel: str) -> No
         real = can.Message(arbitration_id=C.frame_id(name), is_extended_id=False,
                            data=C.encode(name, {"AuxSteerCmd_State": 1, "AuxSteerCmd_Angle": 0.01,
                                                 "AuxSteerCmd_MeasCounter": 15, "AuxSteerCmd_FvCounter": 15}, 14))
-        (_, first), (_, forged) = b._transform(real, 101.0)
+        (_, first), (_, forged) = b.transform(real, 101.0)
         assert first is real
         d = C.decode(real.arbitration_id, bytes(forged.data))
         assert d.status is E2EStatus.OK and d.counter == 0 and d.signals["AuxSteerCmd_FvCounter"] == 0
@@ -138,7 +140,7 @@ def test_the_flood_sends_its_rate_over_its_window(channel: str) -> None:
     try:
         b = Bridge(*buses, Fault("flood", "MRS_YawRate", 0.05, 0.25, 5000.0))
         b.stats.t0 = time.time()
-        flooder = threading.Thread(target=b._flood)
+        flooder = threading.Thread(target=b.flood)
         flooder.start()
         time.sleep(0.4)
         b.stop()
@@ -242,24 +244,23 @@ def test_faults_run_rejects_an_unknown_row() -> None:
     assert proc.returncode == 2 and "no row matches" in proc.stderr
 
 
-def _stamped(times: list[float], fid: int) -> list[tuple[float, int, bytes]]:
-    return [(t, fid, b"") for t in times]
+def _stamped(times: list[float], fid: int) -> list[Frame]:
+    return [Frame(t, fid, b"") for t in times]
 
 
 def test_a_stalled_sender_is_judged_by_bad_frames_not_cycles() -> None:
     # The controller's rule: FAULT in the cycle after the 3rd consecutive bad frame.  Cycles
     # every 10 ms; bad yaw-rate frames from t = 1.0 s, but only one every 40 ms (a stall).
     row = next(r for r in ROWS if r.name.startswith("yaw-rate CRC"))
-    bridge = {"first_affected": 1.0}
     bad = _stamped([1.001, 1.041, 1.081], YAW)
     cmds = [(1.0 + 0.01 * k + 0.005, 1.0) for k in range(20)]
     assert rt.RuntimeConfig().e2e_fail_max == 3
-    assert F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.085)  # the next cycle
-    assert F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.095)  # the one after
-    assert not F._fault_on_bad_frame(bad, cmds, bridge, row, first_fault=1.105)  # a cycle late
-    assert not F._fault_on_bad_frame(bad[:2], cmds, bridge, row, first_fault=1.085)  # only 2 bad frames
+    assert faulted_after_bad_frames(bad, cmds, row, 1.0, first_fault=1.085)  # the next cycle
+    assert faulted_after_bad_frames(bad, cmds, row, 1.0, first_fault=1.095)  # the one after
+    assert not faulted_after_bad_frames(bad, cmds, row, 1.0, first_fault=1.105)  # a cycle late
+    assert not faulted_after_bad_frames(bad[:2], cmds, row, 1.0, first_fault=1.085)  # only 2 bad frames
     other = _stamped([1.001, 1.041, 1.081], C.frame_id("MRS_VehicleSpeed"))
-    assert not F._fault_on_bad_frame(other, cmds, bridge, row, first_fault=1.085)  # not the faulted message
+    assert not faulted_after_bad_frames(other, cmds, row, 1.0, first_fault=1.085)  # not the faulted message
 
 
 def test_matrix_will_not_judge_an_earlier_runs_files(tmp_path: Path) -> None:

@@ -1,11 +1,12 @@
 """Hardware-in-the-loop runner: plant, controller and bus logger as separate processes.
 
 ``run()`` starts (on the fallback bus: a private broker first) the logger, the controller and
-the plant, waits for the plant to play its scenario, stops the controller (which sends its
-final zero command) and the logger, and turns the log into a CSV of decoded signals, a plot
-and a JSON summary.  If any process dies early the others are stopped, nothing is left
-running, and ``HilError`` names the process and its exit status.  Every child gets SIGTERM if
-this process dies (Linux ``PR_SET_PDEATHSIG``), so even a killed runner leaves no orphans.
+the plant, each with the command line ``launch`` builds; waits for the plant to play its
+scenario; stops the controller (which sends its final zero command) and the logger; and hands
+the log and the plant's per-step trace to ``hil_report``.  If any process dies early the others
+are stopped, nothing is left running, and ``HilError`` names the process and its exit status.
+Every child gets SIGTERM if this process dies (Linux ``PR_SET_PDEATHSIG``), so even a killed
+runner leaves no orphans.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -24,8 +24,9 @@ from mrsteer_dbc import secoc as secoc_mod
 from firmware_py.platform import bus_open
 from firmware_py import model_regulator as mr
 from sim_plant.car import scenario as scn
-from sim_plant.harness.hil_report import HilRun, finish
-from sim_plant.harness.processes import Proc, RunError, spawn, stop, tail, wait_for_socket, wait_ready, wait_stderr
+from sim_plant.harness.hil_report import TRACE, HilRun, finish
+from sim_plant.harness import launch
+from sim_plant.harness.processes import Proc, RunError, stop, tail, wait_for_socket, wait_ready, wait_stderr
 
 MODES = ("lockstep", "realtime")
 
@@ -71,45 +72,33 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     procs: list[Proc] = []
     try:
         iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=say)
-        bus_args = ["--interface", iface] + (["--channel", channel] if channel else [])
         env = dict(os.environ)
-        secoc: list[str] = []
         if cfg.secoc_key is not None:
             # Through the environment, not argv: a command line is visible to every user.
             env[secoc_mod.KEY_ENV] = cfg.secoc_key.hex()
-            secoc = ["--secoc"]
         if iface == bus_open.FALLBACK[0] and cfg.channel is None:
             # A private bus for this run: nothing else on it, and it goes away with the run.
             channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
-            bus_args = ["--interface", iface, "--channel", channel]
-            procs.append(spawn("bus broker", [sys.executable, "-m", "firmware_py.platform.fallback_broker", "--channel", channel],
-                                work, env))
+            procs.append(launch.start("bus broker", launch.broker(channel), work, env))
             wait_for_socket(channel, procs[-1])
+        bus = launch.BusArgs(iface, channel)
         say(f"bus: {iface} {channel}")
 
-        logger = spawn("logger", [sys.executable, "-m", "sim_plant.nodes.logger", *bus_args, "--out",
-                                   str(work / "traffic.log"), "--iface-name", str(channel),
-                                   "--stats-out", str(work / "logger.json")], work, env, stdout=True)
+        logger = launch.start("logger", launch.logger(bus, launch.LoggerSettings(
+            work / "traffic.log", iface_name=str(channel), stats_out=work / "logger.json")), work, env, stdout=True)
         procs.append(logger)
         wait_ready(logger)
 
         if cfg.controller != "none":
-            procs.append(spawn("controller", [
-                sys.executable, "-m", "firmware_py", *bus_args, "--rate-hz", repr(cfg.rate_hz),
-                "--trigger", "sensors" if cfg.mode == "lockstep" else "clock", "--controller", cfg.controller,
-                "--k", repr(cfg.k), "--tau", repr(cfg.tau), "--tau-n", repr(cfg.tau_n),
-                "--model-delay", str(cfg.model_delay),
-                "--stats-out", str(work / "controller.json"), *secoc], work, env))
+            procs.append(launch.start("controller", launch.controller(bus, launch.ControllerSettings(
+                cfg.rate_hz, launch.Gains(cfg.k, cfg.tau, cfg.tau_n, cfg.model_delay),
+                trigger="sensors" if cfg.mode == "lockstep" else "clock", q_form=cfg.controller,
+                stats_out=work / "controller.json", secoc=cfg.secoc_key is not None)), work, env))
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
-        plant_cmd = [sys.executable, "-m", "sim_plant", *bus_args, "--scenario", cfg.scenario,
-                     "--mode", cfg.mode, "--rate-hz", repr(cfg.rate_hz), "--delay-steps", str(cfg.delay_steps),
-                     "--stats-out", str(work / "plant.json"), "--trace-out", str(work / "plant_trace.csv"), *secoc]
-        for flag, value in (("--v", cfg.v), ("--mu", cfg.mu), ("--mz", cfg.mz)):
-            if value is not None:
-                plant_cmd += [flag, repr(value)]
-        if cfg.controller == "none":
-            plant_cmd += ["--no-controller"]
-        plant = spawn("plant", plant_cmd, work, env)
+        plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
+            cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,
+            no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
+            secoc=cfg.secoc_key is not None)), work, env)
         procs.append(plant)
         say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}")
 

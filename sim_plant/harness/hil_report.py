@@ -9,7 +9,6 @@ import csv
 import io
 import json
 import math
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
@@ -24,13 +23,14 @@ from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness import hil_plot
 from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, step_table, steps_csv
 from sim_plant.harness.processes import RunError as HilError
+from sim_plant.nodes.candump_log import Frame, read_candump
 from sim_plant.offline.closed_loop import discrete_loop_poles
 
 if TYPE_CHECKING:
     from sim_plant.harness.hil import HilConfig
 
-_LINE = re.compile(r"\((?P<t>[0-9.]+)\)\s+(?P<iface>\S+)\s+(?P<id>[0-9A-Fa-f]+)#(?P<data>[0-9A-Fa-f]*)")
 
+TRACE = "plant_trace.csv"  # in the run's work directory: the plant's true state at every step
 
 @dataclass
 class HilRun:
@@ -43,22 +43,6 @@ class HilRun:
     scenario: scn.Scenario | None = None
 
 
-@dataclass
-class Frame:
-    t: float
-    frame_id: int
-    data: bytes
-
-
-def read_candump(path: Path) -> list[Frame]:
-    frames = []
-    for line in path.read_text().splitlines():
-        m = _LINE.match(line.strip())
-        if m:
-            frames.append(Frame(float(m["t"]), int(m["id"], 16), bytes.fromhex(m["data"])))
-    return frames
-
-
 def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: Path,
             say: Callable[[str], None]) -> HilRun:
     """Write the run's files from the work directory (``traffic.log``, ``plant_trace.csv`` and
@@ -69,7 +53,7 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
     rows = decode(frames, contract)
     traffic = Traffic.of(rows, cfg.rate_hz)
     summary = summarize(traffic, cfg, sc, ctrl)
-    steps = step_table(read_plant_trace(work / "plant_trace.csv"), traffic, cfg.mode == "lockstep", contract)
+    steps = step_table(read_plant_trace(work / TRACE), traffic, cfg.mode == "lockstep", contract)
     summary["steps"] = len(steps)
     summary["frames"] = {
         "on_bus_logged": stats["logger"].get("frames", len(frames)),

@@ -140,8 +140,9 @@ class Bridge:
             data[e2e.crc_byte] = self.contract.e2e_crc(name, bytes(data))
         return bytes(data)
 
-    def _transform(self, msg: can.Message, now: float) -> list[tuple[float, can.Message]]:
-        """Frames to send for one received frame, each with its send time."""
+    def transform(self, msg: can.Message, now: float) -> list[tuple[float, can.Message]]:
+        """Frames to send for one frame received at ``now`` (epoch s), each with its send time:
+        the fault applied if the frame is a target and the window is open (``stats.t0`` set)."""
         f = self.fault
         hist = self._history[msg.arbitration_id]
         hist.append((now, bytes(msg.data)))
@@ -218,7 +219,7 @@ class Bridge:
                 continue
             now = time.time()
             self._saw(msg, to_controller, now)
-            for when, out in self._transform(msg, now):
+            for when, out in self.transform(msg, now):
                 if when <= now:
                     self._send(dst, out, to_controller)
                 else:
@@ -255,7 +256,9 @@ class Bridge:
             else:
                 self.stats.forwarded_to_vehicle += 1
 
-    def _flood(self) -> None:
+    def flood(self) -> None:
+        """Send the flood's frames to the controller side while the fault window is open, until
+        stopped (``run`` gives it a thread of its own when the fault is a flood)."""
         # Keeps count of what is due since the window opened and sends it in bursts: a sleep
         # per frame would cap the rate at the scheduler's granularity, far below ``param``.
         period = 1.0 / max(self.fault.param, 1.0)
@@ -276,7 +279,7 @@ class Bridge:
         threads = [threading.Thread(target=self._pump, args=(self.vehicle, self.controller, True), daemon=True),
                    threading.Thread(target=self._pump, args=(self.controller, self.vehicle, False), daemon=True)]
         if self.fault.kind == "flood":
-            threads.append(threading.Thread(target=self._flood, daemon=True))
+            threads.append(threading.Thread(target=self.flood, daemon=True))
         for t in threads:
             t.start()
         while self._running and all(t.is_alive() for t in threads):

@@ -1,4 +1,5 @@
-"""Bus logger: every frame on the bus to a candump ``-L`` log (``(time) iface ID#DATA``).
+"""Bus logger: every frame on the bus to a candump ``-L`` log (``(time) iface ID#DATA``, written by
+``candump_log``).
 
 Runs until SIGINT/SIGTERM, then drains what is still queued, flushes and reports its count.
 ``cantools decode dbc/mrsteer.dbc < LOG`` decodes the result.
@@ -17,19 +18,7 @@ from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import Parser, check_output_file
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.rx_queue import deepen
-
-
-def candump_line(msg: can.Message, iface: str) -> str:
-    """One line of ``candump -L``: extended IDs in 8 hex digits, standard in 3."""
-    ident = f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
-    if msg.is_remote_frame:
-        body = f"{ident}#R"
-    elif msg.is_fd:
-        flags = (1 if msg.bitrate_switch else 0) | (2 if msg.error_state_indicator else 0)
-        body = f"{ident}##{flags:X}{bytes(msg.data).hex().upper()}"
-    else:
-        body = f"{ident}#{bytes(msg.data).hex().upper()}"
-    return f"({msg.timestamp:.6f}) {iface} {body}\n"
+from sim_plant.nodes.candump_log import format_line
 
 
 class Logger:
@@ -51,7 +40,7 @@ class Logger:
         self.out.flush()
 
     def _write(self, msg: can.Message) -> None:
-        self.out.write(candump_line(msg, self.iface))
+        self.out.write(format_line(msg, self.iface))
         self.frames += 1
 
 

@@ -1,0 +1,5 @@
+import sys
+
+from sim_plant.harness.faults.cli import main
+
+sys.exit(main())

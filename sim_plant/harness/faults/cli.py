@@ -1,0 +1,91 @@
+"""``mrsteer faults``: the fault matrix's command line (``run``, or the ``bridge`` on its own)
+and its table."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+from sim_plant.harness.faults.verdicts import RowResult
+from sim_plant.harness.faults.rows import ROWS, secured_rows
+from sim_plant.harness.faults.run import holds_files, run_matrix
+from sim_plant.harness.faults.settings import CALIBRATIONS, RATE_HZ, Setup
+from sim_plant.harness.processes import RunError
+
+
+def format_table(results: list[RowResult]) -> str:
+    lines = [f"{'fault':<38}{'expected':<42}{'result':<7}{'max |applied|':>14}{'max step':>10}{'detect':>8}  observed",
+             "-" * 160]
+    for r in results:
+        det = "-" if r.detection_cycles is None else f"{r.detection_cycles} cyc"
+        lines.append(f"{r.name:<38}{r.expected:<42}{'PASS' if r.passed else 'FAIL':<7}{r.worst_applied_deg:>12.3f} deg"
+                     f"{r.worst_step_deg:>8.4f}°{det:>8}  {r.observed}")
+        for f in r.failures:
+            lines.append(f"{'':<38}!! {f}")
+    n_pass = sum(r.passed for r in results)
+    lines.append(f"{n_pass}/{len(results)} rows pass")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
+    import argparse
+
+    from firmware_py.platform.cli import Parser
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["bridge"]:  # the bridge owns its whole argument list, --help included
+        from sim_plant.nodes.fault_bridge import main as bridge_main
+
+        return bridge_main(argv[1:], prog=f"{prog} bridge")
+    p = Parser(prog=prog, description="Fault injection: the fault matrix, or the bridge on its own.")
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=Parser)
+    r = sub.add_parser("run", help="run the fault matrix and print the table",
+                       description="Run every row of the fault matrix (each a few seconds of realtime plant and "
+                       "controller joined by the fault bridge) and judge it from the logged traffic.  By default "
+                       "on two private fallback buses; on SocketCAN: --interface socketcan --channels vcan0,vcan1 "
+                       "(tools/vcan.sh up 2).")
+    r.add_argument("--only", action="append", metavar="TEXT", help="only rows whose name contains TEXT; repeatable")
+    r.add_argument("--keep", type=Path, metavar="DIR", help="keep every row's logs, traces and statistics here")
+    r.add_argument("--json", action="store_true", help="print the results as JSON")
+    r.add_argument("--secoc", action="store_true",
+                   help="run every row with the commands and sensor frames authenticated (a random key per row); "
+                   "the rows that show what E2E alone lets through are left out")
+    r.add_argument("--interface", default="mrsteer", help="python-can interface of both buses (default mrsteer, "
+                   "the fallback bus)")
+    r.add_argument("--channels", metavar="VEHICLE,CONTROLLER",
+                   help="the two buses the bridge joins (default: two private fallback buses)")
+    r.add_argument("--rate-hz", type=float, default=RATE_HZ,
+                   help=f"control and plant rate, one of {', '.join(f'{k:g}' for k in CALIBRATIONS)}, each with its "
+                   f"tuned calibration (default {RATE_HZ:g})")
+    r.add_argument("--time-scale", type=float, default=1.0, metavar="F",
+                   help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
+    r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
+                   help="extra scenario seconds in the restart rows for the new process to start (default 0)")
+    b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
+    b.add_argument("args", nargs=argparse.REMAINDER)
+    args = p.parse_args(argv)
+    every = secured_rows() if args.secoc else ROWS
+    rows = tuple(row for row in every if not args.only or any(o.lower() in row.name.lower() for o in args.only))
+    if not rows:
+        p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
+    try:
+        channels = tuple(args.channels.split(",")) if args.channels else None
+        setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s)  # type: ignore[arg-type]
+    except ValueError as exc:
+        p.error(str(exc))
+    if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
+        p.error(f"--keep {args.keep} exists and is not a directory")
+    if holds_files(args.keep):
+        p.error(f"--keep {args.keep} is not empty: an earlier run's files would be judged as this run's")
+    try:
+        results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
+    except RunError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps([asdict(r) for r in results], indent=2))
+    else:
+        print(format_table(results))
+    return 0 if all(r.passed for r in results) else 1

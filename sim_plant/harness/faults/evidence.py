@@ -1,0 +1,98 @@
+"""What a fault-matrix row left in its work directory, read once for the judge: the plant's
+trace, every node's statistics, and the traffic of both buses (candump logs, decoded through
+the DBC)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py.controller import node as rt
+from sim_plant.harness.faults.rows import Row
+from sim_plant.harness.faults.settings import Setup
+from sim_plant.nodes.candump_log import Frame, read_candump
+
+
+@dataclass(frozen=True)
+class Trace:
+    """Plant time, applied angle, the command the actuator holds and the wall clock (epoch s)
+    of every plant step."""
+
+    t: list[float]
+    applied: list[float]
+    held: list[float]
+    wall: list[float]
+
+
+def read_trace(path: Path) -> Trace:
+    t, applied, held, wall = [], [], [], []
+    lines = path.read_text().splitlines()
+    head = lines[0].split(",")
+    ti, ai, ci, wi = (head.index(n) for n in ("t_s", "aux_applied_rad", "aux_cmd_rad", "wall_s"))
+    for line in lines[1:]:
+        cols = line.split(",")
+        t.append(float(cols[ti]))
+        applied.append(float(cols[ai]))
+        held.append(float(cols[ci]))
+        wall.append(float(cols[wi]))
+    return Trace(t, applied, held, wall)
+
+
+def gaps(frames: list[Frame], ids: list[int], longer: float) -> list[tuple[float, float]]:
+    """Intervals in which a message of ``ids`` went quiet for longer than ``longer`` s."""
+    out = []
+    for fid in ids:
+        times = [t for t, f, _ in frames if f == fid]
+        out += [(a, b) for a, b in zip(times, times[1:]) if b - a > longer]
+    return out
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """One row's run: what the runner did (exit status, kill and restart times, epoch s) and
+    what was recorded."""
+
+    row: Row
+    setup: Setup
+    ctl_code: int | None  # the controller's exit status when stopped (None: it was not running)
+    killed_at: float | None
+    restarted: float | None
+    trace: Trace
+    bridge: dict[str, Any]
+    plant: dict[str, Any]
+    ctl_stats: dict[str, Any] | None  # None: the controller wrote none (killed)
+    logged: dict[str, int]  # frames each logger logged, by side
+    vehicle_frames: list[Frame]
+    frames: list[Frame]  # the controller's bus
+    cmds: list[tuple[float, float]]  # (t, AuxSteerCmd_State) of every accepted command to the run's end
+    angles: list[tuple[float, float]]  # (t, AuxSteerCmd_Angle) of the same
+    causes: list[tuple[float, int]]  # (t, CtrlStatus_Cause)
+    faults_after: list[float]  # times of FAULT commands after the controller first became active
+
+
+def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, restarted: float | None,
+           setup: Setup) -> Evidence:
+    c = mrsteer_dbc.load()
+    ctl_json = work / "controller.json"
+    vehicle_frames = read_candump(work / "vehicle.log")
+    frames = read_candump(work / "controller.log")
+    cmd_id, status_id = c.frame_id(rt.MSG_CMD), c.frame_id(rt.MSG_STATUS)
+    decoded = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == cmd_id]
+    cutoff = max(t for t, fid, _ in vehicle_frames
+                 if fid == c.frame_id(rt.MSG_YAW))  # the plant's last measurement: the run's end
+    accepted = [(t, d) for t, d in decoded if d is not None and d.status.accepted and t <= cutoff]
+    cmds = [(t, d.signals["AuxSteerCmd_State"]) for t, d in accepted]
+    statuses = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == status_id]
+    first_active = next((t for t, s in cmds if s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
+    return Evidence(
+        row, setup, ctl_code, killed_at, restarted, read_trace(work / "trace.csv"),
+        json.loads((work / "bridge.json").read_text()), json.loads((work / "plant.json").read_text()),
+        json.loads(ctl_json.read_text()) if ctl_json.exists() else None,
+        {side: json.loads((work / f"logger-{side}.json").read_text())["frames"] for side in ("vehicle", "controller")},
+        vehicle_frames, frames, cmds, [(t, d.signals["AuxSteerCmd_Angle"]) for t, d in accepted],
+        [(t, int(d.signals["CtrlStatus_Cause"])) for t, d in statuses if d is not None],
+        [t for t, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t > first_active])

@@ -1,0 +1,101 @@
+"""The fault matrix's rows: each a fault the bridge injects (or a process the runner kills) and
+what the row must show, judged from the logged traffic (``judge``).  ``secured_rows`` gives
+the same rows as ``faults run --secoc`` runs them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from firmware_py.controller import node as rt
+from sim_plant.harness.faults.settings import E2E_FAIL_MAX, FORGED_ANGLE, TIMEOUT_CYCLES, WINDOW
+from sim_plant.nodes.fault_bridge import Fault
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row: its fault, what the table says it must show, and the verdicts that apply."""
+
+    name: str
+    fault: Fault
+    expected: str
+    detect_within: int | None = None  # controller cycles from the first affected frame to FAULT
+    cause: int = 0  # CtrlStatus_Cause bit expected while faulted
+    no_fault: bool = False  # the controller must stay ACTIVE/SATURATED throughout
+    reject_all: bool = False  # the controller rejects (at least) every affected frame
+    plant_rejects: bool = False  # the plant must reject the affected command frames
+    kill: bool = False  # the runner kills the controller (SIGKILL) ...
+    restart: bool = False  # ... and restarts it
+    kill_plant: bool = False  # the runner kills the plant (SIGKILL) and restarts it
+    secoc: bool = False  # controller and plant authenticate the commands and the sensor frames
+    auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
+    e2e_only: bool = False  # shows what E2E alone lets through: meaningless with SecOC on
+
+
+def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
+    return Fault(kind, target, *WINDOW, param)
+
+
+ROWS = (
+    Row("baseline", _f("none"), "runs clean", no_fault=True),
+    Row("yaw-rate frames lost (burst)", _f("drop"), "FAULT within the timeout, fade, recover",
+        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING),
+    Row("sensor frames lost (20 % random)", _f("drop", "sensors", 0.2), "tolerated, no fault", no_fault=True),
+    Row("yaw-rate payload bit flipped", _f("corrupt_payload"), "rejected (CRC), FAULT after 3, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate CRC corrupted", _f("corrupt_crc"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate counter invalid (15)", _f("corrupt_counter"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("driver-angle frame too short", _f("wrong_length", "MRS_DriverSteer"), "rejected, FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+    Row("yaw-rate frames replayed", _f("replay", param=1.0), "every replayed frame rejected, no fault",
+        no_fault=True, reject_all=True),
+    Row("yaw rate out of range (5 rad/s)", _f("out_of_range", param=5.0), "rejected (range), FAULT, recover",
+        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_RANGE, reject_all=True),
+    Row("sensor frames duplicated", _f("duplicate", "sensors"), "copies rejected as repeated, no fault",
+        no_fault=True, reject_all=True),
+    Row("yaw-rate frames reordered", _f("reorder"), "out-of-order frames rejected, no fault", no_fault=True),
+    Row("sensor frames delayed 4 ms", _f("delay", "sensors", 0.004), "tolerated, no fault", no_fault=True),
+    Row("bus flooded with another ID", _f("flood", param=5000.0), "filtered out, no fault, nothing lost",
+        no_fault=True),
+    Row("command frames lost (burst)", _f("drop", "commands"), "actuator times out, fades, slews back"),
+    Row("command CRC corrupted", _f("corrupt_crc", "commands"), "actuator rejects them", plant_rejects=True),
+    # The same forger without SecOC: E2E alone takes it (docs/faults.md, "E2E is not security");
+    # the actuator's own +-3 deg still bounds what it does.
+    Row("commands forged, E2E only", _f("spoof_command", "commands", FORGED_ANGLE),
+        "forgeries taken, actuator within 3 deg", e2e_only=True),
+    Row("SecOC: baseline", _f("none"), "runs clean, every frame authenticated", no_fault=True, secoc=True),
+    # The forger sends the next alive counter with a valid CRC: E2E alone would take it.
+    Row("SecOC: commands forged", _f("spoof_command", "commands", FORGED_ANGLE),
+        "forgeries rejected (MAC), real ones kept", secoc=True, auth_rejects=True),
+    # 13 back lands 2 ahead of the 4-bit alive counter: E2E alone takes every replay and rejects
+    # the live frames instead (docs/faults.md); the sensor frames' MAC must refuse them.
+    Row("SecOC: yaw-rate replayed 13 back", _f("replay", param=13.0), "every replay rejected (MAC), no fault",
+        no_fault=True, reject_all=True, secoc=True),
+    # 150 frames (0.3 s) back: counter-aligned, so E2E alone would take them (docs/faults.md).
+    Row("SecOC: 0.3 s old commands substituted", _f("substitute", "commands", 150.0),
+        "stale freshness rejected, fade, slew back", secoc=True, auth_rejects=True),
+    Row("controller killed", _f("none"), "actuator at zero within timeout + fade", kill=True),
+    Row("controller killed and restarted", _f("none"), "resumes without a jump", kill=True, restart=True),
+    # The vehicle side crashes: every input goes missing at once, then comes back from a fresh
+    # plant (its counters from 0, its scenario from the start).
+    Row("plant killed and restarted", _f("none"), "FAULT within the timeout, fade, recover",
+        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING, kill_plant=True),
+)
+
+
+def secured_rows(rows: tuple[Row, ...] = ROWS) -> tuple[Row, ...]:
+    """The rows as they run with SecOC on (``faults run --secoc``): every row authenticates,
+    the E2E-only rows are left out, and a row that became the same run as an earlier one (the
+    baseline and "SecOC: baseline") appears once."""
+    out: list[Row] = []
+    seen: set[Row] = set()
+    for row in rows:
+        if row.e2e_only:
+            continue
+        row = replace(row, secoc=True)
+        key = replace(row, name="", expected="")
+        if key not in seen:
+            seen.add(key)
+            out.append(row)
+    return tuple(out)

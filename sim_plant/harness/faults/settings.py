@@ -1,0 +1,86 @@
+"""The fault matrix's numbers and where it runs (``Setup``): its rate and the calibration tuned
+for it, the scenario's timing, the limits its verdicts hold the run to, and the constants
+copied from the plant and the controller."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py.controller import node as rt
+from mrsteer_dbc.busload import frame_bits
+from sim_plant.harness.launch import Gains
+
+RATE_HZ = 1.0 / mr.ControllerConfig().ts
+RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
+PLANT_FADE = math.radians(30.0)  # rad/s, the actuator's fade (plant_node default)
+CMD_TIMEOUT = 0.02  # s, the actuator's command timeout (plant_node default)
+DURATION = 2.6  # s of scenario
+WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
+BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
+TRACE_RESOLUTION = 1e-8  # rad: angles up to 0.06 rad written with 9 significant digits
+ACTUATOR_RATE = math.radians(60.0)  # rad/s, the actuator's own slew limit in these runs
+DRAIN_TIMEOUT = 60.0  # s for bridge and loggers to work off a backlog (a slow machine lags) and exit
+KILL_AT = 1.2  # s after the plant started
+RESTART_AT = 1.7
+TIMEOUT_CYCLES = rt.RuntimeConfig().timeout_cycles
+E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
+# The forger's angle: the DBC maximum, just beyond the controller's 3 deg limit, so a forgery the
+# actuator took is told apart from every real command.
+FORGED_ANGLE = mrsteer_dbc.load().signal_range(rt.MSG_CMD, "AuxSteerCmd_Angle")[1]
+MAC_LUCK = 2
+COUNTER_WINDOW = mrsteer_dbc.E2EReceiver().max_delta  # the actuator's alive-counter window
+# 8-byte frames a 500 kbit/s bus carries per second at most (no stuff bits): a flood at this
+# rate saturates a real bus of the vehicle's kind.
+FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
+
+# Calibrations tuned for other control rates (docs/design.md, `mrsteer design tune`): each keeps
+# 6 dB / 45 deg over the envelope at its rate.  K, tau, tau_n, modelled delay.
+_SHIPPED = mr.ControllerConfig()
+CALIBRATIONS: dict[float, tuple[float, float, float, int]] = {
+    1000.0: (50.0, 0.012, 0.02, 1),
+    500.0: (_SHIPPED.k, _SHIPPED.tau, _SHIPPED.tau_n, _SHIPPED.model_delay_steps),
+    200.0: (14.2, 0.0161, 0.02, 1),
+    100.0: (4.52, 0.0075, 0.02, 1),
+}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Where and how fast the matrix runs.  The default is two private fallback buses at the
+    shipped rate; on real SocketCAN give two interfaces (vehicle, controller).  A slow machine
+    (QEMU without KVM) needs a lower rate, stretched time and longer process start-ups."""
+
+    interface: str = "mrsteer"
+    channels: tuple[str, str] | None = None  # (vehicle, controller); None: fresh fallback buses
+    rate_hz: float = RATE_HZ
+    time_scale: float = 1.0  # stretches the scenario, the fault window and the kill/restart times
+    startup_s: float = 0.0  # extra scenario time in the restart rows for the new process to start
+
+    def __post_init__(self) -> None:
+        if self.rate_hz not in CALIBRATIONS:
+            raise ValueError(f"rate must be one of {', '.join(f'{r:g}' for r in CALIBRATIONS)} Hz (a tuned "
+                             f"calibration exists for each), got {self.rate_hz:g}")
+        if not (math.isfinite(self.time_scale) and 1.0 <= self.time_scale <= 20.0):
+            raise ValueError(f"time scale must be in [1, 20], got {self.time_scale:g}")
+        if not (math.isfinite(self.startup_s) and 0.0 <= self.startup_s <= 120.0):
+            raise ValueError(f"start-up allowance must be in [0, 120] s, got {self.startup_s:g}")
+        if self.channels is not None and (len(self.channels) != 2 or self.channels[0] == self.channels[1]):
+            raise ValueError("give two different channels: vehicle side, controller side")
+        if self.channels is None and self.interface != "mrsteer":
+            raise ValueError(f"--interface {self.interface} needs --channels VEHICLE,CONTROLLER")
+
+    @property
+    def ts(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def cmd_timeout(self) -> float:
+        """The actuator's command timeout: the plant's 20 ms, and never under 4 control periods."""
+        return max(CMD_TIMEOUT, 4.0 * self.ts)
+
+    def gains(self) -> Gains:
+        """The calibration tuned for this rate."""
+        return Gains(*CALIBRATIONS[self.rate_hz])

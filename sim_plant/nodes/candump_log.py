@@ -1,0 +1,49 @@
+"""The candump ``-L`` log format, written by the bus logger and read by the HIL report and the
+fault matrix: one frame a line, ``(1700000000.123456) vcan0 101#0011AA``.
+
+Reading goes through python-can's ``can.CanutilsLogReader``: it parses this format as written
+(the timestamp from its own text, so to the microsecond; extended IDs by their 8 digits; CAN FD
+``##``; remote ``#R``) and also what the real ``candump -L`` writes.
+
+Writing does not use ``can.CanutilsLogWriter``, which writes another file than ``candump -L``
+and than ``traffic.log`` always was: it appends the direction (`` R``/`` T``) to every line,
+writes a frame whose timestamp is older than the previous one with the previous one's (the
+log would no longer show when a frame really came), and names the message's own channel
+rather than the one the logger was told to write (``--iface-name``; the fault matrix names its
+two buses ``vehicle`` and ``controller``).  ``cantools decode`` reads what ``format_line``
+writes, byte for byte the same as the real ``candump -L``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import can
+
+
+class Frame(NamedTuple):
+    """One logged frame: when it was on the bus (epoch s), its ID and its payload."""
+
+    t: float
+    frame_id: int
+    data: bytes
+
+
+def format_line(msg: can.Message, iface: str) -> str:
+    """One line of ``candump -L``: extended IDs in 8 hex digits, standard in 3."""
+    ident = f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
+    if msg.is_remote_frame:
+        body = f"{ident}#R"
+    elif msg.is_fd:
+        flags = (1 if msg.bitrate_switch else 0) | (2 if msg.error_state_indicator else 0)
+        body = f"{ident}##{flags:X}{bytes(msg.data).hex().upper()}"
+    else:
+        body = f"{ident}#{bytes(msg.data).hex().upper()}"
+    return f"({msg.timestamp:.6f}) {iface} {body}\n"
+
+
+def read_candump(path: Path) -> list[Frame]:
+    """Every frame of a candump ``-L`` log, in the order logged (a remote frame with no data)."""
+    with can.CanutilsLogReader(path) as reader:
+        return [Frame(msg.timestamp, msg.arbitration_id, bytes(msg.data)) for msg in reader]
