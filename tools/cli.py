@@ -12,7 +12,7 @@ import os
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.options import resolve_model_delay
@@ -22,6 +22,9 @@ from mrsteer_cli.cli_args import add_gains, count, number
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
+
+if TYPE_CHECKING:
+    from sim_plant.harness.hil import HilConfig
 
 SPEED_RANGE = (3.0, 70.0)  # m/s: where the firmware is active and the model is used
 MASS_RANGE = (300.0, 10000.0)
@@ -62,7 +65,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="mrsteer", description="Limited-integrator model-regulator active steering: "
                     "controller firmware, vehicle simulator and tools.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    _add_sim_parsers(sub)
+    _add_delegated_parsers(sub)
+    design_cli.add_parsers(sub, Parser)
+    p = sub.add_parser("vectors", help="write golden test vectors for ports of the controller",
+                       description="Write, for several configurations and scenarios, every step's inputs, command "
+                       "and state as CSV, and each configuration's calibration and coefficients as key = value "
+                       "lines (see docs/porting.md). tests/vectors/ holds the checked-in set.")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created if needed)")
+    p.set_defaults(handler=_cmd_vectors)
+    _add_hil_parsers(sub)
+    return parser
 
+
+def _add_sim_parsers(sub: Any) -> None:
     sim = sub.add_parser("sim", help="offline closed-loop simulation and the paper reproduction",
                          description="Closed-loop simulations of the single-track car with the model regulator.")
     sim_sub = sim.add_subparsers(dest="experiment", required=True, parser_class=Parser)
@@ -95,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.set_defaults(handler=_cmd_paper)
 
+
+def _add_delegated_parsers(sub: Any) -> None:
+    """Commands whose own main parses the rest of the line (each has its own --help)."""
     for name, text in (("controller", "run the controller process on a CAN bus (same as python -m firmware_py)"),
                        ("plant", "run the simulated car on a CAN bus (same as python -m sim_plant)"),
                        ("bus", "run the fallback CAN bus broker (for machines without vcan)"),
@@ -104,15 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("args", nargs=argparse.REMAINDER)
         p.set_defaults(handler=_delegate(name))
 
-    design_cli.add_parsers(sub, Parser)
 
-    p = sub.add_parser("vectors", help="write golden test vectors for ports of the controller",
-                       description="Write, for several configurations and scenarios, every step's inputs, command "
-                       "and state as CSV, and each configuration's calibration and coefficients as key = value "
-                       "lines (see docs/porting.md). tests/vectors/ holds the checked-in set.")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created if needed)")
-    p.set_defaults(handler=_cmd_vectors)
-
+def _add_hil_parsers(sub: Any) -> None:
     hil = sub.add_parser("hil", help="hardware-in-the-loop runs: plant, controller and logger on one bus",
                          description="Hardware-in-the-loop runs on SocketCAN vcan0 or the fallback bus.")
     hil_sub = hil.add_subparsers(dest="hil_command", required=True, parser_class=Parser)
@@ -140,7 +152,6 @@ def build_parser() -> argparse.ArgumentParser:
                            "without the controller, and explain the result.")
     _add_hil_args(p, default_out="out/hil-demo")
     p.set_defaults(handler=_cmd_hil_demo)
-    return parser
 
 
 def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) -> None:
