@@ -1,0 +1,177 @@
+"""Nonlinear single-track model of the realistic car: the paper's section-3 model with
+magic-formula tyres (``tyres``), optional tyre relaxation, and a speed that braking lowers.
+
+State [beta, r] as in ``vehicle`` (side slip at the CG in rad, yaw rate in rad/s), plus the
+speed v and, with a relaxation length, the two axles' lagged slip angles.  With the
+small-angle kinematics of the paper's model
+
+    alpha_f = delta - beta - l_f r / v,        alpha_r = -beta + l_r r / v
+
+the force balance is
+
+    m v (beta' + r) = F_yf(alpha_f) + F_yr(alpha_r) + F_ext
+    J r'            = l_f F_yf(alpha_f) - l_r F_yr(alpha_r) + M_z
+    v'              = -a_x
+
+where F_ext is a lateral force at the CG (side wind) and a_x a longitudinal deceleration
+(braking, a blown tyre's drag).  With F_y = c alpha (the tyres' slope at zero slip,
+c = mu c_0) these are exactly ``vehicle``'s linear equations, whose transfer functions are
+eqs. (14)/(16): small signals reproduce the paper's model.
+
+**Speed.** v is a state, not a parameter, because a split-mu stop decelerates the car by up
+to (mu_l + mu_r) g / 2 (5.9 m/s^2 at mu 1.0 / 0.2): 25 m/s falls to 13 m/s in 2 s, and every
+coefficient of the lateral dynamics goes with 1/v.  It is integrated in the same RK4 step as
+beta and r, and braking stops at ``stop_speed`` (3 m/s, the scenarios' lowest speed: below
+about 5-10 km/h the slip-angle model is not valid; TUM's model blends to a kinematic one
+there, research/anchors.md section 3).  Left out, as in the paper's model: the longitudinal
+forces' lateral components (F_x sin beta, F_xf sin delta; about m a_x / c = 4 % of the
+cornering terms in a full stop) and the load transfer braking causes.
+
+**Relaxation.** With a relaxation length sigma > 0 each axle's slip angle lags its
+kinematic value, alpha' = (v / sigma)(alpha_kin - alpha) (the PT1 slip transient of TUM's
+single-track model); sigma = 0 (the default) uses the kinematic slip directly.
+
+**Integration.** Fixed-step classical RK4 at the plant step ts with inputs held over it (a
+zero-order hold, as ``vehicle.DiscretePlant``), split into n equal sub-steps so that
+h * ||A||_inf <= 0.25, where A is the linear model at the current speed with the largest
+friction on any wheel (the tyres' slope is largest at zero slip, so this bounds the
+Jacobian) and the relaxation rate v / sigma.  RK4's error per step is then about
+(h lambda)^5 / 120 <= 1e-5 of the state (measured against the exact ZOH solution at small
+slip: ``tests/test_car_models.py``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim_plant.car.tyres import G, INTACT, Grip, axle_tyres
+from sim_plant.car.vehicle import MAX_SPEED, VehicleParams
+
+#: Braking ends here (m/s): the slip-angle model does not hold near standstill.
+STOP_SPEED = 3.0
+#: Largest h * ||A||_inf of one RK4 sub-step.
+MAX_STEP_RATE = 0.25
+MAX_RELAXATION = 5.0  # m; passenger-car tyres are 0.2-1 m
+
+
+class NonlinearPlant:
+    """The nonlinear single-track model stepped at a fixed ``ts``, like ``vehicle.DiscretePlant``.
+
+    ``x`` is [beta, r]; ``v`` the current speed.  ``outputs`` and ``advance`` take the
+    front-wheel angle and the yaw moment as DiscretePlant's do, plus an optional lateral force
+    at the CG and a longitudinal deceleration; ``set_grip`` changes the wheels' grip
+    (split mu, a blow-out).
+    """
+
+    def __init__(self, params: VehicleParams, ts: float, relaxation_length: float = 0.0,
+                 stop_speed: float = STOP_SPEED, g: float = G) -> None:
+        if not (math.isfinite(ts) and 0.0 < ts <= 0.1):
+            raise ValueError(f"plant step ts must be in (0, 0.1] s, got {ts!r}")
+        if not (math.isfinite(relaxation_length) and 0.0 <= relaxation_length <= MAX_RELAXATION):
+            raise ValueError(f"relaxation_length must be in [0, {MAX_RELAXATION:g}] m, got {relaxation_length!r}")
+        if not (math.isfinite(stop_speed) and 0.5 <= stop_speed <= MAX_SPEED):
+            raise ValueError(f"stop_speed must be in [0.5, {MAX_SPEED:g}] m/s, got {stop_speed!r}")
+        self.ts = ts
+        self.sigma = relaxation_length
+        self.stop_speed = stop_speed
+        self.g = g
+        self.set_grip(INTACT)
+        self._z = np.zeros(5)  # beta, r, v, alpha_f (lagged), alpha_r (lagged)
+        self.set_params(params)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def x(self) -> np.ndarray:
+        """[beta, r], the state ``vehicle.DiscretePlant`` has."""
+        return self._z[:2].copy()
+
+    @property
+    def v(self) -> float:
+        return float(self._z[2])
+
+    def reset(self) -> None:
+        self._z[[0, 1, 3, 4]] = 0.0
+        self._z[2] = self.params.v
+
+    def set_params(self, params: VehicleParams, keep_speed: bool = False) -> None:
+        """A new operating point (mu, mass, ...); the speed becomes ``params.v`` unless
+        ``keep_speed`` (then the integrated speed carries on, e.g. while braking)."""
+        self.params = params
+        self._front, self._rear = axle_tyres(params, self.g)
+        if not keep_speed:
+            self._z[2] = params.v
+
+    def set_grip(self, grip: Grip) -> None:
+        """The wheels' grip from now on (``tyres.INTACT`` for all four on the car's road)."""
+        self.grip = grip
+        self._intact = grip == INTACT
+
+    # ------------------------------------------------------------------ model
+
+    def axle_forces(self, alpha_f: float, alpha_r: float) -> tuple[float, float]:
+        """(F_yf, F_yr) in N at the given slip angles with the current grip and road mu."""
+        mu, g = self.params.mu, self.grip
+        if self._intact:
+            return float(self._front.force(alpha_f, mu)), float(self._rear.force(alpha_r, mu))
+        return (float(self._front.axle_force(alpha_f, mu, g.fl, g.fr)),
+                float(self._rear.axle_force(alpha_r, mu, g.rl, g.rr)))
+
+    def _slip(self, z: np.ndarray, delta: float) -> tuple[float, float]:
+        if self.sigma > 0.0:
+            return float(z[3]), float(z[4])
+        beta, r, v = z[0], z[1], z[2]
+        return delta - beta - self.params.l_f * r / v, -beta + self.params.l_r * r / v
+
+    def _derivative(self, z: np.ndarray, delta: float, m_z: float, f_y: float, a_x: float) -> np.ndarray:
+        p = self.params
+        beta, r, v = z[0], z[1], z[2]
+        f_front, f_rear = self.axle_forces(*self._slip(z, delta))
+        dz = np.zeros(5)
+        dz[0] = (f_front + f_rear + f_y) / (p.mass * v) - r
+        dz[1] = (p.l_f * f_front - p.l_r * f_rear + m_z) / p.inertia
+        dz[2] = -a_x if (a_x < 0.0 or v > self.stop_speed) else 0.0
+        if self.sigma > 0.0:
+            rate = v / self.sigma
+            dz[3] = rate * (delta - beta - p.l_f * r / v - z[3])
+            dz[4] = rate * (-beta + p.l_r * r / v - z[4])
+        return dz
+
+    def substeps(self) -> int:
+        """How many RK4 sub-steps the next ``advance`` takes (see the module docstring)."""
+        p, v = self.params, self.v
+        g = self.grip
+        mu = max([p.mu] + [w.mu for w in (g.fl, g.fr, g.rl, g.rr) if w.mu is not None])
+        c_f, c_r = mu * p.c_f0, mu * p.c_r0
+        moment = abs(c_r * p.l_r - c_f * p.l_f)
+        row1 = (c_f + c_r) / (p.mass * v) + abs(moment / (p.mass * v * v) - 1.0)
+        row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
+        rate = max(row1, row2, v / self.sigma if self.sigma > 0.0 else 0.0)
+        return max(1, math.ceil(self.ts * rate / MAX_STEP_RATE))
+
+    # ------------------------------------------------------------------ the DiscretePlant interface
+
+    def outputs(self, delta_f: float, m_z: float, f_y: float = 0.0) -> np.ndarray:
+        """[r, beta, a_y] at the current state with the given (held) inputs; a_y = sum F_y / m."""
+        f_front, f_rear = self.axle_forces(*self._slip(self._z, delta_f))
+        return np.array([self._z[1], self._z[0], (f_front + f_rear + f_y) / self.params.mass])
+
+    def advance(self, delta_f: float, m_z: float, f_y: float = 0.0, a_x: float = 0.0) -> None:
+        """One plant step with the inputs held constant over it (RK4 in equal sub-steps)."""
+        n = self.substeps()
+        h = self.ts / n
+        z = self._z
+        braking = z[2] > self.stop_speed
+        for _ in range(n):
+            k1 = self._derivative(z, delta_f, m_z, f_y, a_x)
+            k2 = self._derivative(z + 0.5 * h * k1, delta_f, m_z, f_y, a_x)
+            k3 = self._derivative(z + 0.5 * h * k2, delta_f, m_z, f_y, a_x)
+            k4 = self._derivative(z + h * k3, delta_f, m_z, f_y, a_x)
+            z = z + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            if braking and a_x > 0.0:
+                z[2] = max(z[2], self.stop_speed)
+        if z[2] > MAX_SPEED:
+            z[2] = MAX_SPEED
+        self._z = z
