@@ -84,7 +84,7 @@ def receive_path(quick: bool) -> dict[str, Any]:
 
         def ours() -> None:
             i = it[0]
-            node._receive(frames[i])
+            node.receive(frames[i])
             it[0] = i + 1 if i + 1 < len(frames) else 0
 
         before = node.stats.rx_rejected

@@ -119,6 +119,12 @@ class Contract:
         Signals not given take their DBC start value where it has one.  ``strict=False`` lets a
         test bench send values outside the DBC ranges on purpose.
         """
+        return self.seal(name, self.encode_unsealed(name, values, counter, strict=strict))
+
+    def encode_unsealed(self, name: str, values: Mapping[str, float | str], counter: int | None = None,
+                        *, strict: bool = True) -> bytearray:
+        """``encode`` with the E2E CRC byte left 0: what a SecOC signer authenticates before it
+        ``seal``s the frame."""
         msg = self._by_name[name]
         cfg = self._e2e[name]
         full = {**self._defaults[name], **values}
@@ -127,7 +133,11 @@ class Contract:
                 raise ValueError(f"{name} is E2E-protected: give the alive counter")
             full[cfg.counter_signal] = counter
             full[cfg.crc_signal] = 0
-        data = bytearray(msg.encode(full, strict=strict, scaling=True))
+        return bytearray(msg.encode(full, strict=strict, scaling=True))
+
+    def seal(self, name: str, data: bytearray) -> bytes:
+        """The frame with its E2E CRC set (last: the CRC covers everything else)."""
+        cfg = self._e2e[name]
         if cfg is not None:
             data[cfg.crc_byte] = self.e2e_crc(name, bytes(data))
         return bytes(data)

@@ -69,6 +69,8 @@ MAX_MODEL_DELAY = 8
 #: The paper's continuous-time tuning of eq. (22), section 4.
 PAPER_K = 10.0
 PAPER_TAU = 0.006
+#: The auxiliary actuator's range, +- rad of front-wheel angle (paper, sec. 4.1: +-3 deg).
+AUX_LIMIT = math.radians(3.0)
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,7 @@ class ControllerConfig:
     tau_n: float = DEFAULT_TAU_N  # eq. (18) desired-model time constant, s
     ts: float = 0.002  # fixed step, s: 500 Hz keeps a 500 kbit/s bus under 40 % worst-case load
     method: str = METHOD_TUSTIN
-    aux_limit: float = math.radians(3.0)  # actuator range, +- rad of wheel angle
+    aux_limit: float = AUX_LIMIT  # actuator range, +- rad of wheel angle
     rate_limit: float = 0.0  # max |d u/dt| in rad/s; 0 disables
     model_delay_steps: int = 1  # whole samples from command to effect, modelled in w (0: none)
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 on fault/inactive, and on recovery

@@ -202,3 +202,32 @@ def test_table_crc_equals_crccheck(data: bytes) -> None:
 @given(st.binary(max_size=16), st.integers(0, 255))
 def test_chained_crc_equals_the_bitwise_reference(data: bytes, start: int) -> None:
     assert mrsteer_dbc.crc8_sae_j1850(data, start, False) == _crc8_j1850_bitwise(data, init=start ^ 0xFF)
+
+
+def test_every_name_in_names_is_in_the_dbc(contract: mrsteer_dbc.Contract) -> None:
+    from mrsteer_dbc import names
+
+    messages = {v for k, v in vars(names).items() if k.startswith("MSG_")}
+    assert messages == {m.name for m in contract.db.messages}  # every message named, none invented
+    assert set(names.SENSORS) == {m.name for m in contract.db.messages if m.senders == ["VEHICLE"]} - {names.MSG_SYNC}
+    signals = {v for k, v in vars(names).items() if k.startswith("SIG_")}
+    in_dbc = {s.name: m.name for m in contract.db.messages for s in m.signals}
+    assert signals <= set(in_dbc)
+    for message, signal in names.SENSOR_SIGNAL.items():
+        assert in_dbc[signal] == message
+
+
+def test_cause_bits_and_meas_none_are_what_the_dbc_says(contract: mrsteer_dbc.Contract) -> None:
+    from mrsteer_dbc import names
+
+    comment = contract.message(names.MSG_STATUS).get_signal_by_name(names.SIG_STATUS_CAUSE).comment
+    said = {names.CAUSE_STEER_MISSING: "1 driver angle missing", names.CAUSE_YAW_MISSING: "2 yaw rate missing",
+            names.CAUSE_SPEED_MISSING: "4 speed missing", names.CAUSE_E2E: "8 E2E errors",
+            names.CAUSE_RANGE: "16 input out of range", names.CAUSE_LOW_SPEED: "32 below activation speed",
+            names.CAUSE_AUTH: "64 (SecOC on)"}
+    for bit, words in said.items():
+        assert words in comment and int(words.split()[0]) == bit
+    causes = [v for k, v in vars(names).items() if k.startswith("CAUSE_")]
+    assert sorted(causes) == sorted(said) and sum(causes) == 0x7F  # distinct single bits
+    meas = contract.message(names.MSG_CMD).get_signal_by_name(names.SIG_CMD_MEAS)
+    assert {int(k): str(v) for k, v in meas.choices.items()} == {names.MEAS_NONE: "NONE"}

@@ -82,7 +82,7 @@ def test_silenced_yaw_sensor_faults_fades_and_recovers_without_jump(rig: Rig) ->
         u, sig = rig.cycle(yaw=None)
         states.append(sig["AuxSteerCmd_State"])
         outs.append(u)
-    limit = rig.node._yaw.limit
+    limit = rig.node.input(rt.MSG_YAW).limit
     assert limit == 10  # 10 of its own 1 ms cycles
     assert all(s == mr.STATUS_ACTIVE for s in states[:limit])
     assert all(s == mr.STATUS_FAULT for s in states[limit + 1:])
@@ -117,7 +117,7 @@ def test_repeated_counter_is_stale_and_rejected(rig: Rig) -> None:
     for _ in range(3):
         rig.cycle(yaw=0.3, counter=stuck)  # a frozen sender repeating itself
     assert rig.node.stats.rx_rejected == 3
-    assert rig.node._yaw.value == pytest.approx(0.01)  # the stale value was never used
+    assert rig.node.input(rt.MSG_YAW).value == pytest.approx(0.01)  # the stale value was never used
 
 
 def test_out_of_range_value_is_rejected_with_range_cause(rig: Rig) -> None:
@@ -191,3 +191,35 @@ def test_phase_lock_moves_cycle_starts_toward_the_frame_arrival_and_converges() 
         assert math.remainder(start - (0.3e-3 + offset), period) == pytest.approx(0.0, abs=1e-7)
     # The error wraps: a frame 0.1 ms *after* the cycle start of the previous period is close.
     assert timing.phase_correction(1.95e-3, 0.0, period, 0.0) == pytest.approx(timing.SYNC_GAIN * -0.05e-3)
+
+
+def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str) -> None:
+    """Lockstep end of run: with no yaw-rate frame the sensors-triggered loop still runs its
+    watchdog cycle after SENSORS_WATCHDOG_S, and a stop while it waits for frames ends it within
+    a receive slice, with nothing sent after the stop but the final zero command."""
+    import threading
+    import time
+
+    with can.Bus(interface="virtual", channel=channel) as ctl, can.Bus(interface="virtual", channel=channel) as ear:
+        node = rt.ControllerNode(ctl, rt.RuntimeConfig(rate_hz=500.0, trigger="sensors"))
+        start = time.monotonic()
+        loop = threading.Thread(target=node.run)
+        loop.start()
+        try:
+            first = ear.recv(3.0)  # the watchdog cycle's command
+            waited = time.monotonic() - start
+            assert first is not None and first.arbitration_id == C.frame_id(rt.MSG_CMD)
+            assert timing.SENSORS_WATCHDOG_S - 0.05 <= waited <= timing.SENSORS_WATCHDOG_S + 0.5
+            time.sleep(0.3)  # well inside the next watchdog wait
+            stopped = time.monotonic()
+            node.stop()
+            loop.join(2.0)
+            assert not loop.is_alive() and time.monotonic() - stopped <= 0.2
+        finally:
+            node.stop()
+            loop.join(2.0)
+        after = list(iter(lambda: ear.recv(0.05), None))
+    assert len(after) == 1
+    d = C.decode(after[0].arbitration_id, bytes(after[0].data))
+    assert d.name == rt.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
+    assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE

@@ -183,7 +183,7 @@ def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
     try:
         node = rt.ControllerNode(bus, rt.RuntimeConfig())
         for fid, data, extended in frames:
-            node._receive(can.Message(arbitration_id=fid, data=data, is_extended_id=extended))
+            node.receive(can.Message(arbitration_id=fid, data=data, is_extended_id=extended))
             node.control()  # and the cycle behind it
         s = node.stats
         assert s.rx_frames == len(frames) and s.rx_rejected + s.rx_ignored <= s.rx_frames

@@ -37,15 +37,15 @@ def test_valid_commands_are_applied_bad_ones_ignored(rig) -> None:
     node, ctl = rig
     _cmd(ctl, 0.02, 0)
     node.step(0)
-    assert node.applied == pytest.approx(0.02)
+    assert node.actuator.applied == pytest.approx(0.02)
     _cmd(ctl, -0.04, 1, corrupt=True)  # bad CRC
     _cmd(ctl, -0.04, 0)  # counter 0 again: stale
     node.step(1)
-    assert node.applied == pytest.approx(0.02)
+    assert node.actuator.applied == pytest.approx(0.02)
     assert node.stats.cmd_rejected == 2
     _cmd(ctl, 0.03, 1)
     node.step(2)
-    assert node.applied == pytest.approx(0.03)
+    assert node.actuator.applied == pytest.approx(0.03)
 
 
 def test_spoofed_out_of_range_command_is_refused(rig) -> None:
@@ -54,7 +54,7 @@ def test_spoofed_out_of_range_command_is_refused(rig) -> None:
                                         "AuxSteerCmd_MeasCounter": 15}, 0, strict=False)
     ctl.send(can.Message(arbitration_id=CMD, data=data, is_extended_id=False))
     node.step(0)
-    assert node.applied == 0.0 and node.stats.cmd_rejected == 1
+    assert node.actuator.applied == 0.0 and node.stats.cmd_rejected == 1
 
 
 def test_a_command_at_the_signals_edge_is_clamped_to_the_actuators_3_degrees(rig) -> None:
@@ -66,8 +66,8 @@ def test_a_command_at_the_signals_edge_is_clamped_to_the_actuators_3_degrees(rig
     for k in range(3):
         _cmd(ctl, edge if k % 2 == 0 else -edge, k)
         node.step(k)
-        assert abs(node.applied) == pytest.approx(math.radians(3.0), abs=1e-15)
-        assert abs(node.applied) <= math.radians(3.0)
+        assert abs(node.actuator.applied) == pytest.approx(math.radians(3.0), abs=1e-15)
+        assert abs(node.actuator.applied) <= math.radians(3.0)
 
 
 def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
@@ -75,12 +75,12 @@ def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
     for k in range(5):
         _cmd(ctl, 0.05, k)
         node.step(k)
-    assert node.applied == pytest.approx(0.05)
+    assert node.actuator.applied == pytest.approx(0.05)
     applied = []
     for k in range(5, 200):  # the controller goes quiet
         node.step(k)
-        applied.append(node.applied)
-    timeout = node.cmd_timeout_steps
+        applied.append(node.actuator.applied)
+    timeout = node.actuator.timeout_steps
     assert applied[timeout - 2] == pytest.approx(0.05)  # held while still fresh
     fade = math.radians(30.0) * 1e-3
     diffs = [a - b for a, b in zip(applied, applied[1:])]
@@ -92,7 +92,7 @@ def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
     for k in range(200, 300):
         _cmd(ctl, 0.04, k % 15)
         node.step(k)
-        back.append(node.applied)
+        back.append(node.actuator.applied)
     steps = [b - a for a, b in zip([0.0] + back, back)]
     assert max(steps) <= fade + 1e-12 and back[-1] == pytest.approx(0.04)
 
@@ -103,5 +103,17 @@ def test_frames_of_other_ids_are_ignored_even_if_they_pass_the_filter(rig) -> No
     node, _ = rig
     status = C.encode("MRS_CtrlStatus", {s.name: 0 for s in C.message("MRS_CtrlStatus").signals})
     msg = can.Message(arbitration_id=C.frame_id("MRS_CtrlStatus"), data=status, is_extended_id=False)
-    assert node._receive(msg, 0) is False
+    assert node.receive(msg, 0) is False
     assert node.stats.rx_ignored == 1 and node.stats.cmd_accepted == node.stats.cmd_rejected == 0
+
+
+def test_the_actuators_defaults_are_the_plants_and_its_command_lines(rig) -> None:
+    from sim_plant.car import actuator
+    from sim_plant.nodes.plant import build_parser
+
+    node, _ = rig
+    assert (actuator.CMD_TIMEOUT_S, actuator.FADE_RATE_RAD_S, actuator.RATE_LIMIT_RAD_S) == (0.02, math.radians(30.0), 0.0)
+    args = build_parser().parse_args([])
+    assert (args.cmd_timeout, args.actuator_rate) == (0.02, 0.0)
+    a = node.actuator  # at 1 ms: 20 steps of timeout, 30 deg/s of fade, +-3 deg
+    assert (a.timeout_steps, a.fade_step, a.slew_step, a.limit) == (20, math.radians(30.0) * 1e-3, 0.0, math.radians(3.0))

@@ -118,12 +118,17 @@ def test_secoc_vectors_verify_in_order_and_fail_when_replayed() -> None:
     verifier = secoc.CommandVerifier(contract, bytes.fromhex(cfg["key"]), lambda: float(cfg["clock_s"]))
     with (VECTOR_DIR / "secoc_frames.csv").open() as f:
         rows = [r for r in csv.DictReader(f) if r["sent"] == "1"]
+
+    def verify(r: dict[str, str]) -> bool:
+        frame_id, frame = int(cfg["command_id"]), bytes.fromhex(r["frame_hex"])
+        return verifier.verify(frame_id, frame, contract.decode(frame_id, frame).signals)
+
     for r in rows:
         if r["kind"] == "sync":
             verifier.current, verifier.previous = int(r["epoch"]), verifier.current
         else:
-            assert verifier.verify(bytes.fromhex(r["frame_hex"])), r
-    assert not any(verifier.verify(bytes.fromhex(r["frame_hex"])) for r in rows if r["kind"] == "cmd")
+            assert verify(r), r
+    assert not any(verify(r) for r in rows if r["kind"] == "cmd")
 
 
 def _sensor_rows() -> list[dict[str, str]]:

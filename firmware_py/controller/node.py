@@ -10,17 +10,19 @@ Each cycle, in this order (the scheduling contract a port must keep):
    command to zero and re-initialise bumplessly once the input is good again;
 4. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
 
-With a SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's
-``MRS_SecOCSync`` frames and verifies each sensor frame's MAC (after length, CRC and range,
-before the alive counter; a failure counts as a rejected frame of cause ``CAUSE_AUTH``), and
-step 4 signs each command (``mrsteer_dbc.secoc``); without a valid sync for
-``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
+Every frame goes through the node's links (``mrsteer_dbc.link``): ``RxLink`` checks a received
+one and names the cause of a rejection, ``TxLink`` builds the command and the status.  With a
+SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's ``MRS_SecOCSync``
+frames and verifies each sensor frame's MAC (a failure counts as a rejected frame of cause
+``CAUSE_AUTH``), and step 4 signs each command (``mrsteer_dbc.secoc``); without a valid sync
+for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
 
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
 plant, where simulated time is set by the plant; with no yaw-rate frame for
 ``SENSORS_WATCHDOG_S`` of wall time it runs a cycle anyway).  Freshness is counted in controller cycles
-either way.  SIGINT/SIGTERM end the loop after the current cycle with a final zero command
+either way.  SIGINT/SIGTERM end the loop after the current cycle (the sensors trigger
+waits for frames in slices of ``STOP_POLL_S``, so it notices promptly) with a final zero command
 marked inactive, and exit status 0.
 """
 
@@ -38,28 +40,20 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.controller.inputs import Input
 from firmware_py.controller.stats import LoopStats
-from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG_S, SYNC_POLL_S, SYNC_WINDOW, phase_correction
+from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG_S, STOP_POLL_S, SYNC_POLL_S,
+                                           SYNC_WINDOW, phase_correction)
 from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
+from mrsteer_dbc.link import Rejected, RxLink, TxLink
+# The names and cause bits are the DBC's (mrsteer_dbc.names); re-exported here for the node's users.
+from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_E2E, CAUSE_LOW_SPEED, CAUSE_RANGE, CAUSE_SPEED_MISSING,  # noqa: F401
+                               CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS,
+                               MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE,
+                               SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS, SIG_STATUS_LATENESS,
+                               SIG_STATUS_OVERRUNS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE,
+                               SIG_YAW_RATE)
 
-MSG_STEER = "MRS_DriverSteer"
-MSG_YAW = "MRS_YawRate"
-MSG_SPEED = "MRS_VehicleSpeed"
-MSG_CMD = "MRS_AuxSteerCmd"
-MSG_STATUS = "MRS_CtrlStatus"
-
-# CtrlStatus_Cause bits (documented in the DBC)
-CAUSE_STEER_MISSING = 0x01
-CAUSE_YAW_MISSING = 0x02
-CAUSE_SPEED_MISSING = 0x04
-CAUSE_E2E = 0x08
-CAUSE_RANGE = 0x10
-CAUSE_LOW_SPEED = 0x20
-# SecOC on: no valid freshness sync (the actuator will not apply commands), or sensor frames failing their MAC
-CAUSE_AUTH = 0x40
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
-
-MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
 TRIGGERS = ("clock", "sensors")
 
@@ -92,10 +86,10 @@ class ControllerNode:
         c = self.contract
         # The firmware's input ranges are the DBC's: one source of truth for what is valid.
         ctrl = replace(config.controller, ts=period,
-                       driver_angle_max=c.signal_range(MSG_STEER, "DriverSteer_Angle")[1],
-                       yaw_rate_max=c.signal_range(MSG_YAW, "YawRate_YawRate")[1],
-                       speed_max=c.signal_range(MSG_SPEED, "VehicleSpeed_Speed")[1],
-                       aux_limit=min(config.controller.aux_limit, c.signal_range(MSG_CMD, "AuxSteerCmd_Angle")[1]))
+                       driver_angle_max=c.signal_range(MSG_STEER, SIG_STEER_ANGLE)[1],
+                       yaw_rate_max=c.signal_range(MSG_YAW, SIG_YAW_RATE)[1],
+                       speed_max=c.signal_range(MSG_SPEED, SIG_SPEED)[1],
+                       aux_limit=min(config.controller.aux_limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1]))
         self.coeffs = mr.configure(ctrl)
         self.state = mr.State()
 
@@ -105,26 +99,26 @@ class ControllerNode:
             cycle = c.cycle_time_s(name, period) or period
             return max(1, int(math.ceil(cycles * cycle / period - 1e-9)))
 
-        self.inputs = {
-            c.frame_id(MSG_STEER): Input(MSG_STEER, "DriverSteer_Angle", CAUSE_STEER_MISSING, limit(MSG_STEER),
-                                          config.max_counter_delta),
-            c.frame_id(MSG_YAW): Input(MSG_YAW, "YawRate_YawRate", CAUSE_YAW_MISSING, limit(MSG_YAW),
-                                        config.max_counter_delta),
-            c.frame_id(MSG_SPEED): Input(MSG_SPEED, "VehicleSpeed_Speed", CAUSE_SPEED_MISSING, limit(MSG_SPEED),
-                                          config.max_counter_delta),
+        self.inputs = {  # by frame ID
+            c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, limit(MSG_STEER)),
+            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW)),
+            c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
         }
+        self._by_name = {inp.name: inp for inp in self.inputs.values()}
         self._steer, self._yaw, self._speed = self.inputs.values()
         self.yaw_id = c.frame_id(MSG_YAW)
-        self.signer = secoc.CommandSigner(c, config.secoc_key) if config.secoc_key is not None else None
-        self.sensor_verifier = secoc.SensorVerifier(c, config.secoc_key) if config.secoc_key is not None else None
-        self.sync_id = c.frame_id(secoc.SYNC) if self.signer is not None else None
-        self.sync_limit = limit(secoc.SYNC, SYNC_STALE_CYCLES)
+        keyed = config.secoc_key is not None
+        self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
+        self.sensor_verifier = secoc.SensorVerifier(c, config.secoc_key) if keyed else None
+        self.sync_id = c.frame_id(MSG_SYNC) if keyed else None
+        self.sync_limit = limit(MSG_SYNC, SYNC_STALE_CYCLES)
         self._sync_age = self.sync_limit + 1
-        wanted = [*self.inputs, *([self.sync_id] if self.sync_id is not None else [])]
-        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in wanted])
-        self.cmd_id = c.frame_id(MSG_CMD)
-        self.status_id = c.frame_id(MSG_STATUS)
-        self.cmd_counter = mrsteer_dbc.AliveCounter()
+        verifiers: dict[str, secoc.FrameVerifier] = {}
+        if self.signer is not None and self.sensor_verifier is not None:
+            verifiers = {MSG_SYNC: self.signer, **dict.fromkeys(self._by_name, self.sensor_verifier)}
+        self.rx = RxLink(c, [*self._by_name, *([MSG_SYNC] if keyed else [])], verifiers, config.max_counter_delta)
+        bus.set_filters(self.rx.filters())
+        self.tx = TxLink(c, (MSG_CMD, MSG_STATUS), self.signer)
         status_cycle = c.cycle_time_s(MSG_STATUS) or 0.1
         self.status_every = max(1, int(round(status_cycle / period)))
         self.stats = LoopStats()
@@ -138,50 +132,42 @@ class ControllerNode:
 
     # ---------------------------------------------------------------- receive
 
-    def _receive(self, msg: can.Message) -> bool:
-        """Check and store one frame; True if it was an accepted yaw-rate frame."""
+    def input(self, name: str) -> Input:
+        """The receive state of sensor message ``name`` (``MSG_STEER``, ``MSG_YAW``, ``MSG_SPEED``)."""
+        return self._by_name[name]
+
+    def receive(self, msg: can.Message) -> bool:
+        """Check one frame through the link and store it; True if it was an accepted yaw-rate frame."""
         self.stats.rx_frames += 1
-        if msg.arbitration_id == self.sync_id and not (msg.is_extended_id or msg.is_error_frame):
-            self._receive_sync(bytes(msg.data))
+        got = self.rx.accept(msg)
+        frame_id = msg.arbitration_id
+        if type(got) is Rejected:  # not isinstance: an Enum class check costs 4 times as much
+            if got is Rejected.IGNORED:
+                self.stats.rx_ignored += 1
+            elif frame_id == self.sync_id:
+                self.stats.syncs_rejected += 1
+            else:
+                self.stats.rx_rejected += 1
+                if got is Rejected.MAC:
+                    self.stats.rx_auth_failed += 1
+                inp = self.inputs[frame_id]
+                inp.rejects += 1
+                inp.bad_cause = got.cause
             return False
-        inp = self.inputs.get(msg.arbitration_id)
-        if inp is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
-            self.stats.rx_ignored += 1
+        if frame_id == self.sync_id:
+            assert self.signer is not None and self.signer.epoch is not None and self.sensor_verifier is not None
+            self._sync_age = 0
+            self.sensor_verifier.adopt(self.signer.epoch)
             return False
-        data = bytes(msg.data)
-        decoded = self.contract.decode(msg.arbitration_id, data)
-        status = decoded.status if decoded is not None else mrsteer_dbc.E2EStatus.BAD_LENGTH
-        # Authenticate before the counter check: a forged frame must not advance the sequence.
-        if status is mrsteer_dbc.E2EStatus.OK and self.sensor_verifier is not None and not self.sensor_verifier.verify(
-                msg.arbitration_id, data, decoded.signals):
-            self.stats.rx_auth_failed += 1
-            return self._reject(inp, CAUSE_AUTH)
-        if status is mrsteer_dbc.E2EStatus.OK:
-            status = inp.receiver.check(decoded.counter)
-        if not status.accepted:
-            return self._reject(inp, CAUSE_RANGE if status is mrsteer_dbc.E2EStatus.OUT_OF_RANGE else CAUSE_E2E)
+        inp = self.inputs[frame_id]
         inp.rejects = 0
-        inp.value = decoded.signals[inp.signal]
-        inp.last_counter = decoded.counter
+        inp.value = got.signals[inp.signal]
+        inp.last_counter = got.counter
         inp.age = 0
-        if msg.arbitration_id == self.yaw_id:
+        if frame_id == self.yaw_id:
             self._yaw_stamp = msg.timestamp or 0.0
             return True
         return False
-
-    def _reject(self, inp: Input, cause: int) -> bool:
-        self.stats.rx_rejected += 1
-        inp.rejects += 1
-        inp.bad_cause = cause
-        return False
-
-    def _receive_sync(self, data: bytes) -> None:
-        decoded = self.contract.decode(self.sync_id, data)
-        if decoded is not None and decoded.status.accepted and self.signer.accept_sync(data):
-            self._sync_age = 0
-            self.sensor_verifier.adopt(self.signer.epoch)
-        else:
-            self.stats.syncs_rejected += 1
 
     def drain(self) -> bool:
         got_yaw = False
@@ -190,7 +176,7 @@ class ControllerNode:
             msg = recv(0.0)
             if msg is None:
                 return got_yaw
-            got_yaw = self._receive(msg) or got_yaw
+            got_yaw = self.receive(msg) or got_yaw
 
     # ---------------------------------------------------------------- control
 
@@ -227,24 +213,18 @@ class ControllerNode:
             self._send_status()
 
     def _send_command(self, u: float, state: int) -> None:
-        values = {"AuxSteerCmd_State": state, "AuxSteerCmd_Angle": u, "AuxSteerCmd_MeasCounter": self._answers}
-        if self.signer is not None:
-            data = self.signer.sign(values, self.cmd_counter.next())
-        else:
-            data = self.contract.encode(MSG_CMD, values, self.cmd_counter.next())
-        self.bus.send(can.Message(arbitration_id=self.cmd_id, data=data, is_extended_id=False))
+        self.bus.send(self.tx.frame(MSG_CMD, {SIG_CMD_STATE: state, SIG_CMD_ANGLE: u, SIG_CMD_MEAS: self._answers}))
         self.stats.tx_frames += 1
 
     def _send_status(self) -> None:
-        data = self.contract.encode(MSG_STATUS, {
-            "CtrlStatus_State": self.state.status,
-            "CtrlStatus_InputFlags": self.state.fault_flags,
-            "CtrlStatus_Cause": self.cause,
-            "CtrlStatus_Rejected": self.stats.rx_rejected % 65536,
-            "CtrlStatus_Overruns": self.stats.overruns % 65536,
-            "CtrlStatus_MaxLateness": min(self._max_lateness, 0.65535),
-        })
-        self.bus.send(can.Message(arbitration_id=self.status_id, data=data, is_extended_id=False))
+        self.bus.send(self.tx.frame(MSG_STATUS, {
+            SIG_STATUS_STATE: self.state.status,
+            SIG_STATUS_FLAGS: self.state.fault_flags,
+            SIG_STATUS_CAUSE: self.cause,
+            SIG_STATUS_REJECTED: self.stats.rx_rejected % 65536,
+            SIG_STATUS_OVERRUNS: self.stats.overruns % 65536,
+            SIG_STATUS_LATENESS: min(self._max_lateness, 0.65535),
+        }))
         self.stats.tx_frames += 1
         self._max_lateness = 0.0
 
@@ -304,7 +284,7 @@ class ControllerNode:
                     if msg is None:
                         time.sleep(min(left, SYNC_POLL_S))
                     else:
-                        got_yaw = self._receive(msg)
+                        got_yaw = self.receive(msg)
             self.control()
             deadline += period
             if sync is not None and got_yaw and self._yaw_stamp > 0.0:
@@ -320,14 +300,30 @@ class ControllerNode:
         wait = max(self._yaw.limit * self.period, SENSORS_WATCHDOG_S)
         while self._running:
             got = False
-            msg = self.bus.recv(wait)
+            msg = self._recv_unless_stopped(wait)
+            if not self._running:
+                break  # stopped while waiting: no cycle on a frame or a watchdog that ended the run
             if msg is not None:
-                got = self._receive(msg)
+                got = self.receive(msg)
             got = self.drain() or got
             if got or msg is None:
                 self.control()
             if end is not None and time.monotonic() >= end:
                 break
+
+    def _recv_unless_stopped(self, wait: float) -> can.Message | None:
+        """The next frame within ``wait`` s, or None after ``wait`` s without one or once
+        ``stop()`` was called: waited in slices of ``STOP_POLL_S``, because a signal does not
+        interrupt a blocking receive (the call is retried with the time that was left)."""
+        until = time.monotonic() + wait
+        while self._running:
+            left = until - time.monotonic()
+            if left <= 0.0:
+                return None
+            msg = self.bus.recv(min(left, STOP_POLL_S))
+            if msg is not None:
+                return msg
+        return None
 
     def finish(self) -> None:
         """Final zero command marked inactive, as on an orderly shutdown."""

@@ -7,6 +7,7 @@ import array
 import math
 
 SENSORS_WATCHDOG_S = 1.0  # sensors trigger: wall time without a yaw-rate frame before a cycle runs anyway
+STOP_POLL_S = 0.05  # sensors trigger: the slice a frame is waited for in, so a stop is seen this soon
 DEFAULT_SYNC_OFFSET = 50e-6  # s after the yaw-rate frame's arrival that the cycle aims to start
 SYNC_GAIN = 0.1  # fraction of the phase error corrected per cycle
 SYNC_MAX_SLEW = 0.02  # largest correction per cycle, as a fraction of the period

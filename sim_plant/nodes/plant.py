@@ -5,9 +5,10 @@ Each plant step (period ``ts``):
 1. apply the scenario events due (and any ``MRS_BenchInject`` received), re-discretising the
    model if speed or friction changed;
 2. the driver model sets the driver's front-wheel angle;
-3. the actuator takes the newest valid auxiliary command: only frames that pass length, CRC,
-   range, SecOC (when a key is given: ``mrsteer_dbc.secoc``) and alive-counter checks count,
-   in that order; with no valid command for ``cmd_timeout`` it fades to zero at a bounded rate;
+3. the actuator (``sim_plant.car.actuator``) takes the newest valid auxiliary command: only
+   frames the receive link accepts count (``mrsteer_dbc.link.RxLink``: length, CRC, range,
+   SecOC when a key is given, alive counter); with no valid command for ``cmd_timeout`` it
+   fades to zero at a bounded rate;
 4. publish the sensor messages due at this step (with SecOC, first ``MRS_SecOCSync`` at its
    DBC cycle time: the actuator is the freshness master, and the sensor frames are signed for
    the epoch it announced) (each at its DBC cycle time, never faster than the plant step):
@@ -44,10 +45,14 @@ from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
+from mrsteer_dbc.link import Rejected, RxLink, TxLink
+from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW, SENSORS, SIG_BENCH_MU,
+                               SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_SPEED, SIG_STEER_ANGLE,
+                               SIG_YAW_RATE)
 from sim_plant.car import scenario as scn
+from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.vehicle import DiscretePlant
 
-ACTUATOR_LIMIT = math.radians(3.0)  # rad: the auxiliary actuator saturates at +-3 deg of wheel angle (paper, sec. 4.1)
 MODES = ("realtime", "lockstep")
 
 
@@ -78,9 +83,9 @@ class PlantNode:
                      "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "wall_s")
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
-                 delay_steps: int = 1, cmd_timeout: float = 0.02, lockstep_timeout: float = 1.0,
-                 fade_rate: float = math.radians(30.0), contract: mrsteer_dbc.Contract | None = None,
-                 expect_controller: bool = True, actuator_rate: float = 0.0,
+                 delay_steps: int = 1, cmd_timeout: float = CMD_TIMEOUT_S, lockstep_timeout: float = 1.0,
+                 fade_rate: float = FADE_RATE_RAD_S, contract: mrsteer_dbc.Contract | None = None,
+                 expect_controller: bool = True, actuator_rate: float = RATE_LIMIT_RAD_S,
                  secoc_key: bytes | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}")
@@ -91,30 +96,22 @@ class PlantNode:
         self.plant = DiscretePlant(self.scene.params(), ts)
         # The actuator's own range, not the signal's: the DBC's +-0.0524 rad is 3.0023 deg, so a
         # command at the signal's edge (a forgery, on a bus without SecOC) would pass +-3 deg.
-        self.limit = min(ACTUATOR_LIMIT, c.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1])
-        self.cmd_id = c.frame_id("MRS_AuxSteerCmd")
-        self.bench_id = c.frame_id("MRS_BenchInject")
-        self.cmd_rx = mrsteer_dbc.E2EReceiver()
+        limit = min(ActuatorConfig().limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1])
+        self.actuator = Actuator(ActuatorConfig(cmd_timeout, fade_rate, actuator_rate, limit), ts)
+        self.cmd_id = c.frame_id(MSG_CMD)
         self.verifier = secoc.CommandVerifier(c, secoc_key) if secoc_key is not None else None
         self.sensor_signer = secoc.SensorSigner(c, secoc_key) if secoc_key is not None else None
-        self.sync_id = c.frame_id(secoc.SYNC)
-        self.sync_every = max(1, int(round((c.cycle_time_s(secoc.SYNC) or 0.1) / ts)))
-        self.bench_rx = mrsteer_dbc.E2EReceiver()
-        bus.set_filters([{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in (self.cmd_id, self.bench_id)])
-        self.counters = {name: mrsteer_dbc.AliveCounter() for name in ("MRS_DriverSteer", "MRS_YawRate",
-                                                                          "MRS_VehicleSpeed")}
-        self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in self.counters}
-        self.cmd_timeout_steps = max(1, int(math.ceil(cmd_timeout / ts)))
+        self.sync_every = max(1, int(round((c.cycle_time_s(MSG_SYNC) or 0.1) / ts)))
+        self.rx = RxLink(c, (MSG_CMD, MSG_BENCH), {MSG_CMD: self.verifier} if self.verifier is not None else None)
+        bus.set_filters(self.rx.filters())
+        # strict=False: a real sensor saturates its range; the controller range-checks.
+        self.tx = TxLink(c, (MSG_SYNC, *SENSORS), self.sensor_signer, strict=False)
+        self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in SENSORS}
         self.lockstep_timeout = lockstep_timeout
         self.expect_controller = expect_controller
-        self.fade_step = fade_rate * ts
-        self.slew_step = actuator_rate * ts  # 0: the actuator follows the command at once
         self.stats = PlantStats()
         self.pipeline: collections.deque[float] = collections.deque([0.0] * delay_steps)
         self.latest_cmd = 0.0
-        self.cmd_age = 0
-        self.applied = 0.0
-        self._recovering = False  # slewing back to the command after a timeout fade
         self.bench_m_z: float | None = None
         self._running = True
         self.record_trace = False
@@ -124,41 +121,30 @@ class PlantNode:
 
     # ---------------------------------------------------------------- receive
 
-    def _receive(self, msg: can.Message, await_counter: int | None) -> bool:
-        """Handle one frame; True if it is the valid command answering ``await_counter``."""
-        # The receive filter is not enough on its own: SocketCAN queues frames of every ID
-        # between opening the socket and installing the filter.
-        if (msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame
-                or msg.arbitration_id not in (self.cmd_id, self.bench_id)):
-            self.stats.rx_ignored += 1
+    def receive(self, msg: can.Message, await_counter: int | None = None) -> bool:
+        """Handle one frame through the link; True if it is the valid command answering
+        ``await_counter``."""
+        got = self.rx.accept(msg)
+        if type(got) is Rejected:
+            if got is Rejected.IGNORED:
+                self.stats.rx_ignored += 1
+            elif msg.arbitration_id == self.cmd_id:  # a rejected bench injection is dropped uncounted
+                self.stats.cmd_rejected += 1
+                if got is Rejected.MAC:
+                    self.stats.cmd_auth_failed += 1
             return False
-        decoded = self.contract.decode(msg.arbitration_id, bytes(msg.data))
-        if decoded is None:
-            return False
-        if msg.arbitration_id == self.bench_id:
-            if decoded.status is mrsteer_dbc.E2EStatus.OK and self.bench_rx.check(decoded.counter).accepted:
-                self.bench_m_z = decoded.signals["BenchInject_YawMoment"]
-                self.scene.mu = decoded.signals["BenchInject_Mu"]
-                self.plant.set_params(self.scene.params())
-                self.stats.bench_injections += 1
-            return False
-        status = decoded.status
-        # Authenticate before the counter check: a forged frame must not advance the sequence.
-        if status is mrsteer_dbc.E2EStatus.OK and self.verifier is not None and not self.verifier.verify(bytes(msg.data)):
-            self.stats.cmd_auth_failed += 1
-            self.stats.cmd_rejected += 1
-            return False
-        if status is mrsteer_dbc.E2EStatus.OK:
-            status = self.cmd_rx.check(decoded.counter)
-        if not status.accepted:
-            self.stats.cmd_rejected += 1
+        if got.name == MSG_BENCH:
+            self.bench_m_z = got.signals[SIG_BENCH_YAW_MOMENT]
+            self.scene.mu = got.signals[SIG_BENCH_MU]
+            self.plant.set_params(self.scene.params())
+            self.stats.bench_injections += 1
             return False
         self.stats.cmd_accepted += 1
-        self.latest_cmd = decoded.signals["AuxSteerCmd_Angle"]
-        self.cmd_age = 0
+        self.latest_cmd = got.signals[SIG_CMD_ANGLE]
+        self.actuator.command_received()
         if await_counter is None:
             return False
-        if int(decoded.signals["AuxSteerCmd_MeasCounter"]) == await_counter:
+        if int(got.signals[SIG_CMD_MEAS]) == await_counter:
             return True
         self.stats.cmd_unmatched += 1
         return False
@@ -166,48 +152,27 @@ class PlantNode:
     # ---------------------------------------------------------------- step
 
     def _publish(self, k: int, driver: float, y: Any) -> int:
-        c = self.contract
+        """Send this step's frames; the yaw-rate frame's alive counter, or -1 if none was due."""
+        send = self.bus.send
         if self.verifier is not None and k % self.sync_every == 0:
-            self.bus.send(can.Message(arbitration_id=self.sync_id, data=self.verifier.next_sync(), is_extended_id=False))
+            send(self.tx.frame(MSG_SYNC, self.verifier.new_epoch()))
             self.stats.tx_frames += 1
+            assert self.sensor_signer is not None
+            self.sensor_signer.adopt(self.verifier.current)
         sends = []
-        if k % self.every["MRS_DriverSteer"] == 0:
-            sends.append(("MRS_DriverSteer", {"DriverSteer_Angle": driver}))
-        if k % self.every["MRS_VehicleSpeed"] == 0:
-            sends.append(("MRS_VehicleSpeed", {"VehicleSpeed_Speed": self.scene.v}))
+        if k % self.every[MSG_STEER] == 0:
+            sends.append((MSG_STEER, {SIG_STEER_ANGLE: driver}))
+        if k % self.every[MSG_SPEED] == 0:
+            sends.append((MSG_SPEED, {SIG_SPEED: self.scene.v}))
         yaw_counter = -1
-        if k % self.every["MRS_YawRate"] == 0:
-            sends.append(("MRS_YawRate", {"YawRate_YawRate": float(y[0])}))
+        if k % self.every[MSG_YAW] == 0:
+            sends.append((MSG_YAW, {SIG_YAW_RATE: float(y[0])}))
         for name, values in sends:
-            counter = self.counters[name].next()
-            # strict=False: a real sensor saturates its range; the controller range-checks.
-            if self.sensor_signer is not None:
-                data = self.sensor_signer.sign(name, values, counter, self.verifier.current, strict=False)
-            else:
-                data = c.encode(name, values, counter, strict=False)
-            self.bus.send(can.Message(arbitration_id=c.frame_id(name), data=data, is_extended_id=False))
+            send(self.tx.frame(name, values))
             self.stats.tx_frames += 1
-            if name == "MRS_YawRate":
-                yaw_counter = counter
+            if name == MSG_YAW:
+                yaw_counter = self.tx.counter(MSG_YAW)
         return yaw_counter
-
-    def _actuator(self, command: float | None) -> float:
-        """What the auxiliary actuator applies this step: the command (clamped to its range) while
-        commands are fresh, otherwise a bounded-rate fade to zero.  After a fade it slews back to
-        the command at the same bounded rate rather than jump to it."""
-        a = self.applied
-        if command is not None and self.cmd_age <= self.cmd_timeout_steps:
-            target = max(-self.limit, min(self.limit, command))
-            if self.slew_step > 0.0:  # the actuator's own rate limit, whatever arrives
-                target = max(a - self.slew_step, min(a + self.slew_step, target))
-            if not self._recovering or abs(target - a) <= self.fade_step:
-                self._recovering = False
-                return target
-            return a + self.fade_step if target > a else a - self.fade_step
-        if self.cmd_age == self.cmd_timeout_steps + 1:
-            self.stats.actuator_timeouts += 1
-        self._recovering = True
-        return a - self.fade_step if a > self.fade_step else a + self.fade_step if a < -self.fade_step else 0.0
 
     def step(self, k: int) -> None:
         t = k * self.ts
@@ -221,11 +186,12 @@ class PlantNode:
         else:
             # Commands that arrived while we slept take effect over this step.
             while (msg := self.bus.recv(0.0)) is not None:
-                self._receive(msg, None)
+                self.receive(msg)
             pending = self.latest_cmd
+        actuator = self.actuator
         # Outputs at this step use the front-wheel angle being applied over it.
-        self.applied = self._actuator(pending)
-        y = self.plant.outputs(driver + self.applied, m_z)
+        actuator.apply(pending)
+        y = self.plant.outputs(driver + actuator.applied, m_z)
         yaw_counter = self._publish(k, driver, y)
 
         if self.mode == "lockstep":
@@ -233,19 +199,20 @@ class PlantNode:
             if self.delay_steps:
                 self.pipeline.append(answer)
             else:
-                self.applied = self._actuator(answer)
-        self.cmd_age += 1
+                actuator.apply(answer)
+        actuator.tick()
+        self.stats.actuator_timeouts = actuator.timeouts
         if self.record_trace:
-            self.stats.trace.append((t, driver, self.applied, m_z, self.scene.mu, self.scene.v,
+            self.stats.trace.append((t, driver, actuator.applied, m_z, self.scene.mu, self.scene.v,
                                      float(y[0]), float(y[1]), float(y[2]), self.latest_cmd, time.time()))
-        self.plant.advance(driver + self.applied, m_z)
+        self.plant.advance(driver + actuator.applied, m_z)
         self.stats.steps += 1
 
     def _await_command(self, yaw_counter: int) -> float | None:
         if not self.expect_controller:
             return None
         if yaw_counter < 0:
-            return self.latest_cmd if self.cmd_age <= self.cmd_timeout_steps else None
+            return self.latest_cmd if self.actuator.fresh else None
         deadline = time.monotonic() + self.lockstep_timeout
         while self._running:
             left = deadline - time.monotonic()
@@ -254,7 +221,7 @@ class PlantNode:
             msg = self.bus.recv(left)
             if msg is None:
                 break
-            if self._receive(msg, yaw_counter):
+            if self.receive(msg, yaw_counter):
                 return self.latest_cmd
         self.stats.lockstep_timeouts += 1
         return None
@@ -307,11 +274,11 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
-    p.add_argument("--actuator-rate", type=float, default=0.0, metavar="RAD_S",
+    p.add_argument("--actuator-rate", type=float, default=RATE_LIMIT_RAD_S, metavar="RAD_S",
                    help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
                    "(default 0: follows the command at once)")
-    p.add_argument("--cmd-timeout", type=float, default=0.02, metavar="S",
-                   help="no valid command for this long: the actuator fades to zero (default 0.02)")
+    p.add_argument("--cmd-timeout", type=float, default=CMD_TIMEOUT_S, metavar="S",
+                   help=f"no valid command for this long: the actuator fades to zero (default {CMD_TIMEOUT_S:g})")
     p.add_argument("--lockstep-timeout", type=float, default=1.0, metavar="S",
                    help="lockstep: longest wait for the controller's answer (default 1)")
     p.add_argument("--no-controller", action="store_true",

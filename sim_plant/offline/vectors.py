@@ -214,7 +214,7 @@ def secoc_vectors() -> dict[str, str]:
                   "AuxSteerCmd_Angle": round(0.05 * math.sin(0.3 * i), 6), "AuxSteerCmd_MeasCounter": i % 15}
         counter = alive.next()
         data = signer.sign(values, counter)
-        assert not sent or verifier.verify(data)
+        assert not sent or verifier.verify(lay.cmd_id, data, contract.decode(lay.cmd_id, data).signals)
         raw = contract.message(secoc.COMMAND).decode(data, decode_choices=False, scaling=False)
         rows.append(["cmd", str(epoch), str(fv), str(counter), str(values["AuxSteerCmd_State"]),
                      _num(values["AuxSteerCmd_Angle"]), str(values["AuxSteerCmd_MeasCounter"]),

@@ -1,0 +1,76 @@
+"""The auxiliary steering actuator: what it applies each plant step, from the newest valid
+command it was given.
+
+It follows a fresh command (clamped to its range, and to its own slew rate when it has one);
+when no valid command came for ``cmd_timeout`` it fades to zero at a bounded rate, and once
+commands come back it slews to them at the same rate rather than jump.  It knows nothing of the
+bus: the plant node (``sim_plant.nodes.plant``) tells it when a valid command arrived.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from firmware_py.model_regulator import AUX_LIMIT
+
+CMD_TIMEOUT_S = 0.02  # s without a valid command before the actuator fades to zero
+FADE_RATE_RAD_S = math.radians(30.0)  # rad/s of the fade to zero, and of the slew back after it
+RATE_LIMIT_RAD_S = 0.0  # rad/s of the actuator's own slew limit; 0: it follows the command at once
+
+
+@dataclass(frozen=True)
+class ActuatorConfig:
+    cmd_timeout: float = CMD_TIMEOUT_S
+    fade_rate: float = FADE_RATE_RAD_S
+    rate_limit: float = RATE_LIMIT_RAD_S
+    limit: float = AUX_LIMIT  # +- rad of front-wheel angle (paper, sec. 4.1: +-3 deg)
+
+
+class Actuator:
+    """The actuator stepped at the plant's period ``ts``: ``command_received()`` when a valid
+    command arrives, ``apply(command)`` for the angle over this step, ``tick()`` once per step."""
+
+    def __init__(self, config: ActuatorConfig, ts: float) -> None:
+        self.config = config
+        self.limit = config.limit
+        self.timeout_steps = max(1, int(math.ceil(config.cmd_timeout / ts)))
+        self.fade_step = config.fade_rate * ts
+        self.slew_step = config.rate_limit * ts  # 0: the actuator follows the command at once
+        self.applied = 0.0  # rad, the angle being applied
+        self.cmd_age = 0  # steps since the last valid command
+        self.recovering = False  # slewing back to the command after a timeout fade
+        self.timeouts = 0  # times the commands went stale
+
+    @property
+    def fresh(self) -> bool:
+        """A valid command came within the timeout."""
+        return self.cmd_age <= self.timeout_steps
+
+    def command_received(self) -> None:
+        self.cmd_age = 0
+
+    def tick(self) -> None:
+        self.cmd_age += 1
+
+    def apply(self, command: float | None) -> float:
+        """What the actuator applies this step (also kept in ``applied``): the command (clamped
+        to its range) while commands are fresh, otherwise a bounded-rate fade to zero.  After a
+        fade it slews back to the command at the same bounded rate rather than jump to it."""
+        self.applied = self._next(command)
+        return self.applied
+
+    def _next(self, command: float | None) -> float:
+        a = self.applied
+        if command is not None and self.fresh:
+            target = max(-self.limit, min(self.limit, command))
+            if self.slew_step > 0.0:  # the actuator's own rate limit, whatever arrives
+                target = max(a - self.slew_step, min(a + self.slew_step, target))
+            if not self.recovering or abs(target - a) <= self.fade_step:
+                self.recovering = False
+                return target
+            return a + self.fade_step if target > a else a - self.fade_step
+        if self.cmd_age == self.timeout_steps + 1:
+            self.timeouts += 1
+        self.recovering = True
+        return a - self.fade_step if a > self.fade_step else a + self.fade_step if a < -self.fade_step else 0.0
