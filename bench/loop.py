@@ -17,7 +17,7 @@ import can
 import numpy as np
 
 import mrsteer_dbc
-from firmware_py.controller import node as rt
+from mrsteer_dbc import names
 from sim_plant.harness import launch
 
 READY_TIMEOUT_S = 60.0
@@ -29,7 +29,7 @@ class _LatencyProbe:
 
     def __init__(self, channel: str) -> None:
         c = mrsteer_dbc.load()
-        self.yaw_id, self.cmd_id = c.frame_id(rt.MSG_YAW), c.frame_id(rt.MSG_CMD)
+        self.yaw_id, self.cmd_id = c.frame_id(names.MSG_YAW), c.frame_id(names.MSG_CMD)
         self.contract = c
         self.bus = can.Bus(interface="mrsteer", channel=channel,
                            can_filters=[{"can_id": i, "can_mask": 0x7FF, "extended": False}

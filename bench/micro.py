@@ -9,6 +9,7 @@ import can
 import numpy as np
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
 from mrsteer_bench.timer import per_call_us
@@ -75,7 +76,7 @@ def receive_path(quick: bool) -> dict[str, Any]:
     bus = can.Bus(interface="virtual", channel="mrsteer-bench-rx", receive_own_messages=False)
     try:
         node = rt.ControllerNode(bus, rt.RuntimeConfig(), contract)
-        name = rt.MSG_YAW
+        name = names.MSG_YAW
         fid = contract.frame_id(name)
         frames = [can.Message(arbitration_id=fid, is_extended_id=False,
                               data=contract.encode(name, {"YawRate_YawRate": 0.1}, k))

@@ -8,6 +8,7 @@ import can
 import pytest
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
 from firmware_py.controller import timing
@@ -23,7 +24,7 @@ class Rig:
         self.ctl_bus = can.Bus(interface="virtual", channel=channel)
         self.sensors = can.Bus(interface="virtual", channel=channel)
         self.node = rt.ControllerNode(self.ctl_bus, rt.RuntimeConfig(rate_hz=1000.0))
-        self.counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+        self.counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
         self.k = 0
 
     def send(self, name: str, values: dict, *, counter: int | None = None, corrupt: bool = False,
@@ -37,17 +38,17 @@ class Rig:
     def cycle(self, yaw: float | None = 0.0, steer: float | None = 0.0, speed: float | None = 20.0,
               **kw) -> tuple[float, dict]:
         if steer is not None:
-            self.send(rt.MSG_STEER, {"DriverSteer_Angle": steer})
+            self.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
         if speed is not None and self.k % 10 == 0:
-            self.send(rt.MSG_SPEED, {"VehicleSpeed_Speed": speed})
+            self.send(names.MSG_SPEED, {"VehicleSpeed_Speed": speed})
         if yaw is not None:
-            self.send(rt.MSG_YAW, {"YawRate_YawRate": yaw}, **kw)
+            self.send(names.MSG_YAW, {"YawRate_YawRate": yaw}, **kw)
         self.k += 1
         self.node.drain()
         self.node.control()
         cmd = None
         while (m := self.sensors.recv(0.0)) is not None:
-            if m.arbitration_id == C.frame_id(rt.MSG_CMD):
+            if m.arbitration_id == C.frame_id(names.MSG_CMD):
                 cmd = C.decode(m.arbitration_id, bytes(m.data))
         assert cmd is not None and cmd.status is mrsteer_dbc.E2EStatus.OK
         return cmd.signals["AuxSteerCmd_Angle"], cmd.signals
@@ -69,7 +70,7 @@ def test_healthy_inputs_give_an_active_command_answering_the_yaw_frame(rig: Rig)
         u, sig = rig.cycle(yaw=0.02)
     assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
     assert u < 0  # counter-steers a positive yaw rate
-    assert sig["AuxSteerCmd_MeasCounter"] == rig.counters[rt.MSG_YAW].value
+    assert sig["AuxSteerCmd_MeasCounter"] == rig.counters[names.MSG_YAW].value
     assert rig.node.cause == 0
 
 
@@ -82,11 +83,11 @@ def test_silenced_yaw_sensor_faults_fades_and_recovers_without_jump(rig: Rig) ->
         u, sig = rig.cycle(yaw=None)
         states.append(sig["AuxSteerCmd_State"])
         outs.append(u)
-    limit = rig.node.input(rt.MSG_YAW).limit
+    limit = rig.node.input(names.MSG_YAW).limit
     assert limit == 10  # 10 of its own 1 ms cycles
     assert all(s == mr.STATUS_ACTIVE for s in states[:limit])
     assert all(s == mr.STATUS_FAULT for s in states[limit + 1:])
-    assert rig.node.cause & rt.CAUSE_YAW_MISSING
+    assert rig.node.cause & names.CAUSE_YAW_MISSING
     assert outs[-1] == 0.0
     steps = [abs(b - a) for a, b in zip(outs[limit:], outs[limit + 1:])]
     assert max(steps) <= FADE + 2e-6  # bounded fade (plus the DBC's 1e-6 rad resolution)
@@ -104,7 +105,7 @@ def test_corrupted_frames_are_rejected_and_fault_after_three(rig: Rig) -> None:
     for i in range(3):
         _, sig = rig.cycle(yaw=0.01, corrupt=True)
     assert rig.node.stats.rx_rejected == 3
-    assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT and rig.node.cause & rt.CAUSE_E2E
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT and rig.node.cause & names.CAUSE_E2E
     for _ in range(5):
         _, sig = rig.cycle(yaw=0.01)
     assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
@@ -113,11 +114,11 @@ def test_corrupted_frames_are_rejected_and_fault_after_three(rig: Rig) -> None:
 def test_repeated_counter_is_stale_and_rejected(rig: Rig) -> None:
     for _ in range(5):
         rig.cycle(yaw=0.01)
-    stuck = rig.counters[rt.MSG_YAW].value
+    stuck = rig.counters[names.MSG_YAW].value
     for _ in range(3):
         rig.cycle(yaw=0.3, counter=stuck)  # a frozen sender repeating itself
     assert rig.node.stats.rx_rejected == 3
-    assert rig.node.input(rt.MSG_YAW).value == pytest.approx(0.01)  # the stale value was never used
+    assert rig.node.input(names.MSG_YAW).value == pytest.approx(0.01)  # the stale value was never used
 
 
 def test_out_of_range_value_is_rejected_with_range_cause(rig: Rig) -> None:
@@ -125,12 +126,12 @@ def test_out_of_range_value_is_rejected_with_range_cause(rig: Rig) -> None:
         rig.cycle(yaw=0.01)
     for _ in range(3):
         _, sig = rig.cycle(yaw=4.0, strict=False)
-    assert rig.node.stats.rx_rejected == 3 and rig.node.cause & rt.CAUSE_RANGE
+    assert rig.node.stats.rx_rejected == 3 and rig.node.cause & names.CAUSE_RANGE
     assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT
 
 
 def test_other_traffic_is_ignored(rig: Rig) -> None:
-    for fid in (0x7FF, 0x123, C.frame_id(rt.MSG_CMD)):
+    for fid in (0x7FF, 0x123, C.frame_id(names.MSG_CMD)):
         rig.sensors.send(can.Message(arbitration_id=fid, data=b"\x00" * 8, is_extended_id=False))
     _, sig = rig.cycle(yaw=0.0)
     assert rig.node.stats.rx_rejected == 0
@@ -141,16 +142,16 @@ def test_status_message_reports_state_cause_and_counts(rig: Rig) -> None:
     for i in range(250):
         rig.cycle(yaw=None if i > 120 else 0.0)
     for _ in range(100):  # one more status period, catching its frame
-        rig.send(rt.MSG_STEER, {"DriverSteer_Angle": 0.0})
+        rig.send(names.MSG_STEER, {"DriverSteer_Angle": 0.0})
         rig.node.drain()
         rig.node.control()
         while (m := rig.sensors.recv(0.0)) is not None:
-            if m.arbitration_id == C.frame_id(rt.MSG_STATUS):
+            if m.arbitration_id == C.frame_id(names.MSG_STATUS):
                 statuses.append(C.decode(m.arbitration_id, bytes(m.data)).signals)
     assert statuses, "a status frame every 100 ms"
     s = statuses[-1]
     assert s["CtrlStatus_State"] == mr.STATUS_FAULT
-    assert int(s["CtrlStatus_Cause"]) & rt.CAUSE_YAW_MISSING
+    assert int(s["CtrlStatus_Cause"]) & names.CAUSE_YAW_MISSING
 
 
 def test_final_command_is_zero_and_inactive(rig: Rig) -> None:
@@ -159,7 +160,7 @@ def test_final_command_is_zero_and_inactive(rig: Rig) -> None:
     rig.node.finish()
     m = rig.sensors.recv(1.0)
     d = C.decode(m.arbitration_id, bytes(m.data))
-    assert d.name == rt.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
+    assert d.name == names.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
     assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE
 
 
@@ -208,7 +209,7 @@ def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str)
         try:
             first = ear.recv(3.0)  # the watchdog cycle's command
             waited = time.monotonic() - start
-            assert first is not None and first.arbitration_id == C.frame_id(rt.MSG_CMD)
+            assert first is not None and first.arbitration_id == C.frame_id(names.MSG_CMD)
             assert timing.SENSORS_WATCHDOG_S - 0.05 <= waited <= timing.SENSORS_WATCHDOG_S + 0.5
             time.sleep(0.3)  # well inside the next watchdog wait
             stopped = time.monotonic()
@@ -221,5 +222,5 @@ def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str)
         after = list(iter(lambda: ear.recv(0.05), None))
     assert len(after) == 1
     d = C.decode(after[0].arbitration_id, bytes(after[0].data))
-    assert d.name == rt.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
+    assert d.name == names.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
     assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE

@@ -23,12 +23,13 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
 from mrsteer_dbc import E2EReceiver, E2EStatus
+from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.nodes.plant import PlantNode
 
 C = mrsteer_dbc.load()
 E2E_MESSAGES = [m.name for m in C.db.messages if C.e2e(m.name) is not None]
-SENSORS = (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)
+SENSORS = (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)
 MODES = {"LOW": e2e_p01.E2E_P01_DATAID_LOW, "ALT": e2e_p01.E2E_P01_DATAID_ALT,
          "NIBBLE": e2e_p01.E2E_P01_DATAID_NIBBLE}
 KEY = bytes(range(16))
@@ -212,7 +213,7 @@ class _LockstepBus:
     on its own when the frame arrives; the command is then waiting in the plant's queue."""
 
     def __init__(self, inner: can.BusABC, node: rt.ControllerNode) -> None:
-        self.inner, self.node, self.yaw_id = inner, node, C.frame_id(rt.MSG_YAW)
+        self.inner, self.node, self.yaw_id = inner, node, C.frame_id(names.MSG_YAW)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self.inner.send(msg)
@@ -299,10 +300,10 @@ class _LibrarySensors:
         return bytes(data)
 
     def cycle(self, yaw: float, *, flip: int | None = None) -> dict:
-        sends = [(rt.MSG_STEER, 0.0), (rt.MSG_YAW, yaw)] + ([(rt.MSG_SPEED, 20.0)] if self.k % 10 == 0 else [])
+        sends = [(names.MSG_STEER, 0.0), (names.MSG_YAW, yaw)] + ([(names.MSG_SPEED, 20.0)] if self.k % 10 == 0 else [])
         for name, value in sends:
             data = bytearray(self.frame(name, value))
-            if flip is not None and name == rt.MSG_YAW:
+            if flip is not None and name == names.MSG_YAW:
                 data[flip // 8] ^= 1 << (flip % 8)
             self.bus.send(can.Message(arbitration_id=C.frame_id(name), data=bytes(data), is_extended_id=False))
         self.k += 1
@@ -310,7 +311,7 @@ class _LibrarySensors:
         self.node.control()
         cmd = None
         while (m := self.bus.recv(0.0)) is not None:
-            if m.arbitration_id == C.frame_id(rt.MSG_CMD):
+            if m.arbitration_id == C.frame_id(names.MSG_CMD):
                 cmd = C.decode(m.arbitration_id, bytes(m.data))
         assert cmd is not None and cmd.status is E2EStatus.OK
         return cmd.signals
@@ -334,7 +335,7 @@ def test_the_controller_accepts_library_protected_sensor_frames(lib_rig: _Librar
     assert st_.rx_rejected == 0 and st_.rx_frames == 40 + 40 + 4
     assert lib_rig.node.cause == 0
     assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
-    assert sig["AuxSteerCmd_MeasCounter"] == lib_rig.counter[rt.MSG_YAW]  # it answers the library's frame
+    assert sig["AuxSteerCmd_MeasCounter"] == lib_rig.counter[names.MSG_YAW]  # it answers the library's frame
     assert sig["AuxSteerCmd_Angle"] < 0  # counter-steers the positive yaw rate
 
 
@@ -342,7 +343,7 @@ def test_a_single_flipped_bit_in_a_library_frame_is_rejected(lib_rig: _LibrarySe
     for _ in range(20):
         lib_rig.cycle(0.02)
     assert lib_rig.node.stats.rx_rejected == 0
-    n_bits = 8 * C.message(rt.MSG_YAW).length
+    n_bits = 8 * C.message(names.MSG_YAW).length
     for bit in range(n_bits):  # each flip alone, between good frames: rejected, no fault
         before = lib_rig.node.stats.rx_rejected
         lib_rig.cycle(0.02, flip=bit)
@@ -352,4 +353,4 @@ def test_a_single_flipped_bit_in_a_library_frame_is_rejected(lib_rig: _LibrarySe
     assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE and lib_rig.node.cause == 0
     for _ in range(rt.RuntimeConfig().e2e_fail_max):  # three in a row: the yaw rate faults on E2E
         lib_rig.cycle(0.02, flip=13)
-    assert lib_rig.node.cause & rt.CAUSE_E2E
+    assert lib_rig.node.cause & names.CAUSE_E2E

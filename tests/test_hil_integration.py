@@ -18,6 +18,7 @@ import can
 import pytest
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
 from sim_plant.car import scenario as scn
@@ -185,26 +186,26 @@ def _start(argv: list[str]) -> subprocess.Popen:
 def test_controller_process_faults_on_a_silenced_sensor_and_recovers(channel: str) -> None:
     bus = can.Bus(interface="mrsteer", channel=channel)
     ctl = _start(["-m", "firmware_py", "--interface", "mrsteer", "--channel", channel, "--rate-hz", "200"])
-    counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+    counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
     seen: list[tuple[float, dict]] = []
     statuses: list[dict] = []
 
     def feed(seconds: float, yaw: bool) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}),
-                                 (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.02})):
-                if name == rt.MSG_YAW and not yaw:
+            for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.0}),
+                                 (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
+                                 (names.MSG_YAW, {"YawRate_YawRate": 0.02})):
+                if name == names.MSG_YAW and not yaw:
                     continue
                 bus.send(can.Message(arbitration_id=C.frame_id(name), data=C.encode(name, values,
                                      counters[name].next()), is_extended_id=False))
             deadline = time.monotonic() + 0.004
             while (m := bus.recv(max(0.0, deadline - time.monotonic()))) is not None:
                 d = C.decode(m.arbitration_id, bytes(m.data))
-                if d and d.name == rt.MSG_CMD:
+                if d and d.name == names.MSG_CMD:
                     seen.append((time.monotonic(), d.signals))
-                elif d and d.name == rt.MSG_STATUS:
+                elif d and d.name == names.MSG_STATUS:
                     statuses.append(d.signals)
                 if time.monotonic() >= deadline:
                     break
@@ -218,7 +219,7 @@ def test_controller_process_faults_on_a_silenced_sensor_and_recovers(channel: st
         faulted = [(t, s) for t, s in seen if t > cut and s["AuxSteerCmd_State"] == mr.STATUS_FAULT]
         assert faulted, "no fault after the yaw-rate sensor went quiet"
         assert faulted[0][0] - cut < 0.5  # 10 cycles of 5 ms, plus scheduling slack
-        assert any(int(s["CtrlStatus_Cause"]) & rt.CAUSE_YAW_MISSING for s in statuses)
+        assert any(int(s["CtrlStatus_Cause"]) & names.CAUSE_YAW_MISSING for s in statuses)
         assert seen[-1][1]["AuxSteerCmd_Angle"] == 0.0  # faded out
         back = time.monotonic()
         feed(1.0, yaw=True)
@@ -231,7 +232,7 @@ def test_controller_process_faults_on_a_silenced_sensor_and_recovers(channel: st
         last = None
         while (m := bus.recv(0.5)) is not None:
             d = C.decode(m.arbitration_id, bytes(m.data))
-            if d and d.name == rt.MSG_CMD:
+            if d and d.name == names.MSG_CMD:
                 last = d.signals
         bus.shutdown()
     assert code == 0

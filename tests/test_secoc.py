@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import mrsteer_dbc
 from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
+from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.nodes.plant import PlantNode
 
@@ -321,12 +322,12 @@ def test_controller_signs_once_synced_and_reports_a_lost_sync(channel: str) -> N
     verifier = secoc.CommandVerifier(C, KEY, clock)
     with can.Bus(interface="virtual", channel=channel) as cb, can.Bus(interface="virtual", channel=channel) as vb:
         node = rt.ControllerNode(cb, rt.RuntimeConfig(rate_hz=1000.0, secoc_key=KEY))
-        counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+        counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
         sensors = secoc.SensorSigner(C, KEY)
 
         def cycle(k: int) -> tuple[bool, int]:
-            for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}), (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                 (rt.MSG_YAW, {"YawRate_YawRate": 0.0})):
+            for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.0}), (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
+                                 (names.MSG_YAW, {"YawRate_YawRate": 0.0})):
                 data = sensors.sign(name, values, counters[name].next(), verifier.current)
                 vb.send(can.Message(arbitration_id=C.frame_id(name), data=data, is_extended_id=False))
             node.drain()
@@ -335,14 +336,14 @@ def test_controller_signs_once_synced_and_reports_a_lost_sync(channel: str) -> N
             return accepts(verifier, bytes(cmd.data)), node.cause
 
         ok, cause = cycle(0)
-        assert not ok and cause & rt.CAUSE_AUTH  # no sync yet
+        assert not ok and cause & names.CAUSE_AUTH  # no sync yet
         vb.send(can.Message(arbitration_id=SYNC_ID, data=verifier.next_sync(), is_extended_id=False))
         results = [cycle(k) for k in range(1, 300)]
         assert all(ok for ok, _ in results)
-        assert not any(cause & rt.CAUSE_AUTH for _, cause in results)
+        assert not any(cause & names.CAUSE_AUTH for _, cause in results)
         # No sync for three of its cycles (300 ms): still signing, but the status says so.
         late = [cycle(k) for k in range(300, 310)][1:]  # the sync came in cycle 1: 300 cycles is the limit
-        assert all(cause & rt.CAUSE_AUTH for _, cause in late)
+        assert all(cause & names.CAUSE_AUTH for _, cause in late)
         forged = bytearray(verifier.next_sync())
         forged[7] ^= 0x01
         vb.send(can.Message(arbitration_id=SYNC_ID, data=bytes(forged), is_extended_id=False))

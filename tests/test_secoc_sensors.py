@@ -13,11 +13,12 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
+from mrsteer_dbc import names
 
 C = mrsteer_dbc.load()
 KEY = bytes(range(16))
 EPOCH = 1_000_000
-YAW = C.frame_id(rt.MSG_YAW)
+YAW = C.frame_id(names.MSG_YAW)
 
 
 def yaw_values(i: int) -> dict[str, float]:
@@ -28,7 +29,7 @@ def yaw_stream(n: int, epoch: int | None = EPOCH, signer: secoc.SensorSigner | N
                alive: mrsteer_dbc.AliveCounter | None = None) -> list[bytes]:
     signer = signer or secoc.SensorSigner(C, KEY)
     alive = alive or mrsteer_dbc.AliveCounter()
-    return [signer.sign(rt.MSG_YAW, yaw_values(i), alive.next(), epoch) for i in range(n)]
+    return [signer.sign(names.MSG_YAW, yaw_values(i), alive.next(), epoch) for i in range(n)]
 
 
 def verifier(*epochs: int) -> secoc.SensorVerifier:
@@ -47,7 +48,7 @@ def accepts(v: secoc.SensorVerifier, data: bytes, frame_id: int = YAW) -> bool:
 # ---------------------------------------------------------------------- the layout and the counter
 
 
-@pytest.mark.parametrize("name, mac_bits", [(rt.MSG_STEER, 8), (rt.MSG_YAW, 16), (rt.MSG_SPEED, 8)])
+@pytest.mark.parametrize("name, mac_bits", [(names.MSG_STEER, 8), (names.MSG_YAW, 16), (names.MSG_SPEED, 8)])
 def test_every_sensor_message_has_its_fields_in_the_dbc(name: str, mac_bits: int) -> None:
     f = secoc.SensorFields.of(C, name)
     assert f.mac_bits == mac_bits
@@ -69,18 +70,18 @@ def test_every_signed_frame_verifies_once_and_a_duplicate_does_not() -> None:
     frames = yaw_stream(40)
     assert all(accepts(v, d) for d in frames)
     assert not accepts(v, frames[-1])
-    assert v.failed[rt.MSG_YAW] == 1
+    assert v.failed[names.MSG_YAW] == 1
 
 
 def test_each_sensor_message_is_signed_and_checked_on_its_own() -> None:
     signer, v = secoc.SensorSigner(C, KEY), verifier()
-    for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.1}), (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                         (rt.MSG_YAW, yaw_values(3))):
+    for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.1}), (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
+                         (names.MSG_YAW, yaw_values(3))):
         alive = mrsteer_dbc.AliveCounter()
         frames = [signer.sign(name, values, alive.next(), EPOCH) for _ in range(20)]
         assert all(accepts(v, d, C.frame_id(name)) for d in frames)
     other = secoc.SensorSigner(C, bytes(16))  # the freshness right, the key wrong
-    assert not accepts(v, other.sign(rt.MSG_YAW, yaw_values(0), 5, EPOCH))
+    assert not accepts(v, other.sign(names.MSG_YAW, yaw_values(0), 5, EPOCH))
 
 
 def test_a_changed_bit_outside_the_crc_fails_the_mac() -> None:
@@ -91,7 +92,7 @@ def test_a_changed_bit_outside_the_crc_fails_the_mac() -> None:
         for bit in range(8):
             bad = bytearray(frames[1])
             bad[byte] ^= 1 << bit
-            bad[0] = C.e2e_crc(rt.MSG_YAW, bytes(bad))  # a forger can always fix the CRC
+            bad[0] = C.e2e_crc(names.MSG_YAW, bytes(bad))  # a forger can always fix the CRC
             decoded = C.decode(YAW, bytes(bad))
             if decoded.status is mrsteer_dbc.E2EStatus.OK:
                 assert not v.verify(YAW, bytes(bad), decoded.signals), (byte, bit)
@@ -182,10 +183,10 @@ def _stream_with_yaw_replays(secured: bool, back: int, n: int = 200) -> list[tup
         if secured and i % 50 == 0:
             out.append((C.frame_id(secoc.SYNC), master.next_sync()))
             epoch = master.current
-        for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}), (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})):
-            if name == rt.MSG_STEER or i % 5 == 0:
+        for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.0}), (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})):
+            if name == names.MSG_STEER or i % 5 == 0:
                 out.append((C.frame_id(name), signer.sign(name, values, counters[name].next(), epoch)))
-        yaw.append(signer.sign(rt.MSG_YAW, yaw_values(i), counters[rt.MSG_YAW].next(), epoch))
+        yaw.append(signer.sign(names.MSG_YAW, yaw_values(i), counters[names.MSG_YAW].next(), epoch))
         if back and i >= 40 and i >= back:
             out.append((YAW, yaw[-1]))
             out.append((YAW, yaw[i - back]))  # the replay right after the live frame
@@ -198,9 +199,9 @@ def _stream_with_yaw_replays(secured: bool, back: int, n: int = 200) -> list[tup
 def test_controller_with_secoc_refuses_the_aliased_replays_that_e2e_takes(back: int, channel: str) -> None:
     _, plain = _controller_run(False, _stream_with_yaw_replays(False, back), channel + "p")
     # E2E alone: the controller ends on the replayed (stale) value, the documented limit.
-    assert plain[rt.MSG_YAW] == pytest.approx(yaw_values(199 - back)["YawRate_YawRate"], abs=1e-6)
+    assert plain[names.MSG_YAW] == pytest.approx(yaw_values(199 - back)["YawRate_YawRate"], abs=1e-6)
     secured, values = _controller_run(True, _stream_with_yaw_replays(True, back), channel + "s")
-    assert values[rt.MSG_YAW] == pytest.approx(yaw_values(199)["YawRate_YawRate"], abs=1e-6)
+    assert values[names.MSG_YAW] == pytest.approx(yaw_values(199)["YawRate_YawRate"], abs=1e-6)
     assert secured.stats.rx_auth_failed == 200 - 40
     assert secured.stats.rx_rejected == 200 - 40
     assert secured.state.status != mr.STATUS_FAULT and secured.cause == 0
@@ -217,9 +218,9 @@ def test_controller_with_secoc_faults_on_forged_sensor_frames_with_cause_auth(ch
             n_yaw += 1
             counter = alive.next()
             if n_yaw > 30:
-                data = forger.sign(rt.MSG_YAW, yaw_values(0), counter, EPOCH)
+                data = forger.sign(names.MSG_YAW, yaw_values(0), counter, EPOCH)
         forged.append((frame_id, data))
     node, values = _controller_run(True, forged, channel)
     assert node.stats.rx_auth_failed == 30
-    assert node.cause & rt.CAUSE_AUTH and node.state.status == mr.STATUS_FAULT
-    assert values[rt.MSG_YAW] == pytest.approx(yaw_values(29)["YawRate_YawRate"], abs=1e-6)
+    assert node.cause & names.CAUSE_AUTH and node.state.status == mr.STATUS_FAULT
+    assert values[names.MSG_YAW] == pytest.approx(yaw_values(29)["YawRate_YawRate"], abs=1e-6)

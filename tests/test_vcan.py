@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from firmware_py.platform.bus_open import vcan_available
+from mrsteer_dbc import names
 
 pytestmark = [
     pytest.mark.vcan,
@@ -110,14 +111,13 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
 
     import mrsteer_dbc
     from firmware_py import model_regulator as mr
-    from firmware_py.controller import node as rt
 
     c = mrsteer_dbc.load()
     stats = tmp_path / "ctl.json"
     ctl = subprocess.Popen([sys.executable, "-m", "firmware_py", *IFACE, "--rate-hz", "100", "--stats-out", str(stats)],
                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
     bus = can.Bus(interface="socketcan", channel="vcan0")
-    counters = {n: mrsteer_dbc.AliveCounter() for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)}
+    counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
     run, paused = threading.Event(), threading.Event()
     run.set()
     last_yaw: list[bytes] = []
@@ -125,12 +125,12 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
     def feed() -> None:
         while run.is_set():
             if not paused.is_set():
-                for name, values in ((rt.MSG_STEER, {"DriverSteer_Angle": 0.0}),
-                                     (rt.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
-                                     (rt.MSG_YAW, {"YawRate_YawRate": 0.01})):
+                for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.0}),
+                                     (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
+                                     (names.MSG_YAW, {"YawRate_YawRate": 0.01})):
                     data = c.encode(name, values, counters[name].next())
                     bus.send(can.Message(arbitration_id=c.frame_id(name), data=data, is_extended_id=False))
-                    if name == rt.MSG_YAW:
+                    if name == names.MSG_YAW:
                         last_yaw[:] = [data]
             time.sleep(0.01)
 
@@ -144,7 +144,7 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
         time.sleep(2.0)
         paused.set()
         time.sleep(0.3)
-        yaw_id = f"{c.frame_id(rt.MSG_YAW):03X}"
+        yaw_id = f"{c.frame_id(names.MSG_YAW):03X}"
         good = last_yaw[0]
         bad_crc = bytes([good[0] ^ 0x5A]) + good[1:]
         injections = [
@@ -163,7 +163,7 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
         # The controller keeps sending, so read for a bounded time rather than until silence.
         until = time.monotonic() + 1.0
         while time.monotonic() < until and (m := bus.recv(0.2)) is not None:
-            if m.arbitration_id == c.frame_id(rt.MSG_CMD):
+            if m.arbitration_id == c.frame_id(names.MSG_CMD):
                 recent.append(c.decode(m.arbitration_id, bytes(m.data)).signals["AuxSteerCmd_State"])
         assert recent and recent[-1] in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)
     finally:

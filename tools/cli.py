@@ -15,18 +15,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py import model_regulator as mr
+from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.controller.options import resolve_model_delay
 from firmware_py.platform.cli import EXIT_USAGE, Parser, add_secoc_args, secoc_key
 from mrsteer_cli import design_cli
 from mrsteer_cli.cli_args import add_gains, count, number
+from sim_plant.car.scenario import SPEED_RANGE
+from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS
-from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 
 if TYPE_CHECKING:
     from sim_plant.harness.hil import HilConfig
 
-SPEED_RANGE = (3.0, 70.0)  # m/s: where the firmware is active and the model is used
 MASS_RANGE = (300.0, 10000.0)
 MAX_DURATION = 60.0
 PAPER_OUT = Path("out/paper")
@@ -160,9 +161,8 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
     p.add_argument("--channel", help="channel for the interface")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, comparable with `sim --ts` (default); realtime: wall clock")
-    rate = 1.0 / mr.ControllerConfig().ts
-    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=rate,
-                   help=f"controller and plant rate in Hz (default {rate:g}, the rate the default gains are tuned for)")
+    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=DEFAULT_RATE_HZ,
+                   help=f"controller and plant rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains are tuned for)")
     p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
                    help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")
     add_secoc_args(p)

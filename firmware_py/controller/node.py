@@ -45,13 +45,12 @@ from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG
 from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
-# The names and cause bits are the DBC's (mrsteer_dbc.names); re-exported here for the node's users.
-from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_E2E, CAUSE_LOW_SPEED, CAUSE_RANGE, CAUSE_SPEED_MISSING,  # noqa: F401
-                               CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS,
-                               MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE,
-                               SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS, SIG_STATUS_LATENESS,
-                               SIG_STATUS_OVERRUNS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE,
-                               SIG_YAW_RATE)
+from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_RANGE, CAUSE_SPEED_MISSING,
+                               CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD, MSG_SPEED,
+                               MSG_STATUS, MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS,
+                               SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
+                               SIG_STATUS_LATENESS, SIG_STATUS_OVERRUNS, SIG_STATUS_REJECTED,
+                               SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for

@@ -44,7 +44,7 @@ from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams, steering_tf
 EVENT_KINDS = ("yaw_moment", "steer", "steer_norm", "mu", "speed")
 DRIVER_MODES = ("hold", "model")
 REACTION_RANGE = (0.5, 2.0)
-SPEED_RANGE = (3.0, 70.0)
+SPEED_RANGE = (3.0, 70.0)  # m/s: from the firmware's activation speed to the DBC's speed range
 MAX_DURATION = 600.0
 
 

@@ -23,6 +23,7 @@ from typing import Callable
 from mrsteer_dbc import secoc as secoc_mod
 from firmware_py.platform import bus_open
 from firmware_py import model_regulator as mr
+from firmware_py.controller.node import DEFAULT_RATE_HZ
 from sim_plant.car import scenario as scn
 from sim_plant.harness.hil_report import TRACE, HilRun, finish
 from sim_plant.harness import launch
@@ -41,7 +42,7 @@ _DEFAULT = mr.ControllerConfig()
 class HilConfig:
     scenario: str = "paper-fig9"
     mode: str = "lockstep"
-    rate_hz: float = 1.0 / _DEFAULT.ts
+    rate_hz: float = DEFAULT_RATE_HZ
     interface: str | None = None
     channel: str | None = None
     v: float | None = None

@@ -40,7 +40,6 @@ from typing import Any, Sequence
 import can
 
 import mrsteer_dbc
-from firmware_py import model_regulator as mr
 from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
 from firmware_py.platform.lifecycle import run_node
@@ -49,14 +48,13 @@ from mrsteer_dbc.link import Rejected, RxLink, TxLink
 from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW, SENSORS, SIG_BENCH_MU,
                                SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_SPEED, SIG_STEER_ANGLE,
                                SIG_YAW_RATE)
+from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.vehicle import DiscretePlant
 
 MODES = ("realtime", "lockstep")
 
-
-DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the controller's default rate
 
 @dataclass
 class PlantStats:

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
-from firmware_py.controller import node as rt
 from sim_plant.harness.faults.rows import Row
 from sim_plant.harness.faults.settings import Setup
 from sim_plant.nodes.candump_log import Frame, read_candump
@@ -80,10 +80,10 @@ def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, 
     ctl_json = work / "controller.json"
     vehicle_frames = read_candump(work / "vehicle.log")
     frames = read_candump(work / "controller.log")
-    cmd_id, status_id = c.frame_id(rt.MSG_CMD), c.frame_id(rt.MSG_STATUS)
+    cmd_id, status_id = c.frame_id(names.MSG_CMD), c.frame_id(names.MSG_STATUS)
     decoded = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == cmd_id]
     cutoff = max(t for t, fid, _ in vehicle_frames
-                 if fid == c.frame_id(rt.MSG_YAW))  # the plant's last measurement: the run's end
+                 if fid == c.frame_id(names.MSG_YAW))  # the plant's last measurement: the run's end
     accepted = [(t, d) for t, d in decoded if d is not None and d.status.accepted and t <= cutoff]
     cmds = [(t, d.signals["AuxSteerCmd_State"]) for t, d in accepted]
     statuses = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == status_id]

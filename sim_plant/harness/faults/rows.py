@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from firmware_py.controller import node as rt
+from mrsteer_dbc import names
 from sim_plant.harness.faults.settings import E2E_FAIL_MAX, FORGED_ANGLE, TIMEOUT_CYCLES, WINDOW
 from sim_plant.nodes.fault_bridge import Fault
 
@@ -38,20 +38,20 @@ def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
 ROWS = (
     Row("baseline", _f("none"), "runs clean", no_fault=True),
     Row("yaw-rate frames lost (burst)", _f("drop"), "FAULT within the timeout, fade, recover",
-        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING),
+        detect_within=TIMEOUT_CYCLES + 2, cause=names.CAUSE_YAW_MISSING),
     Row("sensor frames lost (20 % random)", _f("drop", "sensors", 0.2), "tolerated, no fault", no_fault=True),
     Row("yaw-rate payload bit flipped", _f("corrupt_payload"), "rejected (CRC), FAULT after 3, recover",
-        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+        detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_E2E, reject_all=True),
     Row("yaw-rate CRC corrupted", _f("corrupt_crc"), "rejected, FAULT, recover",
-        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+        detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_E2E, reject_all=True),
     Row("yaw-rate counter invalid (15)", _f("corrupt_counter"), "rejected, FAULT, recover",
-        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+        detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_E2E, reject_all=True),
     Row("driver-angle frame too short", _f("wrong_length", "MRS_DriverSteer"), "rejected, FAULT, recover",
-        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_E2E, reject_all=True),
+        detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_E2E, reject_all=True),
     Row("yaw-rate frames replayed", _f("replay", param=1.0), "every replayed frame rejected, no fault",
         no_fault=True, reject_all=True),
     Row("yaw rate out of range (5 rad/s)", _f("out_of_range", param=5.0), "rejected (range), FAULT, recover",
-        detect_within=E2E_FAIL_MAX + 2, cause=rt.CAUSE_RANGE, reject_all=True),
+        detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_RANGE, reject_all=True),
     Row("sensor frames duplicated", _f("duplicate", "sensors"), "copies rejected as repeated, no fault",
         no_fault=True, reject_all=True),
     Row("yaw-rate frames reordered", _f("reorder"), "out-of-order frames rejected, no fault", no_fault=True),
@@ -80,7 +80,7 @@ ROWS = (
     # The vehicle side crashes: every input goes missing at once, then comes back from a fresh
     # plant (its counters from 0, its scenario from the start).
     Row("plant killed and restarted", _f("none"), "FAULT within the timeout, fade, recover",
-        detect_within=TIMEOUT_CYCLES + 2, cause=rt.CAUSE_YAW_MISSING, kill_plant=True),
+        detect_within=TIMEOUT_CYCLES + 2, cause=names.CAUSE_YAW_MISSING, kill_plant=True),
 )
 
 

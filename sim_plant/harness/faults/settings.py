@@ -10,13 +10,16 @@ from dataclasses import dataclass
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
+from firmware_py.controller.node import DEFAULT_RATE_HZ
 from mrsteer_dbc.busload import frame_bits
+from mrsteer_dbc import names
+from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S
 from sim_plant.harness.launch import Gains
 
-RATE_HZ = 1.0 / mr.ControllerConfig().ts
+RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
-PLANT_FADE = math.radians(30.0)  # rad/s, the actuator's fade (plant_node default)
-CMD_TIMEOUT = 0.02  # s, the actuator's command timeout (plant_node default)
+PLANT_FADE = FADE_RATE_RAD_S  # rad/s, the actuator's fade (the plant's default)
+CMD_TIMEOUT = CMD_TIMEOUT_S  # s, the actuator's command timeout (the plant's default)
 DURATION = 2.6  # s of scenario
 WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
 BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
@@ -29,7 +32,7 @@ TIMEOUT_CYCLES = rt.RuntimeConfig().timeout_cycles
 E2E_FAIL_MAX = rt.RuntimeConfig().e2e_fail_max
 # The forger's angle: the DBC maximum, just beyond the controller's 3 deg limit, so a forgery the
 # actuator took is told apart from every real command.
-FORGED_ANGLE = mrsteer_dbc.load().signal_range(rt.MSG_CMD, "AuxSteerCmd_Angle")[1]
+FORGED_ANGLE = mrsteer_dbc.load().signal_range(names.MSG_CMD, "AuxSteerCmd_Angle")[1]
 MAC_LUCK = 2
 COUNTER_WINDOW = mrsteer_dbc.E2EReceiver().max_delta  # the actuator's alive-counter window
 # 8-byte frames a 500 kbit/s bus carries per second at most (no stuff bits): a flood at this

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py.controller import node as rt
 from mrsteer_dbc import secoc
+from mrsteer_dbc import names
 from sim_plant.harness.faults.evidence import Evidence, gaps, gather
 from sim_plant.harness.faults.rows import Row
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
@@ -91,7 +91,7 @@ def check_nothing_lost(e: Evidence, v: Verdict) -> None:
     plant_tx = plant["tx_frames"]
     if e.row.kill_plant and e.restarted is not None:
         # The killed plant wrote no statistics: its frames are the ones its logger saw.
-        own = {c.frame_id(n) for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED, secoc.SYNC)}
+        own = {c.frame_id(n) for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED, secoc.SYNC)}
         plant_tx += sum(1 for t_, fid, _ in e.vehicle_frames if fid in own and t_ < e.restarted)
         v.observed.append("applied angle judged on the restarted plant's trace")
     logged = e.logged
@@ -136,7 +136,7 @@ def check_no_fault(e: Evidence, v: Verdict) -> None:
     # A FAULT is the right answer when the machine stalled the plant past the timeout: judge
     # only those without such a gap in the sensor frames the controller was given.
     # Each input times out after TIMEOUT_CYCLES of its own cycle (speed: 10 ms at most rates).
-    found = [g for n in (rt.MSG_STEER, rt.MSG_YAW, rt.MSG_SPEED)
+    found = [g for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)
              for g in gaps(e.frames, [c.frame_id(n)], TIMEOUT_CYCLES * (c.cycle_time_s(n, ts) or ts) - ts)]
     unexplained = [t_ for t_ in e.faults_after if not any(g0 - 0.005 <= t_ <= g1 + 0.1 for g0, g1 in found)]
     if unexplained:
@@ -152,9 +152,9 @@ def outage(e: Evidence) -> tuple[float | None, float | None]:
         c, ts = mrsteer_dbc.load(), e.setup.ts
         # The outage, as the controller saw it: from when the dead plant's next yaw-rate frame
         # was due to the restarted plant's first one.
-        yaws = [t_ for t_, fid, _ in e.frames if fid == c.frame_id(rt.MSG_YAW)]
+        yaws = [t_ for t_, fid, _ in e.frames if fid == c.frame_id(names.MSG_YAW)]
         last = max((t_ for t_ in yaws if t_ <= e.killed_at), default=None)
-        affected0 = None if last is None else last + (c.cycle_time_s(rt.MSG_YAW, ts) or ts)
+        affected0 = None if last is None else last + (c.cycle_time_s(names.MSG_YAW, ts) or ts)
         affected1 = min((t_ for t_ in yaws if e.restarted is not None and t_ >= e.restarted), default=e.killed_at)
     return affected0, affected1
 
@@ -307,7 +307,7 @@ def check_controller_kill(e: Evidence, v: Verdict) -> None:
     if not (row.kill and killed_at is not None):
         return
     t, applied, wall, ts = e.trace.t, e.trace.applied, e.trace.wall, e.setup.ts
-    cmd_id = mrsteer_dbc.load().frame_id(rt.MSG_CMD)
+    cmd_id = mrsteer_dbc.load().frame_id(names.MSG_CMD)
     # The actuator's timeout runs from the last command it was given: the dead controller's
     # last one as it reached the vehicle's bus (the bridge forwards in order, and late when
     # the machine stalls it).
