@@ -36,12 +36,12 @@ import numpy as np
 from scipy.signal import butter, lfilter_zi
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from sim_plant.car.model_files import ModelFileError, boolean, integer, number, read_table, reject_unknown, table
 
 #: (message, signal) of each measured quantity in the DBC.
-DBC_SIGNALS = {"yaw_rate": ("MRS_YawRate", "YawRate_YawRate"),
-               "steer": ("MRS_DriverSteer", "DriverSteer_Angle"),
-               "speed": ("MRS_VehicleSpeed", "VehicleSpeed_Speed")}
+DBC_SIGNALS = {"yaw_rate": (names.MSG_YAW, names.SIG_YAW_RATE), "steer": (names.MSG_STEER, names.SIG_STEER_ANGLE),
+               "speed": (names.MSG_SPEED, names.SIG_SPEED)}
 MAX_SEED = 2**63 - 1
 
 

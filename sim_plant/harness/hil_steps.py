@@ -28,12 +28,11 @@ from pathlib import Path
 from typing import Any
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from sim_plant.harness.processes import RunError
 from sim_plant.nodes.plant import PlantNode
 
-YAW = "MRS_YawRate"
-CMD = "MRS_AuxSteerCmd"
-STATUS = "MRS_CtrlStatus"
+YAW, CMD, STATUS = names.MSG_YAW, names.MSG_CMD, names.MSG_STATUS
 
 
 @dataclass(frozen=True)

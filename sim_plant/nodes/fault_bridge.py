@@ -48,14 +48,15 @@ from typing import Any, Sequence
 import can
 
 import mrsteer_dbc
+from mrsteer_dbc import names
 from firmware_py.platform.cli import Parser, check_output_file
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.rx_queue import deepen
 
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
          "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")
-SENSORS = ("MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed")
-COMMAND = "MRS_AuxSteerCmd"
+SENSORS = names.SENSORS
+COMMAND = names.MSG_CMD
 FLOOD_ID = 0x7F0
 HISTORY = 256  # frames kept per message for replay and substitution
 # E2E and SecOC fields (the DBC's naming): out_of_range sets the first signal that is none of these.
@@ -65,7 +66,7 @@ PROTECTION_SUFFIXES = ("_CRC", "_Counter", "_FvEpoch", "_FvCounter", "_MAC")
 @dataclass(frozen=True)
 class Fault:
     kind: str = "none"
-    target: str = "MRS_YawRate"
+    target: str = names.MSG_YAW
     start: float = 1.0
     stop: float = 1.3
     param: float = 1.0

@@ -33,7 +33,7 @@ from typing import Callable, Iterator
 from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 import mrsteer_dbc
-from mrsteer_dbc import secoc
+from mrsteer_dbc import names, secoc
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 Inputs = tuple[float, float, float]  # driver's front-wheel angle, yaw rate, speed
@@ -247,8 +247,7 @@ def _csv_text(columns: tuple[str, ...], rows: list[list[str]]) -> str:
 
 
 SENSOR_COLUMNS = ("kind", "message", "epoch", "fv_counter", "alive_counter", "value", "mac", "sent", "frame_hex")
-_SENSOR_SIGNAL = {"MRS_DriverSteer": "DriverSteer_Angle", "MRS_YawRate": "YawRate_YawRate",
-                  "MRS_VehicleSpeed": "VehicleSpeed_Speed"}
+_SENSOR_SIGNAL = names.SENSOR_SIGNAL
 
 
 def secoc_sensor_vectors() -> dict[str, str]:
