@@ -32,7 +32,7 @@ class AuthFields:
     mac: str
     mac_bits: int
     mac_start: int  # the MAC's first bit (little-endian): its place in the payload read as one integer
-    zero_mask: bytes  # AND mask clearing the CRC byte, the MAC bits and the bits no signal covers
+    zero_mask: bytes  # AND mask clearing the CRC byte and the MAC bits
 
     @classmethod
     def of(cls, contract: Contract, name: str, purpose: str = "SecOC",
@@ -59,11 +59,9 @@ class AuthFields:
         mac = sigs["MAC"]
         if not 0 < mac.length <= 128:
             raise SecOCError(f"{mac.name}: MAC width out of range")
-        # Bits no signal covers are not authenticated: a payload re-encoded from its signals (how
-        # the command's verifier once zeroed its fields) has them 0.  Every signal's raw value
-        # all ones (-1 for a signed one) marks the bits the DBC uses, in either byte order.
-        ones = {s.name: -1 if s.is_signed else (1 << s.length) - 1 for s in msg.signals}
-        mask = bytearray(msg.encode(ones, scaling=False, strict=False))
+        # Every payload bit is authenticated but the CRC's and the MAC's own, spare bits too: a
+        # forger must not be able to flip even a bit that no receiver reads today.
+        mask = bytearray(b"\xff" * msg.length)
         mask[e2e.crc_byte] = 0
         for bit in range(mac.start, mac.start + mac.length):
             mask[bit // 8] &= ~(1 << (bit % 8)) & 0xFF
@@ -71,7 +69,7 @@ class AuthFields:
                    sigs["FvCounter"].length, mac.name, mac.length, mac.start, bytes(mask))
 
     def zeroed(self, data: bytes) -> bytes:
-        """The payload the MAC covers: CRC and MAC (and unused bits) zero."""
+        """The payload the MAC covers: every byte, with the CRC and the MAC zero."""
         return bytes(b & m for b, m in zip(data, self.zero_mask))
 
     def write_mac(self, data: bytearray, mac: int) -> bytearray:
