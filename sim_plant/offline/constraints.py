@@ -128,9 +128,10 @@ def applied_threshold(params: VehicleParams, config: mr.ControllerConfig, delay_
     if not tr.stable:
         return 0.0
     per_nm = float(np.max(np.abs(tr.applied))) / probe
-    lo = goal / per_nm if per_nm > 0.0 else hi_limit  # linear: the least it can be
-    lo = min(lo * (1.0 - 1e-9), hi_limit)
-    if reaches(lo):
+    if per_nm <= 0.0:
+        return hi_limit
+    lo = min(goal / per_nm, hi_limit)  # linear: the least it can be, and exact while the command is unsaturated
+    if reaches(lo * (1.0 + 1e-9)):
         return lo
     hi = lo
     while not reaches(hi):
@@ -183,7 +184,7 @@ class ConstraintReport:
     dry: DryRoadFigures
 
     def worst(self) -> dict[str, dict[str, Any]]:
-        rows = [(m.as_dict(), c.as_dict()) for m, c in zip(self.margins.points, self.points)]
+        rows = [(m.as_dict(), vars(c)) for m, c in zip(self.margins.points, self.points)]
         out: dict[str, dict[str, Any]] = {}
         for key, (limit, largest) in LIMITS.items():
             if key == "threshold_nm":
