@@ -28,7 +28,7 @@ from firmware_py import model_regulator as mr
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.sensors import SensorConfig, Sensors
 from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
-from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles
+from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles, inverse_kn
 from sim_plant.offline.loop_plant import LoopModels, sampled_plant
 
 __all__ = ["CONTROLLERS", "Experiment", "Trace", "continuous_loop_poles", "discrete_loop_matrix",
@@ -95,8 +95,7 @@ class Trace:
 
 def inverse_nominal_gain(cfg: mr.ControllerConfig, v: float) -> float:
     """1 / K_n(v) exactly as the firmware schedules it (eq. 15 of its nominal car)."""
-    coeffs = mr.configure(cfg)
-    return coeffs.wheelbase / v + coeffs.k_us * v
+    return inverse_kn(mr.configure(cfg), v)
 
 
 # --------------------------------------------------------------------------- continuous

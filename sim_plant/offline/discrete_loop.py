@@ -38,7 +38,7 @@ class ClosedLoop:
     plant: SampledPlant  # its states come first in x
 
 
-def inverse_nominal_gain(coeffs: mr.Coefficients, v: float) -> float:
+def inverse_kn(coeffs: mr.Coefficients, v: float) -> float:
     """1 / K_n(v) exactly as the firmware schedules it (eq. 15 of its nominal car)."""
     return coeffs.wheelbase / v + coeffs.k_us * v
 
@@ -61,7 +61,7 @@ def closed_loop(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int
     parts = [(applied_at, plant.b)]
     if plant.b_prev is not None:
         parts.append((applied_at + 1, plant.b_prev))
-    ikn = inverse_nominal_gain(coeffs, params.v)
+    ikn = inverse_kn(coeffs, params.v)
     m = coeffs.model_delay
     depth = max(parts[-1][0], m)
     iz = npl  # index of the law's state z; queue slot i at iz + i

@@ -43,7 +43,7 @@ import numpy as np
 from firmware_py import model_regulator as mr
 from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 from sim_plant.offline.delay_margin import DelayMargin, delay_margin
-from sim_plant.offline.discrete_loop import IDEAL, inverse_nominal_gain, max_pole_radius
+from sim_plant.offline.discrete_loop import IDEAL, inverse_kn, max_pole_radius
 from sim_plant.offline.loop_plant import LoopModels, measured_response, sampled_plant
 
 #: Default operating envelope of ``mrsteer design margins`` (issue 5): speed, friction, mass.
@@ -119,7 +119,7 @@ class LoopResponse:
         self.ts = coeffs.ts
         self.plant = sampled_plant(params, coeffs.ts, models)
         self.delay_steps = delay_steps + self.plant.dead_time
-        self._ikn = inverse_nominal_gain(coeffs, params.v)
+        self._ikn = inverse_kn(coeffs, params.v)
         self._c = coeffs
 
     def plant_path(self, w: np.ndarray | float) -> np.ndarray:
