@@ -184,3 +184,32 @@ def test_model_delay_defaults_follow_the_gains(capsys: pytest.CaptureFixture[str
     assert _json(capsys, *base)["model_delay_steps"] == mr.ControllerConfig().model_delay_steps == 1
     assert _json(capsys, *base, "--k", "10", "--tau", "0.006")["model_delay_steps"] == 0  # the paper's law
     assert _json(capsys, *base, "--k", "10", "--tau", "0.006", "--model-delay", "1")["model_delay_steps"] == 1
+
+
+def test_sim_with_actuator_and_sensors_reports_applied_and_commanded_angle(capsys: pytest.CaptureFixture[str],
+                                                                           tmp_path: Path) -> None:
+    base = ("sim", "disturbance", "--mz", "1000", "--v", "20", "--mu", "1", "--ts", "0.002", "--k", "5",
+            "--tau", "0.05", "--model-delay", "1")
+    plain = _json(capsys, *base)
+    assert "peak_applied_aux_deg" not in plain  # the ideal loop's output is as it was
+    slow = tmp_path / "slow.toml"
+    slow.write_text("time_constant_s = 0.05\n")
+    lagged = _json(capsys, *base, "--actuator", str(slow))
+    # A lagging actuator applies less than it is commanded at the peak; the command is larger.
+    assert lagged["peak_applied_aux_deg"] < lagged["peak_aux_steer_deg"]
+    assert lagged["peak_aux_steer_deg"] > plain["peak_aux_steer_deg"]
+    noisy = [_json(capsys, *base, "--sensors", "default", "--seed", s)["final_aux_steer_deg"] for s in ("1", "1", "2")]
+    assert noisy[0] == noisy[1] != noisy[2]  # seeded and reproducible
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["sim", "disturbance", "--mz", "100", "--v", "20", "--mu", "1", "--ts", "0.002", "--actuator", "nofile.toml"],
+     "--actuator"),
+    (["sim", "steer", "--v", "20", "--mu", "1", "--ts", "0.002", "--sensors", "default", "--seed", "-1"], "--seed"),
+    (["sim", "disturbance", "--mz", "100", "--v", "20", "--mu", "1", "--actuator", "default"], "--ts > 0"),
+])
+def test_bad_model_arguments_give_one_line_and_exit_2(args: list[str], needle: str) -> None:
+    proc = _run(*args)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], proc.stderr

@@ -211,3 +211,33 @@ def test_a_whole_sample_of_extra_delay_is_the_same_loop_as_one_more_delay_step()
     a = np.sort_complex(discrete_loop_poles(p, c, 3))
     b = np.sort_complex(discrete_loop_poles(p, c, 1, extra_delay=2.0))
     assert np.max(np.abs(a - b)) < 1e-12
+
+
+def test_design_margins_reference_reports_every_constraint(capsys: pytest.CaptureFixture[str]) -> None:
+    grid = ("--v-grid", "5:50:2", "--mu-grid", "1", "--mass-grid", "1296")
+    assert main(["design", "margins", *grid, "--json"]) == 0
+    ideal = json.loads(capsys.readouterr().out)
+    assert "constraints" not in ideal  # without the flags: today's output
+    assert main(["design", "margins", "--reference", *grid, "--json"]) == 0
+    ref = json.loads(capsys.readouterr().out)
+    worst = ref["constraints"]["worst"]
+    assert set(worst) == {"max_pole_radius", "gain_margin_db", "phase_margin_deg", "extra_delay_pole_radius",
+                          "tau_range_pole_radius", "noise_rms_deg", "threshold_nm"}
+    # The shipped calibration is unstable on the reference loop (the 30 Hz filter, issue 15).
+    assert not ref["stable"] and not ref["constraints"]["passes"]
+    assert worst["max_pole_radius"]["where"] == {"v": 5.0, "mu": 1.0, "mass": 1296.0}
+    assert len(ref["constraints"]["points"]) == 2 and len(ref["constraints"]["dry_road"]["points"]) == 3
+    assert main(["design", "margins", "--reference", *grid]) == 0
+    assert "FAIL" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["design", "margins", "--actuator", "nofile.toml"], "no such file"),
+    (["design", "margins", "--reference", "--sensors", "ideal"], "--reference sets"),
+])
+def test_design_model_flags_reject_bad_input(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2 and needle in capsys.readouterr().err

@@ -19,7 +19,7 @@ from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.controller.options import resolve_model_delay
 from firmware_py.platform.cli import EXIT_USAGE, Parser, add_secoc_args, secoc_key
 from mrsteer_cli import design_cli
-from mrsteer_cli.cli_args import add_gains, count, number
+from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 from sim_plant.offline import experiments
@@ -28,7 +28,6 @@ from sim_plant.offline.closed_loop import CONTROLLERS
 if TYPE_CHECKING:
     from sim_plant.harness.hil import HilConfig
 
-MASS_RANGE = (300.0, 10000.0)
 MAX_DURATION = 60.0
 PAPER_OUT = Path("out/paper")
 
@@ -89,6 +88,7 @@ def _add_sim_parsers(sub: Any) -> None:
     p.add_argument("--mz", type=number("M_z", -1e5, 1e5), required=True, metavar="NM", help="yaw moment step in Nm")
     _add_operating_point(p, required=True)
     _add_controller(p)
+    add_models(p, seed=True)
     p.set_defaults(handler=_cmd_disturbance)
 
     p = sim_sub.add_parser("steer", help="driver steering step, normalised as in Figure 8",
@@ -96,6 +96,7 @@ def _add_sim_parsers(sub: Any) -> None:
                            "uncontrolled car on dry road; yaw rate is reported in those units.")
     _add_operating_point(p, required=True)
     _add_controller(p)
+    add_models(p, seed=True)
     p.set_defaults(handler=_cmd_steer)
 
     p = sim_sub.add_parser("threshold", help="smallest yaw moment step that saturates the actuator",
@@ -275,16 +276,26 @@ def _emit(args: argparse.Namespace, result: dict[str, object], title: str) -> No
         print(f"  {key:<28}{value:.6g}" if isinstance(value, float) else f"  {key:<28}{value}")
 
 
+def _models_out(args: argparse.Namespace, trace: Any) -> tuple[Any, dict[str, object]]:
+    """The loop's models, and what the output adds with them: the applied angle beside the
+    command, and the models (nothing for the ideal loop, whose output stays as it was)."""
+    models = loop_models(args)
+    return models, ({} if models.is_ideal or trace is None else {**trace.applied_summary(), **models.describe()})
+
+
 def _cmd_disturbance(args: argparse.Namespace) -> int:
     exp = experiments.disturbance(_params(args), args.mz, args.controller, _config(args), args.duration)
-    trace = experiments.run(exp, args.ts, args.delay_steps)
-    _emit(args, {**trace.summary(), "m_z": args.mz, **_echo(args)}, f"yaw moment step of {args.mz:g} Nm")
+    models, _ = _models_out(args, None)
+    trace = experiments.run(exp, args.ts, args.delay_steps, models)
+    _emit(args, {**trace.summary(), **_models_out(args, trace)[1], "m_z": args.mz, **_echo(args)},
+          f"yaw moment step of {args.mz:g} Nm")
     return 0
 
 
 def _cmd_steer(args: argparse.Namespace) -> int:
     exp = experiments.steer(_params(args), args.controller, _config(args), args.duration)
-    trace = experiments.run(exp, args.ts, args.delay_steps)
+    models, _ = _models_out(args, None)
+    trace = experiments.run(exp, args.ts, args.delay_steps, models)
     s = trace.summary()
     result = {
         "peak_yaw_rate_norm": s["peak_yaw_rate_rad_s"],
@@ -294,6 +305,7 @@ def _cmd_steer(args: argparse.Namespace) -> int:
         "final_aux_steer_deg": s["final_aux_steer_deg"],
         "saturated": s["saturated"],
         "stable": s["stable"],
+        **_models_out(args, trace)[1],
         **_echo(args),
     }
     _emit(args, result, "driver steering step (yaw rate normalised to the uncontrolled dry-road steady state)")

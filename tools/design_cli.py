@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
-from mrsteer_cli.cli_args import add_gains, count, number
+from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number
+from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU
 
 GRID_HELP = "LO:HI:N (N evenly spaced values, ends included) or a single value"
@@ -48,9 +49,9 @@ def _add_envelope(p: argparse.ArgumentParser) -> None:
     from sim_plant.offline import margins as M
 
     for flag, kind, (lo, hi, n), limits in (
-            ("--v-grid", "speed", M.DEFAULT_SPEEDS, (3.0, 70.0)),
+            ("--v-grid", "speed", M.DEFAULT_SPEEDS, SPEED_RANGE),
             ("--mu-grid", "friction", M.DEFAULT_FRICTIONS, (0.01, MAX_MU)),
-            ("--mass-grid", "mass", M.DEFAULT_MASSES, (300.0, 10000.0))):
+            ("--mass-grid", "mass", M.DEFAULT_MASSES, MASS_RANGE)):
         p.add_argument(flag, type=_grid(kind, *limits), default=None, metavar="LO:HI:N",
                        help=f"{kind} values of the envelope, {GRID_HELP} (default {lo:g}:{hi:g}:{n})")
 
@@ -72,6 +73,23 @@ def _add_loop(p: argparse.ArgumentParser, form_help: str) -> None:
                    help=f"{form_help} (default {d.q_form})")
 
 
+def _add_reference(p: argparse.ArgumentParser) -> None:
+    add_models(p)
+    p.add_argument("--reference", action="store_true",
+                   help="issue 15's reference loop: --actuator default --sensors default (with the default "
+                   "--ts 0.002 and --delay-steps 1)")
+
+
+def _models(args: argparse.Namespace) -> Any:
+    from sim_plant.offline.loop_plant import LoopModels
+
+    if args.reference:
+        if args.actuator is not None or args.sensors is not None:
+            raise ValueError("--reference sets --actuator and --sensors; give one or the other")
+        return LoopModels.reference()
+    return loop_models(args)
+
+
 def add_parsers(sub: Any, parser_class: type) -> None:
     design = sub.add_parser("design", help="stability margins, tuning and bus load (offline design)",
                             description="Offline design checks of the discrete controller on a real bus.")
@@ -87,7 +105,14 @@ def add_parsers(sub: Any, parser_class: type) -> None:
     p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
                    help=f"discretisation (default {d.method})")
     _add_envelope(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object (stable, worst, points)")
+    _add_reference(p)
+    p.add_argument("--constraints", action="store_true",
+                   help="also the constraint figures of issue 15 (extra sample of delay, actuator time constant "
+                   "x0.5..x2, command noise, applied-angle saturation threshold, dry-road peaks); on by default "
+                   "when an actuator or sensor model is in the loop")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object (stable, worst, points; with the constraints: constraints.worst, "
+                   "constraints.points, constraints.dry_road)")
     p.set_defaults(handler=_cmd_margins)
 
     p = dsub.add_parser("tune", help="choose K, tau, tau_n for the strongest rejection with GM >= 6 dB, PM >= 45 deg",
@@ -96,6 +121,7 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                         ">= 6 dB and phase margin >= 45 deg over the whole envelope.")
     _add_loop(p, "model regulator form")
     _add_envelope(p)
+    _add_reference(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
 
@@ -146,22 +172,63 @@ def _margins_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _constraints_table(res: dict[str, Any]) -> str:
+    from sim_plant.offline.constraints import LIMITS
+
+    labels = {"max_pole_radius": ("pole radius", "<", ".5f"), "gain_margin_db": ("gain margin, dB", ">=", ".2f"),
+              "phase_margin_deg": ("phase margin, deg", ">=", ".1f"),
+              "extra_delay_pole_radius": ("radius, +1 sample", "<", ".5f"),
+              "tau_range_pole_radius": ("radius, T x0.5..2", "<", ".5f"),
+              "noise_rms_deg": ("command noise, deg", "<=", ".3f"), "threshold_nm": ("threshold, Nm", ">=", ".0f")}
+    c = res["constraints"]
+    lines = [f"constraints ({res['models']['actuator']}; sensors {res['models']['sensors']}):",
+             f"{'':<22}{'worst':>12}{'limit':>12}  verdict  at v [m/s], mu, mass [kg]"]
+    for key in LIMITS:
+        label, sense, spec = labels[key]
+        w = c["worst"][key]
+        value = "n/a" if w["where"] is None else ("unbounded" if w["value"] is None else format(w["value"], spec))
+        at = "-" if w["where"] is None else ", ".join(f"{x:g}" for x in w["where"].values())
+        lines.append(f"{label:<22}{value:>12}{sense:>4}{w['limit']:>8g}  {'pass' if w['pass'] else 'FAIL':<7}  {at}")
+    for p in c["dry_road"]["points"]:
+        lines.append(f"peak yaw rate after {c['dry_road']['m_z_nm']:g} Nm at {p['v']:g} m/s, mu 1: "
+                     f"{p['peak_yaw_rate_rad_s']:.4f} rad/s")
+    lines.append("ALL CONSTRAINTS MET" if c["passes"] else f"FAILS: {', '.join(c['failing'])}")
+    return "\n".join(lines)
+
+
 def _cmd_margins(args: argparse.Namespace) -> int:
     from sim_plant.offline.margins import envelope_margins
 
     cfg = replace(mr.ControllerConfig(), q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
                   ts=args.ts, method=args.method, model_delay_steps=args.model_delay)
     env = _envelope(args)
-    res = envelope_margins(cfg, args.delay_steps, env, progress=_progress("margins")).as_dict()
-    print(json.dumps(res, indent=2) if args.json else _margins_table(res))
+    models = _models(args)
+    margins = envelope_margins(cfg, args.delay_steps, env, progress=_progress("margins"), models=models)
+    res = margins.as_dict()
+    if args.constraints or not models.is_ideal:
+        from sim_plant.offline.constraints import evaluate
+
+        res["models"] = models.describe()
+        res["constraints"] = evaluate(cfg, args.delay_steps, margins, models,
+                                      progress=_progress("constraints")).as_dict()
+    if args.json:
+        print(json.dumps(res, indent=2))
+    else:
+        print(_margins_table(res))
+        if "constraints" in res:
+            print(_constraints_table(res))
     return 0
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from sim_plant.offline.tuning import tune
+    from sim_plant.offline.tuning import TuneInfeasible, tune
 
-    res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
-               progress=_progress("tune")).as_dict()
+    try:
+        res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
+                   progress=_progress("tune"), models=_models(args)).as_dict()
+    except TuneInfeasible as exc:
+        print(f"mrsteer design tune: no calibration of this structure meets every constraint: {exc}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
@@ -175,6 +242,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
           f"{_fmt(res['worst']['phase_margin_deg'], '.1f')} deg, worst pole radius "
           f"{res['worst']['max_pole_radius']:.5f} ({res['search']['feasible']} of {res['search']['screened']} "
           "grid candidates feasible)")
+    if "constraint_figures" in res:
+        c = res["constraint_figures"]
+        print("  " + ("every constraint met" if c["passes"] else f"FAILS: {', '.join(c['failing'])}") + ": "
+              + ", ".join(f"{k} {_fmt(w['value'], '.4g')}" for k, w in c["worst"].items()))
     return 0
 
 

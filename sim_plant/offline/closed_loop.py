@@ -11,13 +11,12 @@ from rest, speed constant):
   the exactly (ZOH) discretised plant, with ``delay_steps`` samples between measurement
   and applied command.
 
-``discrete_loop_poles`` and ``continuous_loop_poles`` give the linear (unsaturated) loop's
-poles, from which the ``stable`` verdicts come.
+``discrete_loop_poles`` (``discrete_loop``, re-exported here) and ``continuous_loop_poles``
+give the linear (unsaturated) loop's poles, from which the ``stable`` verdicts come.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import deque
 from dataclasses import dataclass, replace
@@ -26,7 +25,14 @@ import numpy as np
 from scipy.linalg import expm
 
 from firmware_py import model_regulator as mr
+from sim_plant.car.actuator_dynamics import PositionActuator
+from sim_plant.car.sensors import SensorConfig, Sensors
 from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
+from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles, inverse_kn
+from sim_plant.offline.loop_plant import LoopModels, sampled_plant
+
+__all__ = ["CONTROLLERS", "Experiment", "Trace", "continuous_loop_poles", "discrete_loop_matrix",
+           "discrete_loop_poles", "inverse_nominal_gain", "simulate_continuous", "simulate_discrete"]
 
 CONTROLLERS = ("none", mr.Q_STANDARD, mr.Q_LIMITED)
 
@@ -68,6 +74,13 @@ class Trace:
     aux: np.ndarray
     saturated: bool
     stable: bool
+    applied: np.ndarray | None = None  # the angle the actuator applied (rad); None: the command itself
+
+    def applied_summary(self) -> dict[str, float]:
+        """Peak and final applied auxiliary angle (deg), beside the command's in ``summary``."""
+        applied = self.aux if self.applied is None else self.applied
+        return {"peak_applied_aux_deg": math.degrees(float(np.max(np.abs(applied)))),
+                "final_applied_aux_deg": math.degrees(float(applied[-1]))}
 
     def summary(self) -> dict[str, float | bool]:
         return {
@@ -82,8 +95,7 @@ class Trace:
 
 def inverse_nominal_gain(cfg: mr.ControllerConfig, v: float) -> float:
     """1 / K_n(v) exactly as the firmware schedules it (eq. 15 of its nominal car)."""
-    coeffs = mr.configure(cfg)
-    return coeffs.wheelbase / v + coeffs.k_us * v
+    return inverse_kn(mr.configure(cfg), v)
 
 
 # --------------------------------------------------------------------------- continuous
@@ -213,11 +225,13 @@ def _bisect_event(M: np.ndarray, z0: np.ndarray, y_row: np.ndarray, limit: float
 # ----------------------------------------------------------------------------- discrete
 
 
-def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace:
+def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: LoopModels = IDEAL) -> Trace:
     """The firmware's step() in closed loop with the exactly discretised plant.
 
-    At sample k the sensors read the plant, the firmware computes a command, and that command
-    reaches the wheels ``delay_steps`` samples later, held for one sample.
+    At sample k the sensors read the plant (``Sensors``: exact for ideal sensors), the firmware
+    computes a command, and that command reaches the actuator ``delay_steps`` samples later;
+    the actuator (``PositionActuator``: its dead time, range, lag and rate limit; ideal = the
+    command clamped to its range) gives the angle the car gets over that sample.
     """
     if not (math.isfinite(ts) and ts > 0.0):
         raise ValueError(f"ts must be positive and finite, got {ts!r}")
@@ -227,10 +241,8 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace
         raise ValueError("the firmware always applies its actuator limit; saturate=False is continuous-only")
     ss = state_space(exp.params)
     phi, gamma = zoh_discretize(ss.A, ss.B, ts)
-    p00, p01, p10, p11 = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
-    gm0 = gamma[0, 1] * exp.m_z
-    gm1 = gamma[1, 1] * exp.m_z
-    gd0, gd1 = gamma[0, 0], gamma[1, 0]
+    car = _CarStep(exp, ts, models)
+    sensors = Sensors(models.sensors, ts)
 
     use_controller = exp.controller != "none"
     if use_controller:
@@ -245,112 +257,76 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1) -> Trace
     r_hist = np.empty(n)
     aux_hist = np.empty(n)
     applied_hist = np.empty(n)
-    pipeline: deque[float] = deque([0.0] * delay_steps)
-    beta = r = 0.0
+    pipeline: deque[float] = deque([0.0] * (delay_steps + models.actuator.dead_time_samples))
     v = exp.params.v
     dd = exp.delta_driver
     saturated = False
     for k in range(n):
-        beta_hist[k] = beta
-        r_hist[k] = r
+        beta_hist[k] = car.beta
+        r_hist[k] = car.r
         if use_controller:
-            u = mr.step(coeffs, state, dd, r, v)
+            u = mr.step(coeffs, state, sensors.steer(dd), sensors.yaw_rate(car.r), sensors.speed(v))
             saturated = saturated or state.status == mr.STATUS_SATURATED
         else:
             u = 0.0
         aux_hist[k] = u
         pipeline.append(u)
-        applied = pipeline.popleft()
-        applied_hist[k] = applied
-        d = dd + applied
-        beta, r = (p00 * beta + p01 * r + gd0 * d + gm0,
-                   p10 * beta + p11 * r + gd1 * d + gm1)
+        applied_hist[k] = car.step(pipeline.popleft())
     t = np.arange(n) * ts
     delta_f = dd + applied_hist
     out = ss.C @ np.vstack([beta_hist, r_hist]) + ss.D @ np.vstack([delta_f, np.full(n, exp.m_z)])
     if use_controller:
-        poles = discrete_loop_poles(exp.params, coeffs, delay_steps)
+        poles = discrete_loop_poles(exp.params, coeffs, delay_steps, models=models)
     else:
         poles = np.linalg.eigvals(phi)
     stable = bool(np.all(np.abs(poles) < 1.0))
-    return Trace(t, r_hist, beta_hist, out[2], aux_hist, saturated, stable)
+    return Trace(t, r_hist, beta_hist, out[2], aux_hist, saturated, stable, applied_hist)
 
 
-def discrete_loop_poles(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
-                        loop_gain: complex = 1.0, extra_delay: float = 0.0) -> np.ndarray:
-    """Poles of the sampled loop (ZOH plant, firmware law unsaturated, N samples of delay, and
-    ``extra_delay`` samples of further continuous-time delay)."""
-    return np.linalg.eigvals(discrete_loop_matrix(params, coeffs, delay_steps, loop_gain, extra_delay)[0])
+class _CarStep:
+    """The car (and actuator) over one sample of the firmware's loop.
 
-
-@functools.lru_cache(maxsize=1024)
-def _sampled_plant(params: VehicleParams, ts: float, frac: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(Phi, Gamma, Gamma_late, Gamma_early) of the ZOH plant with a delay of ``frac`` of a
-    sample before it (steering columns; Gamma_late = Gamma and Gamma_early = 0 at frac = 0).
-    Cached: a margin search asks for the same few fractions at one operating point many times.
-    The arrays are shared between callers and must not be written to."""
-    ss = state_space(params)
-    phi, gamma = zoh_discretize(ss.A, ss.B, ts)
-    if frac == 0.0:
-        return phi, gamma, gamma[:, 0], np.zeros(2)
-    phi_late, gamma_late = zoh_discretize(ss.A, ss.B[:, :1], (1.0 - frac) * ts)
-    gamma_early = phi_late @ zoh_discretize(ss.A, ss.B[:, :1], frac * ts)[1]
-    return phi, gamma, gamma_late[:, 0], gamma_early[:, 0]
-
-
-def discrete_loop_matrix(params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
-                         loop_gain: complex = 1.0, extra_delay: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """(F, g): the sampled loop x+ = F x + g M_z, delta_d = 0, the firmware law unsaturated.
-
-    State: [beta, r, z, q_1 .. q_D] with q_i the command computed i samples ago and
-    D = max(N, M), M the firmware's modelled delay.  At speed v (constant), delta_d = 0:
-    M = 0: u = (z - g_r0 rho) / (1 - g_w0), w = u;   M >= 1: u = z - g_r0 rho + g_w0 q_M, w = q_M;
-    z+ = g_w1 w - g_r1 rho + a u, rho = r / K_n(v); the plant gets q_N (u itself when N = 0).
-    ``loop_gain`` multiplies the command on its way into the plant (a real or complex
-    perturbation of the loop, for checking margins).  ``extra_delay`` (in samples, >= 0, any
-    real value) is a further pure delay in continuous time between the hold and the plant: with
-    k + f samples of it (0 <= f < 1) a command acts for the last (1 - f) T of the sample
-    k samples after the nominal one and for the first f T of the next, so the plant's input
-    matrix splits into Gamma_late = int_0^{(1-f)T} e^{As} ds B and
-    Gamma_early = e^{A(1-f)T} int_0^{fT} e^{As} ds B (the modified z-transform).
+    Ideal actuator: the command clamped to the range (``PositionActuator``) steers the ZOH car,
+    today's arithmetic exactly.  Otherwise the car and the actuator's linear response are the
+    exact ZOH cascade of ``loop_plant`` (the car sees the position move within the sample), and
+    the position is then taken from ``PositionActuator`` (range, rate limit, end stop), so the
+    limits hold; within a sample where the rate limit acts, the car sees the linear response.
+    The actuator's dead time is in the caller's queue.
     """
-    if not (math.isfinite(extra_delay) and extra_delay >= 0.0):
-        raise ValueError(f"extra_delay must be >= 0 samples, got {extra_delay!r}")
-    whole, frac = divmod(extra_delay, 1.0)
-    phi, gamma, late, early = _sampled_plant(params, coeffs.ts, frac)
-    applied_at = delay_steps + int(whole)  # the queue slot whose command acts over the sample's end
-    parts = [(applied_at, late)] if frac == 0.0 else [(applied_at, late), (applied_at + 1, early)]
-    ikn = coeffs.wheelbase / params.v + coeffs.k_us * params.v
-    m = coeffs.model_delay
-    depth = max(parts[-1][0], m)
-    n = 3 + depth
-    u_row = np.zeros(n)  # u[k] as a function of the state
-    w_row = np.zeros(n)  # w[k] (the command the law compares the yaw rate with)
-    if m == 0:
-        g = coeffs.inv_one_minus_g_w0
-        u_row[1] = -coeffs.g_r0 * ikn * g
-        u_row[2] = g
-        w_row[:] = u_row
-    else:
-        u_row[1] = -coeffs.g_r0 * ikn
-        u_row[2] = 1.0
-        u_row[2 + m] = coeffs.g_w0
-        w_row[2 + m] = 1.0
-    F = np.zeros((n, n), dtype=complex if isinstance(loop_gain, complex) else float)
-    F[:2, :2] = phi
-    for slot, column in parts:
-        b = column * loop_gain
-        if slot == 0:
-            F[:2, :] += np.outer(b, u_row)
+
+    def __init__(self, exp: Experiment, ts: float, models: LoopModels) -> None:
+        act = replace(models.actuator, dead_time_samples=0)
+        self.actuator = PositionActuator(act, ts)
+        self.order = act.order
+        self.dd = exp.delta_driver
+        self.beta = self.r = 0.0
+        if self.order == 0:
+            ss = state_space(exp.params)
+            phi, gamma = zoh_discretize(ss.A, ss.B, ts)
+            self._p = (phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1])
+            self._g = (gamma[0, 0], gamma[1, 0], gamma[0, 1] * exp.m_z, gamma[1, 1] * exp.m_z)
         else:
-            F[:2, 2 + slot] += b  # the command queued this many samples ago is applied now
-    if depth > 0:
-        F[3, :] = u_row  # newest queue slot gets this sample's command
-        for i in range(1, depth):
-            F[3 + i, 2 + i] = 1.0
-    z_row = coeffs.g_w1 * w_row + coeffs.a * u_row
-    z_row[1] -= coeffs.g_r1 * ikn
-    F[2, :] = z_row
-    g = np.zeros(n)
-    g[:2] = gamma[:, 1]
-    return F, g
+            plant = sampled_plant(exp.params, ts, LoopModels(act, SensorConfig.ideal()))
+            self._a, self._b = plant.a, plant.b
+            self._const = plant.g * exp.m_z + plant.g_driver * exp.delta_driver  # both steps held
+            self._x = np.zeros(plant.order)
+
+    def step(self, command: float) -> float:
+        """The command reaching the actuator this sample; returns the applied angle at its start."""
+        if self.order == 0:
+            applied = self.actuator.step(command)
+            p00, p01, p10, p11 = self._p
+            gd0, gd1, gm0, gm1 = self._g
+            d = self.dd + applied
+            self.beta, self.r = (p00 * self.beta + p01 * self.r + gd0 * d + gm0,
+                                 p10 * self.beta + p11 * self.r + gd1 * d + gm1)
+            return applied
+        x = self._x
+        applied = float(x[2])
+        lim = self.actuator.limit
+        held = min(lim, max(-lim, command))
+        x = self._a @ x + self._b * held + self._const
+        x[2] = self.actuator.step(command)
+        self._x = x
+        self.beta, self.r = float(x[0]), float(x[1])
+        return applied

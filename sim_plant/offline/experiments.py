@@ -12,13 +12,18 @@ from dataclasses import replace
 from firmware_py import model_regulator as mr
 from sim_plant.offline.closed_loop import Experiment, Trace, simulate_continuous, simulate_discrete
 from sim_plant.car.vehicle import VehicleParams, steering_tf
+from sim_plant.offline.discrete_loop import IDEAL
+from sim_plant.offline.loop_plant import LoopModels
 
 
-def run(exp: Experiment, ts: float = 0.0, delay_steps: int = 1) -> Trace:
-    """Continuous reference for ``ts == 0``, otherwise the firmware at step ``ts``."""
+def run(exp: Experiment, ts: float = 0.0, delay_steps: int = 1, models: LoopModels = IDEAL) -> Trace:
+    """Continuous reference for ``ts == 0``, otherwise the firmware at step ``ts`` with the
+    actuator and sensor ``models`` in the loop."""
     if ts == 0.0:
+        if not models.is_ideal:
+            raise ValueError("an actuator or sensor model needs the sampled loop: give --ts > 0")
         return simulate_continuous(exp)
-    return simulate_discrete(exp, ts, delay_steps)
+    return simulate_discrete(exp, ts, delay_steps, models)
 
 
 def disturbance(params: VehicleParams, m_z: float, controller: str,

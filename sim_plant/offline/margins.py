@@ -25,7 +25,11 @@ found on the poles of the loop with that delay in it (``sim_plant.offline.delay_
 delay of a fraction of a sample changes the sampled plant's gain too, so phase margin over
 crossover frequency is not the delay margin of a sampled loop).
 Closed-loop pole radius comes independently from the state matrix of
-``sim_plant.offline.closed_loop.discrete_loop_poles``.
+``sim_plant.offline.discrete_loop``.
+
+With ``models`` (``loop_plant.LoopModels``) P(z) is the augmented plant from the command at the
+actuator's input to the *measured* yaw rate: actuator response, car and the sensor's low-pass
+(and the actuator's dead time joins z^-N); the ideal models give the loop above exactly.
 """
 
 from __future__ import annotations
@@ -37,9 +41,10 @@ from typing import Any
 import numpy as np
 
 from firmware_py import model_regulator as mr
-from sim_plant.offline.closed_loop import discrete_loop_poles
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 from sim_plant.offline.delay_margin import DelayMargin, delay_margin
-from sim_plant.car.vehicle import PAPER_MASS, VehicleParams, state_space, zoh_discretize
+from sim_plant.offline.discrete_loop import IDEAL, inverse_kn, max_pole_radius
+from sim_plant.offline.loop_plant import LoopModels, measured_response, sampled_plant
 
 #: Default operating envelope of ``mrsteer design margins`` (issue 5): speed, friction, mass.
 DEFAULT_SPEEDS = (5.0, 50.0, 10)
@@ -104,16 +109,17 @@ class Margins:
 
 
 class LoopResponse:
-    """L(e^{jwT}) of one operating point, evaluated at any frequencies (rad/s)."""
+    """L(e^{jwT}) of one operating point, evaluated at any frequencies (rad/s).
 
-    def __init__(self, params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int) -> None:
-        ss = state_space(params)
-        phi, gamma = zoh_discretize(ss.A, ss.B, coeffs.ts)
+    The plant is ``loop_plant``'s: with ``models`` the actuator and the yaw-rate filter are in
+    it (ideal: the ZOH car alone), and the actuator's dead time joins the N samples of delay."""
+
+    def __init__(self, params: VehicleParams, coeffs: mr.Coefficients, delay_steps: int,
+                 models: LoopModels = IDEAL) -> None:
         self.ts = coeffs.ts
-        self.delay_steps = delay_steps
-        self._phi = phi
-        self._gamma = gamma[:, 0]
-        self._ikn = coeffs.wheelbase / params.v + coeffs.k_us * params.v
+        self.plant = sampled_plant(params, coeffs.ts, models)
+        self.delay_steps = delay_steps + self.plant.dead_time
+        self._ikn = inverse_kn(coeffs, params.v)
         self._c = coeffs
 
     def plant_path(self, w: np.ndarray | float) -> np.ndarray:
@@ -121,11 +127,7 @@ class LoopResponse:
         return self.plant_path_z(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
 
     def plant_path_z(self, z: np.ndarray | complex) -> np.ndarray:
-        (p00, p01), (p10, p11) = self._phi
-        g0, g1 = self._gamma
-        # r-row of (zI - Phi)^-1 Gamma for the 2x2 plant
-        plant = ((z - p00) * g1 + p10 * g0) / ((z - p00) * (z - p11) - p01 * p10)
-        return self._ikn * plant * z ** (-self.delay_steps)
+        return self._ikn * measured_response(self.plant, z) * np.asarray(z) ** (-self.delay_steps)
 
     def at_z(self, z: np.ndarray | complex) -> np.ndarray:
         """L(z) anywhere in the z-plane."""
@@ -188,13 +190,14 @@ def frequency_margins(loop: LoopResponse) -> dict[str, float | None]:
 
 
 def point_margins(params: VehicleParams, config: mr.ControllerConfig, delay_steps: int,
-                  with_delay_margin: bool = True) -> Margins:
+                  with_delay_margin: bool = True, models: LoopModels = IDEAL) -> Margins:
     """Margins of one operating point; the delay margin (a pole search, the costly part) only
     when asked for, else None."""
     coeffs = mr.configure(config)
-    radius = float(np.max(np.abs(discrete_loop_poles(params, coeffs, delay_steps))))
-    fm = frequency_margins(LoopResponse(params, coeffs, delay_steps))
-    dm = delay_margin(params, coeffs, delay_steps) if with_delay_margin else DelayMargin(None, None)
+    radius = max_pole_radius(params, coeffs, delay_steps, models)
+    fm = frequency_margins(LoopResponse(params, coeffs, delay_steps, models))
+    dm = (delay_margin(params, coeffs, delay_steps, models=models) if with_delay_margin
+          else DelayMargin(None, None))
     return Margins(v=params.v, mu=params.mu, mass=params.mass, max_pole_radius=radius, **fm,
                    delay_margin_s=dm.seconds(coeffs.ts), delay_margin_samples=dm.samples,
                    delay_crossover_hz=dm.crossover_hz)
@@ -245,7 +248,7 @@ class EnvelopeMargins:
 
 def envelope_margins(config: mr.ControllerConfig, delay_steps: int, envelope: Envelope = Envelope(),
                      base: VehicleParams = VehicleParams(), progress=None,
-                     with_delay_margin: bool = True) -> EnvelopeMargins:
+                     with_delay_margin: bool = True, models: LoopModels = IDEAL) -> EnvelopeMargins:
     """``point_margins`` at every point of the envelope; ``progress(done, total)`` if given."""
     mr.configure(config)  # validate once, before the sweep
     if delay_steps < 0:
@@ -253,7 +256,7 @@ def envelope_margins(config: mr.ControllerConfig, delay_steps: int, envelope: En
     pts = envelope.points(base)
     out = []
     for i, p in enumerate(pts):
-        out.append(point_margins(p, config, delay_steps, with_delay_margin))
+        out.append(point_margins(p, config, delay_steps, with_delay_margin, models))
         if progress is not None:
             progress(i + 1, len(pts))
     return EnvelopeMargins(config, delay_steps, out)
