@@ -142,7 +142,7 @@ class Sensors:
         self.yaw_bias = math.radians(yaw.bias_deg_s)
         self.steer_sigma = math.radians(config.steer.noise)
         self.speed_sigma = config.speed.noise
-        if yaw.lowpass_hz > 0.0:
+        if yaw.lowpass_hz > 0.0 and not config.exact:  # exact sensors filter nothing
             # Imported here: scipy.signal costs the plant process half a second of start-up,
             # which every run with ideal sensors (the default) would pay for nothing.
             from scipy.signal import butter
