@@ -49,6 +49,15 @@ def test_plant_settings_reach_the_plant_as_given() -> None:
                                                                     Path("w/plant.json"), True)
 
 
+def test_the_car_settings_reach_the_plant_as_given_and_unset_leave_the_scenarios() -> None:
+    s = launch.PlantSettings(500.0, "lockstep", "split-mu", plant="nonlinear", actuator="act.toml", sensors="ideal",
+                             seed=12345678901)
+    a = plant_parser().parse_args(list(launch.plant(BUS, s).argv))
+    assert (a.plant, a.actuator, a.sensors, a.seed) == ("nonlinear", "act.toml", "ideal", 12345678901)
+    a = plant_parser().parse_args(list(launch.plant(BUS, launch.PlantSettings(500.0, "lockstep")).argv))
+    assert (a.plant, a.actuator, a.sensors, a.seed) == (None, None, None, None)
+
+
 def test_the_bridge_gets_its_fault_whole() -> None:
     fault = Fault("replay", "MRS_YawRate", 1.5, 2.25, 13.0)
     argv = launch.bridge("mrsteer", "veh", "ctl", fault, Path("bridge.json")).argv

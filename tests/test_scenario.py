@@ -108,3 +108,108 @@ def test_mu_and_speed_events_change_the_operating_point() -> None:
     assert st.advance_to(1.0) and st.params() == VehicleParams(v=20.0, mu=0.3)
     assert st.advance_to(2.5) and st.params().v == 30.0
     assert st.panic_until == 1.0 + sc.driver.reaction_time  # a friction drop also startles the driver
+
+
+# ---------------------------------------------------------------- the realistic car's keys
+
+from sim_plant.car import disturbances as dist  # noqa: E402
+from sim_plant.car.actuator_dynamics import ActuatorModelConfig  # noqa: E402
+from sim_plant.car.sensors import SensorConfig  # noqa: E402
+
+
+def test_a_file_without_the_new_keys_is_the_papers_ideal_car(tmp_path: Path) -> None:
+    sc = scn.load(_write(tmp_path, "duration = 1\n[[events]]\nt = 0.5\nyaw_moment = 100"))
+    assert sc.plant == "linear" and sc.actuator == ActuatorModelConfig.ideal() and sc.sensors == SensorConfig.ideal()
+    assert sc.ideal_car and sc.disturbances == ()
+    for name in ("paper-fig8", "paper-fig9", "handover"):
+        assert scn.load(name).ideal_car
+
+
+def test_plant_actuator_sensors_and_disturbances_are_read_from_the_file(tmp_path: Path) -> None:
+    sc = scn.load(_write(tmp_path, """
+duration = 3
+v = 25
+mass = 1500
+plant = "nonlinear"
+[actuator]
+time_constant_s = 0.03
+[sensors]
+seed = 7
+[sensors.yaw_rate]
+lowpass_hz = 20.0
+[[events]]
+t = 0.5
+split_mu_braking = { mu_left = 0.9, mu_right = 0.3, deceleration = 4.0 }
+[[events]]
+t = 1.0
+side_wind = {}
+[[events]]
+t = 2.0
+blowout = { wheel = "rr" }
+"""))
+    assert sc.plant == "nonlinear" and sc.actuator.time_constant_s == 0.03 and sc.actuator.order == 1
+    assert sc.sensors.seed == 7 and sc.sensors.yaw_rate.lowpass_hz == 20.0 and not sc.sensors.exact
+    assert sc.disturbances == (dist.SplitMuBraking(t_start=0.5, mu_left=0.9, mu_right=0.3, deceleration=4.0,
+                                                   mass=1500.0),
+                               dist.SideWindGust(t_start=1.0), dist.TyreBlowout(t_start=2.0, wheel="rr", mass=1500.0))
+    assert sc.first_disturbance_time == 0.5
+    # The loads at t are those of the disturbances themselves, added.
+    state = scn.ScenarioState(sc)
+    assert state.loads(0.4) == dist.NO_LOADS
+    assert state.loads(1.2) == sc.disturbances[0].at(1.2) + sc.disturbances[1].at(1.2)
+    # A disturbance shocks the driver like a mu change: the panic reaction time starts.
+    state.advance_to(0.5)
+    assert state.panic_until == 0.5 + sc.driver.reaction_time
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("duration = 2\nplant = 'bicycle'", "plant must be one of linear, nonlinear"),
+    ("duration = 2\n[[events]]\nt = 1\nside_wind = {}", "linear plant takes only yaw-moment loads; side_wind"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nside_wind = { gust = 1 }", "unknown key 'gust'"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nside_wind = { t_start = 1 }", "unknown key 't_start'"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nblowout = { mass = 900 }", "unknown key 'mass'"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nblowout = { wheel = 'spare' }", "wheel must be one of"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nsplit_mu_braking = { mu_right = 0 }", "mu_right must be"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nside_wind = { peak_force = 'x' }", "must be a number"),
+    ("duration = 2\nplant = 'nonlinear'\n[[events]]\nt = 1\nside_wind = 3", "must be a table"),
+    ("duration = 2\n[actuator]\ntime_constant_s = 0", "'time_constant_s' must be a number in (0, 1]"),
+    ("duration = 2\n[actuator]\nlag = 1", "unknown key 'lag'"),
+    ("duration = 2\nactuator = 3", "must be a table"),
+    ("duration = 2\n[sensors.yaw_rate]\nnoise_density = -1", "'noise_density' must be a number in [0, 10]"),
+    ("duration = 2\n[sensors]\nseed = -1", "'seed' must be an integer"),
+])
+def test_bad_car_keys_name_the_problem_in_one_line(tmp_path: Path, text: str, needle: str) -> None:
+    with pytest.raises(scn.ScenarioError) as info:
+        scn.load(_write(tmp_path, text))
+    assert needle in str(info.value) and "s.toml" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_command_line_choices_override_the_files(tmp_path: Path) -> None:
+    sc = scn.load("split-mu")
+    assert (sc.plant, sc.actuator, sc.sensors) == ("nonlinear", ActuatorModelConfig.default(), SensorConfig.default())
+    ideal = sc.with_models(actuator="ideal", sensors="ideal", seed=None)
+    assert ideal.actuator == ActuatorModelConfig.ideal() and ideal.sensors.exact and ideal.plant == "nonlinear"
+    assert sc.with_models(seed=5).sensors == SensorConfig(seed=5)
+    assert sc.with_models() == sc
+    f = tmp_path / "act.toml"
+    f.write_text("order = 2\nnatural_frequency_hz = 10.0\n")
+    assert scn.load("paper-fig9").with_models("nonlinear", str(f)).actuator == ActuatorModelConfig(
+        order=2, natural_frequency_hz=10.0)
+    with pytest.raises(scn.ScenarioError, match="linear plant takes only yaw-moment loads"):
+        sc.with_models(plant="linear")
+    with pytest.raises(scn.ScenarioError, match="no such file"):
+        sc.with_models(sensors=str(tmp_path / "none.toml"))
+    with pytest.raises(scn.ScenarioError, match="seed must be"):
+        sc.with_models(seed=-1)
+    # The car's mass reaches the disturbances that depend on it.
+    assert sc.with_overrides(mass=1600.0).disturbances[0].mass == 1600.0
+
+
+def test_the_realistic_builtins_are_the_named_events_on_the_realistic_car() -> None:
+    split, wind, blow = (scn.load(n) for n in ("split-mu", "side-wind", "blow-out"))
+    for sc in (split, wind, blow):
+        assert not sc.ideal_car and sc.driver == scn.DriverModel("model", 1.0, 0.5)
+        assert sc.plant == "nonlinear" and sc.actuator == ActuatorModelConfig.default() and not sc.sensors.exact
+    (b,), (w,), (o,) = split.disturbances, wind.disturbances, blow.disturbances
+    assert (split.v, b.mu_left, b.mu_right) == (25.0, 1.0, 0.2) and isinstance(b, dist.SplitMuBraking)
+    assert wind.v == 30.0 and isinstance(w, dist.SideWindGust) and blow.v == 30.0 and isinstance(o, dist.TyreBlowout)

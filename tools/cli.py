@@ -136,24 +136,67 @@ def _add_hil_parsers(sub: Any) -> None:
                            "plot.png and summary.json.")
     _add_hil_args(p)
     p.add_argument("--scenario", default="paper-fig9",
-                   help="built-in (paper-fig8, paper-fig9, handover) or a TOML file (default paper-fig9)")
+                   help="built-in (paper-fig8, paper-fig9, handover; on the realistic car split-mu, side-wind, "
+                   "blow-out) or a TOML file (default paper-fig9)")
     p.add_argument("--v", type=number("speed v", *SPEED_RANGE), metavar="MPS", help="override the scenario's speed")
     p.add_argument("--mu", type=number("friction mu", 0.0, MAX_MU, lo_open=True), metavar="MU",
                    help="override the scenario's friction")
     p.add_argument("--mz", type=number("M_z", -20000.0, 20000.0), metavar="NM",
                    help="override the scenario's yaw-moment steps")
+    p.add_argument("--duration", type=number("duration", 0.0, 600.0, lo_open=True), metavar="S",
+                   help="override the scenario's duration")
     p.add_argument("--controller", choices=CONTROLLERS, default=mr.Q_LIMITED,
                    help="none, standard or limited (default limited)")
     add_gains(p)
     p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
+    _add_car_args(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(handler=_cmd_hil_run)
+    p = hil_sub.add_parser("evidence", help="the realistic scenarios with and without the controller, one table",
+                           description="Run split-mu, side-wind and blow-out (the realistic car: nonlinear tyres, "
+                           "the default actuator and sensors, the driver model with a 1 s panic time) on the bus, "
+                           "each with and without the controller, and print peak yaw rate and its reduction, peak "
+                           "side slip, the auxiliary command's peak and RMS and the time at the +-3 deg limit.")
+    _add_hil_args(p, default_out="out/hil-evidence")
+    p.add_argument("--scenario", action="append", metavar="NAME",
+                   help="run only these scenarios (built-in or TOML file); repeatable (default: the three)")
+    p.add_argument("--controller", choices=(mr.Q_STANDARD, mr.Q_LIMITED), default=mr.Q_LIMITED,
+                   help="standard or limited (default limited)")
+    add_gains(p)
+    _add_car_args(p)
+    p.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p.set_defaults(handler=_cmd_hil_evidence)
     p = hil_sub.add_parser("demo", help="the quick-start demo: paper-fig9 with and without the controller",
                            description="Run the paper's 4000 Nm yaw-moment step (Figure 9) on the bus with and "
                            "without the controller, and explain the result.")
     _add_hil_args(p, default_out="out/hil-demo")
     p.set_defaults(handler=_cmd_hil_demo)
+
+
+def _add_car_args(p: argparse.ArgumentParser) -> None:
+    """The car the plant plays; each overrides the scenario's (whose default is the paper's ideal car)."""
+    p.add_argument("--plant", choices=("linear", "nonlinear"),
+                   help="linear (the paper's exact model) or nonlinear (magic-formula tyres); default: the scenario's")
+    p.add_argument("--actuator", metavar="ideal|default|FILE",
+                   help="actuator position model: ideal, default (first order, 20 ms) or a TOML file; "
+                   "default: the scenario's")
+    p.add_argument("--sensors", metavar="ideal|default|FILE",
+                   help="sensor models: ideal, default (noise, 30 Hz low-pass, DBC quantisation) or a TOML file; "
+                   "default: the scenario's")
+    p.add_argument("--seed", type=_seed, metavar="N", help="the sensors' noise seed (default: the scenario's)")
+
+
+def _seed(text: str) -> int:
+    from sim_plant.car.sensors import MAX_SEED
+
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if not 0 <= n <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {n}")
+    return n
 
 
 def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) -> None:
@@ -203,9 +246,11 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
     from sim_plant.harness import hil
 
     out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
-    cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, controller=args.controller,
+    cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, duration=args.duration,
+                      controller=args.controller,
                       k=args.k, tau=args.tau, tau_n=args.tau_n, model_delay=args.model_delay,
-                      delay_steps=args.delay_steps, out=out)
+                      delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
+                      sensors=args.sensors, seed=args.seed)
     try:
         result = hil.run(cfg, progress=_say)
     except hil.HilError as exc:
@@ -216,10 +261,27 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
         print(json.dumps(s, indent=2))
     else:
         for key in ("scenario", "mode", "rate_hz", "delay_steps", "controller", "peak_yaw_rate_rad_s",
-                    "final_yaw_rate_rad_s", "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable"):
+                    "final_yaw_rate_rad_s", "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable",
+                    "plant", "actuator", "sensors", "peak_yaw_rate_true_rad_s", "peak_side_slip_deg", "aux_rms_deg",
+                    "time_at_limit_s", "final_speed_m_s"):
             value = s[key]
-            print(f"  {key:<24}{value:.6g}" if isinstance(value, float) else f"  {key:<24}{value}")
-        print(f"  {'frames':<24}{s['frames']}")
+            print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
+        print(f"  {'frames':<26}{s['frames']}")
+    return 0
+
+
+def _cmd_hil_evidence(args: argparse.Namespace) -> int:
+    from sim_plant.harness import hil, hil_evidence
+
+    cfg = _hil_config(args, controller=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
+                      model_delay=args.model_delay, out=args.out, plant=args.plant, actuator=args.actuator,
+                      sensors=args.sensors, seed=args.seed)
+    try:
+        rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=_say)
+    except hil.HilError as exc:
+        print(f"mrsteer hil evidence: error: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps([e.row() for e in rows], indent=2) if args.json else hil_evidence.format_table(rows))
     return 0
 
 

@@ -33,7 +33,6 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, lfilter_zi
 
 import mrsteer_dbc
 from mrsteer_dbc import names
@@ -143,7 +142,11 @@ class Sensors:
         self.yaw_bias = math.radians(yaw.bias_deg_s)
         self.steer_sigma = math.radians(config.steer.noise)
         self.speed_sigma = config.speed.noise
-        if yaw.lowpass_hz > 0.0:
+        if yaw.lowpass_hz > 0.0 and not config.exact:  # exact sensors filter nothing
+            # Imported here: scipy.signal costs the plant process half a second of start-up,
+            # which every run with ideal sensors (the default) would pay for nothing.
+            from scipy.signal import butter
+
             b, a = butter(2, yaw.lowpass_hz, fs=fs)
             self.lowpass: tuple[np.ndarray, np.ndarray] | None = (b / a[0], a / a[0])
         else:
@@ -164,6 +167,8 @@ class Sensors:
             return x
         b, a = self.lowpass
         if self._z is None:  # at rest on the first value
+            from scipy.signal import lfilter_zi
+
             self._z = (lfilter_zi(b, a) * x).tolist()
         z = self._z
         # scipy.signal.lfilter's direct form II transposed, one sample at a time

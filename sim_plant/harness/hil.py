@@ -48,12 +48,17 @@ class HilConfig:
     v: float | None = None
     mu: float | None = None
     mz: float | None = None
+    duration: float | None = None  # s; None: the scenario's
     controller: str = mr.Q_LIMITED  # or "none"
     k: float = _DEFAULT.k
     tau: float = _DEFAULT.tau
     tau_n: float = _DEFAULT.tau_n
     model_delay: int = _DEFAULT.model_delay_steps
     delay_steps: int = 1
+    plant: str | None = None  # the car (``PlantSettings``); None: the scenario's
+    actuator: str | None = None
+    sensors: str | None = None
+    seed: int | None = None
     out: Path = Path("out/hil")
     secoc_key: bytes | None = None  # authenticate the commands and the sensor frames (mrsteer_dbc.secoc)
 
@@ -62,7 +67,9 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     say = progress or (lambda m: None)
     if cfg.mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}")
-    sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz)
+    # The scenario on the chosen car, checked here: a bad choice fails before anything starts.
+    sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz, duration=cfg.duration).with_models(
+        cfg.plant, cfg.actuator, cfg.sensors, cfg.seed)
     ctrl = mr.ControllerConfig(q_form=cfg.controller if cfg.controller != "none" else mr.Q_LIMITED, k=cfg.k,
                                tau=cfg.tau, tau_n=cfg.tau_n, ts=1.0 / cfg.rate_hz, model_delay_steps=cfg.model_delay)
     mr.configure(ctrl)  # reject an impossible calibration before starting anything
@@ -98,6 +105,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
             cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,
+            duration=cfg.duration, plant=cfg.plant, actuator=cfg.actuator, sensors=cfg.sensors, seed=cfg.seed,
             no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
             secoc=cfg.secoc_key is not None)), work, env)
         procs.append(plant)

@@ -24,7 +24,10 @@ def event_marks(sc: scn.Scenario) -> list[tuple[float, str]]:
         "mu": lambda v: f"mu {v:g}",
         "speed": lambda v: f"v {v:g} m/s",
     }
-    return [(e.t, labels[e.kind](e.value)) for e in sc.events]
+    loads = {"split_mu_braking": lambda d: f"split-mu braking {d.mu_left:g}/{d.mu_right:g}",
+             "side_wind": lambda d: f"side wind {d.peak_force:g} N",
+             "blowout": lambda d: f"blow-out {d.wheel}"}
+    return [(e.t, loads[e.kind](e.load) if e.load is not None else labels[e.kind](e.value)) for e in sc.events]
 
 
 def run_png(steps: Sequence[Step], marks: Sequence[tuple[float, str]], title: str) -> bytes | None:

@@ -55,6 +55,7 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
     summary = summarize(traffic, cfg, sc, ctrl)
     steps = step_table(read_plant_trace(work / TRACE), traffic, cfg.mode == "lockstep", contract)
     summary["steps"] = len(steps)
+    summary.update(car_figures(sc, steps))
     summary["frames"] = {
         "on_bus_logged": stats["logger"].get("frames", len(frames)),
         "sent_plant": stats["plant"].get("tx_frames"),
@@ -129,7 +130,9 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
         delay = max(1, int(math.ceil(float(np.median(lat)) / ts))) if latencies else 1
     params = VehicleParams(v=sc.v, mu=sc.mu, mass=sc.mass)
     if cfg.controller == "none":
-        stable = True
+        stable: bool | None = True
+    elif not sc.ideal_car:
+        stable = None  # the pole analysis is of the paper's ideal loop, not of this car's
     else:
         poles = discrete_loop_poles(params, mr.configure(replace(ctrl, ts=ts)), delay)
         stable = bool(np.all(np.abs(poles) < 1.0))
@@ -155,6 +158,31 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
         "latency_p99_s": float(np.percentile(lat, 99)) if latencies else None,
         "commands_answering_measurements": len(answered),
         "measurements": len(yaw),
+    }
+
+
+def car_figures(sc: scn.Scenario, steps: list[Step]) -> dict[str, Any]:
+    """The car the run used and what it did, from the plant's true states (``steps.csv``):
+    the true yaw rate's peak (the bus's ``peak_yaw_rate_rad_s`` is the *measured* one, noisy
+    with realistic sensors), the side slip's peak, the auxiliary command's peak and RMS over
+    the run, the time the command sat at its +-3 deg limit, and the speed at the end."""
+    limit = mr.ControllerConfig().aux_limit
+    ts = steps[1].t_s - steps[0].t_s if len(steps) > 1 else 0.0
+    cmd = np.array([s.aux_cmd_rad for s in steps] or [0.0])
+    return {
+        "plant": sc.plant,
+        "actuator": "ideal" if sc.actuator.order == 0 and sc.actuator.dead_time_samples == 0 else
+                    f"order {sc.actuator.order}, {1e3 * sc.actuator.time_constant_s:g} ms" if sc.actuator.order == 1
+                    else f"order {sc.actuator.order}, {sc.actuator.natural_frequency_hz:g} Hz",
+        "sensors": "ideal" if sc.sensors.exact else (f"{sc.sensors.yaw_rate.noise_density:g} deg/s/rtHz, "
+                                                      f"{sc.sensors.yaw_rate.lowpass_hz:g} Hz low-pass"),
+        "seed": None if sc.sensors.exact else sc.sensors.seed,
+        "peak_yaw_rate_true_rad_s": max((abs(s.yaw_rate_rad_s) for s in steps), default=0.0),
+        "peak_side_slip_deg": math.degrees(max((abs(s.beta_rad) for s in steps), default=0.0)),
+        "aux_rms_deg": math.degrees(float(np.sqrt(np.mean(cmd * cmd)))),
+        # The DBC's 1e-6 rad resolution: a command within it of the limit is at the limit.
+        "time_at_limit_s": float(np.sum(np.abs(cmd) >= limit - 1e-6)) * ts,
+        "final_speed_m_s": steps[-1].v_m_s if steps else sc.v,
     }
 
 

@@ -43,6 +43,7 @@ class Step:
     t_s: float  # scenario time, step x Ts
     driver_angle_rad: float
     yaw_rate_rad_s: float
+    yaw_rate_measured_rad_s: float  # what the yaw-rate sensor gave (the true rate with ideal sensors)
     v_m_s: float
     aux_cmd_rad: float  # the newest valid command the actuator had received
     aux_applied_rad: float  # what the actuator applied over this step

@@ -154,6 +154,10 @@ class PlantSettings:
     v: float | None = None
     mu: float | None = None
     mz: float | None = None
+    plant: str | None = None  # "linear" or "nonlinear"; default: the scenario's
+    actuator: str | None = None  # ideal, default or a TOML file; default: the scenario's
+    sensors: str | None = None  # ideal, default or a TOML file; default: the scenario's
+    seed: int | None = None  # the sensors' noise seed; default: the scenario's
     no_controller: bool = False
     trace_out: Path | None = None  # the true state of every step, as CSV
     stats_out: Path | None = None
@@ -165,7 +169,8 @@ def plant(bus: BusArgs, s: PlantSettings) -> Launch:
         *bus.argv(), "--scenario", s.scenario, "--mode", s.mode, "--rate-hz", _num(s.rate_hz),
         *_opt("--delay-steps", s.delay_steps), *_opt("--duration", s.duration),
         *_opt("--actuator-rate", s.actuator_rate), *_opt("--cmd-timeout", s.cmd_timeout),
-        *_opt("--v", s.v), *_opt("--mu", s.mu), *_opt("--mz", s.mz),
+        *_opt("--v", s.v), *_opt("--mu", s.mu), *_opt("--mz", s.mz), *_opt("--plant", s.plant),
+        *_opt("--actuator", s.actuator), *_opt("--sensors", s.sensors), *_opt("--seed", s.seed),
         *_flag("--no-controller", s.no_controller), *_opt("--trace-out", s.trace_out),
         *_opt("--stats-out", s.stats_out), *_flag("--secoc", s.secoc)))
 

@@ -1,20 +1,28 @@
 """The plant process: the single-track car, its sensors and the auxiliary actuator on a bus.
 
-Each plant step (period ``ts``):
+The car is the scenario's (``sim_plant.car.scenario``; ``--plant``, ``--actuator``,
+``--sensors``, ``--seed`` override it): by default the paper's exact linear plant, an ideal
+actuator and exact sensors; on request the nonlinear car, the actuator's position dynamics and
+the sensor models of ``docs/realistic-car.md``.  Each plant step (period ``ts``):
 
 1. apply the scenario events due (and any ``MRS_BenchInject`` received), re-discretising the
-   model if speed or friction changed;
+   model if speed or friction changed, and take the physical disturbances' loads at t
+   (``Car.set_loads``: grip now, forces held over the step);
 2. the driver model sets the driver's front-wheel angle;
-3. the actuator (``sim_plant.car.actuator``) takes the newest valid auxiliary command: only
-   frames the receive link accepts count (``mrsteer_dbc.link.RxLink``: length, CRC, range,
-   SecOC when a key is given, alive counter); with no valid command for ``cmd_timeout`` it
-   fades to zero at a bounded rate;
-4. publish the sensor messages due at this step (with SecOC, first ``MRS_SecOCSync`` at its
-   DBC cycle time: the actuator is the freshness master, and the sensor frames are signed for
-   the epoch it announced) (each at its DBC cycle time, never faster than the plant step):
-   driver angle, speed, then yaw rate last, so a controller triggered by the yaw-rate frame
-   sees a complete set;
-5. advance the exactly discretised model with front-wheel angle = driver angle + actuator.
+3. the actuator's command handling (``sim_plant.car.actuator``) takes the newest valid
+   auxiliary command: only frames the receive link accepts count (``mrsteer_dbc.link.RxLink``:
+   length, CRC, range, SecOC when a key is given, alive counter); with no valid command for
+   ``cmd_timeout`` it fades to zero at a bounded rate;
+4. the sensors (``sim_plant.car.sensors``) measure the driver angle, the speed and the yaw
+   rate, and the messages due at this step are published (with SecOC, first
+   ``MRS_SecOCSync`` at its DBC cycle time: the actuator is the freshness master, and the
+   sensor frames are signed for the epoch it announced) (each at its DBC cycle time, never
+   faster than the plant step): driver angle, speed, then yaw rate last, so a controller
+   triggered by the yaw-rate frame sees a complete set;
+5. the actuator's position (``sim_plant.car.actuator_dynamics.PositionActuator``, when not
+   ideal) follows what the command handling gave, once per step, and the car advances with
+   front-wheel angle = driver angle + that position.  The ideal actuator applies the handled
+   command itself, so the default run is today's exactly.
 
 ``lockstep`` mode waits after step 4 for the command that answers this step's yaw-rate frame
 (``AuxSteerCmd_MeasCounter``), up to ``lockstep_timeout``, and applies it ``delay_steps``
@@ -51,7 +59,9 @@ from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_SYN
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
-from sim_plant.car.vehicle import DiscretePlant
+from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
+from sim_plant.car.plants import PLANTS, Car
+from sim_plant.car.sensors import Sensors
 
 MODES = ("realtime", "lockstep")
 
@@ -78,7 +88,8 @@ class PlantStats:
 
 class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
-                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "wall_s")
+                     "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "yaw_rate_measured_rad_s",
+                     "wall_s")
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = CMD_TIMEOUT_S, lockstep_timeout: float = 1.0,
@@ -91,7 +102,10 @@ class PlantNode:
         self.delay_steps = delay_steps
         self.contract = c = contract or mrsteer_dbc.load()
         self.scene = scn.ScenarioState(sc)
-        self.plant = DiscretePlant(self.scene.params(), ts)
+        self.plant = Car(sc.plant, self.scene.params(), ts)
+        # The ideal actuator is the command handling alone (today's plant, exactly).
+        self.position = None if sc.actuator == ActuatorModelConfig.ideal() else PositionActuator(sc.actuator, ts)
+        self.sensors = Sensors(sc.sensors, ts)
         # The actuator's own range, not the signal's: the DBC's +-0.0524 rad is 3.0023 deg, so a
         # command at the signal's edge (a forgery, on a bus without SecOC) would pass +-3 deg.
         limit = min(ActuatorConfig().limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1])
@@ -149,8 +163,9 @@ class PlantNode:
 
     # ---------------------------------------------------------------- step
 
-    def _publish(self, k: int, driver: float, y: Any) -> int:
-        """Send this step's frames; the yaw-rate frame's alive counter, or -1 if none was due."""
+    def _publish(self, k: int, driver: float, speed: float, yaw_rate: float) -> int:
+        """Send this step's frames (the measured values); the yaw-rate frame's alive counter, or
+        -1 if none was due."""
         send = self.bus.send
         if self.verifier is not None and k % self.sync_every == 0:
             send(self.tx.frame(MSG_SYNC, self.verifier.new_epoch()))
@@ -161,10 +176,10 @@ class PlantNode:
         if k % self.every[MSG_STEER] == 0:
             sends.append((MSG_STEER, {SIG_STEER_ANGLE: driver}))
         if k % self.every[MSG_SPEED] == 0:
-            sends.append((MSG_SPEED, {SIG_SPEED: self.scene.v}))
+            sends.append((MSG_SPEED, {SIG_SPEED: speed}))
         yaw_counter = -1
         if k % self.every[MSG_YAW] == 0:
-            sends.append((MSG_YAW, {SIG_YAW_RATE: float(y[0])}))
+            sends.append((MSG_YAW, {SIG_YAW_RATE: yaw_rate}))
         for name, values in sends:
             send(self.tx.frame(name, values))
             self.stats.tx_frames += 1
@@ -176,6 +191,7 @@ class PlantNode:
         t = k * self.ts
         if self.scene.advance_to(t):
             self.plant.set_params(self.scene.params())
+        self.plant.set_loads(self.scene.loads(t))
         m_z = self.bench_m_z if self.bench_m_z is not None else self.scene.m_z
         r_now = float(self.plant.x[1])
         driver = self.scene.driver_angle(t, r_now, self.ts)
@@ -187,10 +203,14 @@ class PlantNode:
                 self.receive(msg)
             pending = self.latest_cmd
         actuator = self.actuator
-        # Outputs at this step use the front-wheel angle being applied over it.
+        # Outputs at this step use the front-wheel angle being applied over it (a lagging
+        # actuator's: its position as the step begins).
         actuator.apply(pending)
-        y = self.plant.outputs(driver + actuator.applied, m_z)
-        yaw_counter = self._publish(k, driver, y)
+        position = self.position
+        y = self.plant.outputs(driver + (actuator.applied if position is None else position.position), m_z)
+        sensors = self.sensors
+        measured_yaw = sensors.yaw_rate(float(y[0]))
+        yaw_counter = self._publish(k, sensors.steer(driver), sensors.speed(self.scene.v), measured_yaw)
 
         if self.mode == "lockstep":
             answer = self._await_command(yaw_counter)
@@ -200,10 +220,14 @@ class PlantNode:
                 actuator.apply(answer)
         actuator.tick()
         self.stats.actuator_timeouts = actuator.timeouts
+        applied = actuator.applied if position is None else position.step(actuator.applied)
         if self.record_trace:
-            self.stats.trace.append((t, driver, actuator.applied, m_z, self.scene.mu, self.scene.v,
-                                     float(y[0]), float(y[1]), float(y[2]), self.latest_cmd, time.time()))
-        self.plant.advance(driver + actuator.applied, m_z)
+            # m_z: the whole yaw moment on the car, the physical disturbances' included.
+            self.stats.trace.append((t, driver, applied, m_z + self.plant.loads.m_z, self.scene.mu, self.scene.v, float(y[0]), float(y[1]),
+                                     float(y[2]), self.latest_cmd, measured_yaw, time.time()))
+        self.plant.advance(driver + applied, m_z)
+        if not self.plant.linear:
+            self.scene.v = self.plant.v  # braking slows the car: the speed frames carry it
         self.stats.steps += 1
 
     def _await_command(self, yaw_counter: int) -> float | None:
@@ -272,6 +296,15 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
+    p.add_argument("--plant", choices=PLANTS, help="override the scenario's car: linear (the paper's exact "
+                   "model; the default of every scenario that names none) or nonlinear (magic-formula tyres)")
+    p.add_argument("--actuator", metavar="ideal|default|FILE",
+                   help="override the scenario's actuator position model: ideal (applies the command at once), "
+                   "default (first order, 20 ms, +-3 deg) or a TOML file (docs/realistic-car.md)")
+    p.add_argument("--sensors", metavar="ideal|default|FILE",
+                   help="override the scenario's sensor models: ideal (exact), default (yaw-rate noise, 30 Hz "
+                   "low-pass, DBC quantisation) or a TOML file (docs/realistic-car.md)")
+    p.add_argument("--seed", type=int, help="override the sensors' noise seed")
     p.add_argument("--actuator-rate", type=float, default=RATE_LIMIT_RAD_S, metavar="RAD_S",
                    help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
                    "(default 0: follows the command at once)")
@@ -302,7 +335,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
             parser.error(f"--{name.replace('_', '-')} must be positive")
     try:
         sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass,
-                                                   duration=args.duration)
+                                                   duration=args.duration).with_models(
+            args.plant, args.actuator, args.sensors, args.seed)
     except scn.ScenarioError as exc:
         parser.error(str(exc))
     key = secoc_key(args, parser)

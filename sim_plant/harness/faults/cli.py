@@ -63,6 +63,11 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
                    help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
     r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
                    help="extra scenario seconds in the restart rows for the new process to start (default 0)")
+    r.add_argument("--plant", choices=("linear", "nonlinear"),
+                   help="the car every row's plant plays: linear (default, the paper's) or nonlinear")
+    r.add_argument("--actuator", metavar="ideal|default|FILE",
+                   help="the actuator's position model in every row (default ideal)")
+    r.add_argument("--sensors", metavar="ideal|default|FILE", help="the sensor models in every row (default ideal)")
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
@@ -72,7 +77,8 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
-        setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s)  # type: ignore[arg-type]
+        setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]
+                      args.plant, args.actuator, args.sensors)
     except ValueError as exc:
         p.error(str(exc))
     if args.keep is not None and args.keep.exists() and not args.keep.is_dir():

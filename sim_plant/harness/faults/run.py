@@ -20,7 +20,7 @@ from sim_plant.harness import launch
 from sim_plant.harness.faults.verdicts import RowResult, judge
 from sim_plant.harness.faults.rows import ROWS, Row
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_LIMIT,
-                                               RESTART_AT, Setup)
+                                               RESTART_AT, SCENARIO, Setup)
 from sim_plant.harness.processes import Proc, RunError, stop, wait_for_socket, wait_ready, wait_stderr
 
 
@@ -69,8 +69,9 @@ class _RowRun:
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
         return self.start(name, launch.plant(launch.BusArgs(self.setup.interface, self.vehicle), launch.PlantSettings(
-            self.setup.rate_hz, "realtime", "paper-fig9", duration=seconds, actuator_rate=ACTUATOR_RATE,
-            cmd_timeout=self.setup.cmd_timeout, trace_out=self.work / "trace.csv",
+            self.setup.rate_hz, "realtime", SCENARIO, duration=seconds, actuator_rate=ACTUATOR_RATE,
+            cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
+            sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
             stats_out=self.work / "plant.json", secoc=self.row.secoc)))
 
     def play(self, ctl: Proc, plant: Proc, duration: float) -> tuple[Proc, float | None, float | None]:

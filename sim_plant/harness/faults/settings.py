@@ -13,13 +13,16 @@ from firmware_py.controller import node as rt
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from mrsteer_dbc.busload import frame_bits
 from mrsteer_dbc import names
+from sim_plant.car import scenario
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S
+from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.harness.launch import Gains
 
 RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
 PLANT_FADE = FADE_RATE_RAD_S  # rad/s, the actuator's fade (the plant's default)
 CMD_TIMEOUT = CMD_TIMEOUT_S  # s, the actuator's command timeout (the plant's default)
+SCENARIO = "paper-fig9"  # the plant's scenario in every row
 DURATION = 2.6  # s of scenario
 WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
 BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
@@ -61,6 +64,11 @@ class Setup:
     rate_hz: float = RATE_HZ
     time_scale: float = 1.0  # stretches the scenario, the fault window and the kill/restart times
     startup_s: float = 0.0  # extra scenario time in the restart rows for the new process to start
+    # The car the plant plays (``--plant``, ``--actuator``, ``--sensors``); None: the scenario's
+    # (paper-fig9: the paper's ideal car).
+    plant: str | None = None
+    actuator: str | None = None
+    sensors: str | None = None
 
     def __post_init__(self) -> None:
         if self.rate_hz not in CALIBRATIONS:
@@ -74,6 +82,7 @@ class Setup:
             raise ValueError("give two different channels: vehicle side, controller side")
         if self.channels is None and self.interface != "mrsteer":
             raise ValueError(f"--interface {self.interface} needs --channels VEHICLE,CONTROLLER")
+        scenario.load(SCENARIO).with_models(self.plant, self.actuator, self.sensors)  # a bad choice: one line
 
     @property
     def ts(self) -> float:
@@ -83,6 +92,25 @@ class Setup:
     def cmd_timeout(self) -> float:
         """The actuator's command timeout: the plant's 20 ms, and never under 4 control periods."""
         return max(CMD_TIMEOUT, 4.0 * self.ts)
+
+    def settling(self, angle: float) -> tuple[float, float]:
+        """(tolerance in rad, seconds) within which the actuator's *position* reaches zero after
+        the command it follows is zero, from ``angle``: 0 and exactly 0 for the ideal actuator
+        (it applies the command itself); for a lagging one, its dead time plus the time its
+        slowest mode takes from ``angle`` to the DBC's command resolution (docs/faults.md)."""
+        cfg = self.actuator_model()
+        if cfg.order == 0 and cfg.dead_time_samples == 0:
+            return 0.0, 0.0
+        dead = cfg.dead_time_samples * self.ts
+        if cfg.order == 0:
+            return BUS_RESOLUTION, dead
+        tau = cfg.time_constant_s if cfg.order == 1 else 1.0 / (
+            min(cfg.damping, 1.0) * 2.0 * math.pi * cfg.natural_frequency_hz)
+        return BUS_RESOLUTION, dead + tau * math.log(max(abs(angle), BUS_RESOLUTION) / BUS_RESOLUTION)
+
+    def actuator_model(self) -> ActuatorModelConfig:
+        """The actuator position model every row's plant runs with."""
+        return scenario.load(SCENARIO).with_models(self.plant, self.actuator, self.sensors).actuator
 
     def gains(self) -> Gains:
         """The calibration tuned for this rate."""
