@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from typing import Callable
 
 from firmware_py import model_regulator as mr
@@ -114,3 +115,8 @@ def loop_models(args: argparse.Namespace) -> object:
     if getattr(args, "seed", None) is not None:
         sensors = replace(sensors, seed=args.seed)
     return LoopModels(args.actuator or ActuatorModelConfig.ideal(), sensors)
+
+
+def say(msg: str) -> None:
+    """Progress and notices on stderr, so that stdout stays the command's result."""
+    print(msg, file=sys.stderr, flush=True)

@@ -1,0 +1,185 @@
+"""``mrsteer hil``: HIL runs on the bus (run, evidence, demo), their options and handlers."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from firmware_py import model_regulator as mr
+from firmware_py.controller.node import DEFAULT_RATE_HZ
+from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
+from mrsteer_cli.cli_args import add_gains, count, number, say
+from sim_plant.car.scenario import SPEED_RANGE
+from sim_plant.car.vehicle import MAX_MU, VehicleParams
+from sim_plant.offline import experiments
+from sim_plant.offline.closed_loop import CONTROLLERS
+
+if TYPE_CHECKING:
+    from sim_plant.harness.hil import HilConfig
+
+
+def add_parsers(sub: Any) -> None:
+    """``mrsteer hil run|evidence|demo``."""
+    hil = sub.add_parser("hil", help="hardware-in-the-loop runs: plant, controller and logger on one bus",
+                         description="Hardware-in-the-loop runs on SocketCAN vcan0 or the fallback bus.")
+    hil_sub = hil.add_subparsers(dest="hil_command", required=True, parser_class=Parser)
+    p = hil_sub.add_parser("run", help="run one scenario and write log, CSV, plot and summary",
+                           description="Start the plant, the controller and a bus logger as separate processes, "
+                           "run the scenario, stop everything and write traffic.log (candump -L), signals.csv, "
+                           "plot.png and summary.json.")
+    _add_hil_args(p)
+    p.add_argument("--scenario", default="paper-fig9",
+                   help="built-in (paper-fig8, paper-fig9, handover; on the realistic car split-mu, side-wind, "
+                   "blow-out) or a TOML file (default paper-fig9)")
+    p.add_argument("--v", type=number("speed v", *SPEED_RANGE), metavar="MPS", help="override the scenario's speed")
+    p.add_argument("--mu", type=number("friction mu", 0.0, MAX_MU, lo_open=True), metavar="MU",
+                   help="override the scenario's friction")
+    p.add_argument("--mz", type=number("M_z", -20000.0, 20000.0), metavar="NM",
+                   help="override the scenario's yaw-moment steps")
+    p.add_argument("--duration", type=number("duration", 0.0, 600.0, lo_open=True), metavar="S",
+                   help="override the scenario's duration")
+    p.add_argument("--controller", choices=CONTROLLERS, default=mr.Q_LIMITED,
+                   help="none, standard or limited (default limited)")
+    add_gains(p)
+    p.add_argument("--delay-steps", type=count, default=1, metavar="N",
+                   help="lockstep: samples from measurement to applied command (default 1)")
+    _add_car_args(p)
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(handler=_cmd_hil_run)
+    p = hil_sub.add_parser("evidence", help="the realistic scenarios with and without the controller, one table",
+                           description="Run split-mu, side-wind and blow-out (the realistic car: nonlinear tyres, "
+                           "the default actuator and sensors, the driver model with a 1 s panic time) on the bus, "
+                           "each with and without the controller, and print peak yaw rate and its reduction, peak "
+                           "side slip, the auxiliary command's peak and RMS and the time at the +-3 deg limit.")
+    _add_hil_args(p, default_out="out/hil-evidence")
+    p.add_argument("--scenario", action="append", metavar="NAME",
+                   help="run only these scenarios (built-in or TOML file); repeatable (default: the three)")
+    p.add_argument("--controller", choices=(mr.Q_STANDARD, mr.Q_LIMITED), default=mr.Q_LIMITED,
+                   help="standard or limited (default limited)")
+    add_gains(p)
+    _add_car_args(p)
+    p.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p.set_defaults(handler=_cmd_hil_evidence)
+    p = hil_sub.add_parser("demo", help="the quick-start demo: paper-fig9 with and without the controller",
+                           description="Run the paper's 4000 Nm yaw-moment step (Figure 9) on the bus with and "
+                           "without the controller, and explain the result.")
+    _add_hil_args(p, default_out="out/hil-demo")
+    p.set_defaults(handler=_cmd_hil_demo)
+
+
+def _add_car_args(p: argparse.ArgumentParser) -> None:
+    """The car the plant plays; each overrides the scenario's (whose default is the paper's ideal car)."""
+    p.add_argument("--plant", choices=("linear", "nonlinear"),
+                   help="linear (the paper's exact model) or nonlinear (magic-formula tyres); default: the scenario's")
+    p.add_argument("--actuator", metavar="ideal|default|FILE",
+                   help="actuator position model: ideal, default (first order, 20 ms) or a TOML file; "
+                   "default: the scenario's")
+    p.add_argument("--sensors", metavar="ideal|default|FILE",
+                   help="sensor models: ideal, default (noise, 30 Hz low-pass, DBC quantisation) or a TOML file; "
+                   "default: the scenario's")
+    p.add_argument("--seed", type=_seed, metavar="N", help="the sensors' noise seed (default: the scenario's)")
+
+
+def _seed(text: str) -> int:
+    from sim_plant.car.sensors import MAX_SEED
+
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if not 0 <= n <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {n}")
+    return n
+
+
+def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) -> None:
+    p.add_argument("--interface", help="python-can interface (default: SocketCAN vcan0 if present, "
+                   "else a private mrsteer fallback bus)")
+    p.add_argument("--channel", help="channel for the interface")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                   help="lockstep: deterministic, comparable with `sim --ts` (default); realtime: wall clock")
+    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=DEFAULT_RATE_HZ,
+                   help=f"controller and plant rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains are tuned for)")
+    p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
+                   help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")
+    add_secoc_args(p)
+
+
+def _hil_config(args: argparse.Namespace, **overrides: object) -> "HilConfig":
+    from sim_plant.harness.hil import HilConfig
+
+    key = secoc_key(args)  # a bad key raises SecOCError, a ValueError: a usage error
+    base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel, secoc_key=key)
+    base.update(overrides)
+    return HilConfig(**base)  # type: ignore[arg-type]
+
+
+def _cmd_hil_run(args: argparse.Namespace) -> int:
+    from sim_plant.harness import hil
+
+    out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
+    cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, duration=args.duration,
+                      controller=args.controller,
+                      k=args.k, tau=args.tau, tau_n=args.tau_n, model_delay=args.model_delay,
+                      delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
+                      sensors=args.sensors, seed=args.seed)
+    try:
+        result = hil.run(cfg, progress=say)
+    except hil.HilError as exc:
+        print(f"mrsteer hil run: error: {exc}", file=sys.stderr)
+        return 1
+    s = result.summary
+    if args.json:
+        print(json.dumps(s, indent=2))
+    else:
+        for key in ("scenario", "mode", "rate_hz", "delay_steps", "controller", "peak_yaw_rate_rad_s",
+                    "final_yaw_rate_rad_s", "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable",
+                    "plant", "actuator", "sensors", "peak_yaw_rate_true_rad_s", "peak_side_slip_deg", "aux_rms_deg",
+                    "time_at_limit_s", "final_speed_m_s"):
+            value = s[key]
+            print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
+        print(f"  {'frames':<26}{s['frames']}")
+    return 0
+
+
+def _cmd_hil_evidence(args: argparse.Namespace) -> int:
+    from sim_plant.harness import hil, hil_evidence
+
+    cfg = _hil_config(args, controller=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
+                      model_delay=args.model_delay, out=args.out, plant=args.plant, actuator=args.actuator,
+                      sensors=args.sensors, seed=args.seed)
+    try:
+        rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=say)
+    except hil.HilError as exc:
+        print(f"mrsteer hil evidence: error: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps([e.row() for e in rows], indent=2) if args.json else hil_evidence.format_table(rows))
+    return 0
+
+
+def _cmd_hil_demo(args: argparse.Namespace) -> int:
+    from mrsteer_cli import hil_demo
+    from sim_plant.car import scenario as scn
+    from sim_plant.harness import hil
+
+    runs = {}
+    for ctrl in (mr.Q_LIMITED, "none"):
+        cfg = _hil_config(args, scenario=hil_demo.SCENARIO, controller=ctrl,
+                          out=args.out / ("with-controller" if ctrl != "none" else "without-controller"))
+        try:
+            runs[ctrl] = hil.run(cfg, progress=say)
+        except hil.HilError as exc:
+            print(f"mrsteer hil demo: error: {exc}", file=sys.stderr)
+            return 1
+    on, off = runs[mr.Q_LIMITED].summary, runs["none"].summary
+    sc = scn.load(hil_demo.SCENARIO)
+    offline = experiments.run(experiments.disturbance(VehicleParams(v=on["v"], mu=on["mu"]), on["m_z"], mr.Q_LIMITED,
+                                                      replace(mr.ControllerConfig(), ts=1.0 / on["rate_hz"]), 3.0),
+                              1.0 / on["rate_hz"], on["delay_steps"]).summary()
+    hil_demo.write_figure(runs[mr.Q_LIMITED], runs["none"], sc, args.out)
+    print(hil_demo.explain(sc, on, off, offline["peak_yaw_rate_rad_s"], args.out))
+    return 0
