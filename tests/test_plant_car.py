@@ -86,3 +86,17 @@ def test_the_linear_car_takes_yaw_moments_only() -> None:
         car.set_loads(dist.SideWindGust(t_start=0.0).at(0.5))
     with pytest.raises(ValueError, match="plant must be one of"):
         Car("rigid", VehicleParams(), TS)
+
+
+@pytest.mark.parametrize("argv", [
+    ["plant", "--seed", "-1"], ["plant", "--plant", "bicycle"], ["hil", "run", "--seed", "x"],
+    ["faults", "run", "--plant", "bicycle"],
+])
+def test_the_car_options_are_checked_alike_by_every_command(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    from mrsteer_cli.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) >= 1 and "error:" in err[-1] and ("--seed" in err[-1] or "--plant" in err[-1])

@@ -13,6 +13,7 @@ from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
 from mrsteer_cli.cli_args import add_gains, count, number, say
+from sim_plant.car.options import add_car_args
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
 from sim_plant.offline import experiments
@@ -47,7 +48,7 @@ def add_parsers(sub: Any) -> None:
     add_gains(p)
     p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
-    _add_car_args(p)
+    add_car_args(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(handler=_cmd_hil_run)
     p = hil_sub.add_parser("evidence", help="the realistic scenarios with and without the controller, one table",
@@ -61,7 +62,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--controller", choices=(mr.Q_STANDARD, mr.Q_LIMITED), default=mr.Q_LIMITED,
                    help="standard or limited (default limited)")
     add_gains(p)
-    _add_car_args(p)
+    add_car_args(p)
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     p.set_defaults(handler=_cmd_hil_evidence)
     p = hil_sub.add_parser("demo", help="the quick-start demo: paper-fig9 with and without the controller",
@@ -69,31 +70,6 @@ def add_parsers(sub: Any) -> None:
                            "without the controller, and explain the result.")
     _add_hil_args(p, default_out="out/hil-demo")
     p.set_defaults(handler=_cmd_hil_demo)
-
-
-def _add_car_args(p: argparse.ArgumentParser) -> None:
-    """The car the plant plays; each overrides the scenario's (whose default is the paper's ideal car)."""
-    p.add_argument("--plant", choices=("linear", "nonlinear"),
-                   help="linear (the paper's exact model) or nonlinear (magic-formula tyres); default: the scenario's")
-    p.add_argument("--actuator", metavar="ideal|default|FILE",
-                   help="actuator position model: ideal, default (first order, 20 ms) or a TOML file; "
-                   "default: the scenario's")
-    p.add_argument("--sensors", metavar="ideal|default|FILE",
-                   help="sensor models: ideal, default (noise, 30 Hz low-pass, DBC quantisation) or a TOML file; "
-                   "default: the scenario's")
-    p.add_argument("--seed", type=_seed, metavar="N", help="the sensors' noise seed (default: the scenario's)")
-
-
-def _seed(text: str) -> int:
-    from sim_plant.car.sensors import MAX_SEED
-
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if not 0 <= n <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {n}")
-    return n
 
 
 def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) -> None:

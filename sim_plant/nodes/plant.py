@@ -60,7 +60,8 @@ from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at th
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
-from sim_plant.car.plants import PLANTS, Car
+from sim_plant.car.options import add_car_args
+from sim_plant.car.plants import Car
 from sim_plant.car.sensors import Sensors
 
 MODES = ("realtime", "lockstep")
@@ -296,15 +297,7 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mz", type=float, help="override every yaw-moment step, Nm")
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
-    p.add_argument("--plant", choices=PLANTS, help="override the scenario's car: linear (the paper's exact "
-                   "model; the default of every scenario that names none) or nonlinear (magic-formula tyres)")
-    p.add_argument("--actuator", metavar="ideal|default|FILE",
-                   help="override the scenario's actuator position model: ideal (applies the command at once), "
-                   "default (first order, 20 ms, +-3 deg) or a TOML file (docs/realistic-car.md)")
-    p.add_argument("--sensors", metavar="ideal|default|FILE",
-                   help="override the scenario's sensor models: ideal (exact), default (yaw-rate noise, 30 Hz "
-                   "low-pass, DBC quantisation) or a TOML file (docs/realistic-car.md)")
-    p.add_argument("--seed", type=int, help="override the sensors' noise seed")
+    add_car_args(p)  # each overrides the scenario's car
     p.add_argument("--actuator-rate", type=float, default=RATE_LIMIT_RAD_S, metavar="RAD_S",
                    help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
                    "(default 0: follows the command at once)")

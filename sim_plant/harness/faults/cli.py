@@ -8,6 +8,7 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
+from sim_plant.car.options import add_car_args
 from sim_plant.harness.faults.verdicts import RowResult
 from sim_plant.harness.faults.rows import ROWS, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix
@@ -63,11 +64,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
                    help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
     r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
                    help="extra scenario seconds in the restart rows for the new process to start (default 0)")
-    r.add_argument("--plant", choices=("linear", "nonlinear"),
-                   help="the car every row's plant plays: linear (default, the paper's) or nonlinear")
-    r.add_argument("--actuator", metavar="ideal|default|FILE",
-                   help="the actuator's position model in every row (default ideal)")
-    r.add_argument("--sensors", metavar="ideal|default|FILE", help="the sensor models in every row (default ideal)")
+    add_car_args(r, default="ideal, the paper's linear car (the rows' scenario names none)", with_seed=False)
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
