@@ -1,2 +1,15 @@
-"""The car: ``vehicle`` (single-track model, eqs. 14/16, exact ZOH discretisation) and
-``scenario`` (operating point, events, driver model; built-ins and TOML files)."""
+"""The car and what it plays.
+
+* ``vehicle``: the paper's linear single-track model (eqs. 14/16), exact ZOH discretisation.
+* ``tyres``, ``nonlinear``: magic-formula tyres and the nonlinear single-track model.
+* ``plants``: one interface over the linear and the nonlinear car, with the disturbance loads.
+* ``disturbances``: split-μ braking, side-wind gust, tyre blow-out.
+* ``actuator``: the actuator's handling of commands (timeout, fade, slew back, ±3°);
+  ``actuator_dynamics``: its position response (lag, rate limit, dead time).
+* ``sensors``: noise, bias, low-pass and DBC quantisation of the measurements.
+* ``scenario``: operating point, events, driver model; built-ins and TOML files;
+  ``model_files``: reading the actuator and sensor TOML files.
+* ``options``: the command-line options that choose the car.
+
+``docs/realistic-car.md`` describes the models.
+"""
