@@ -75,10 +75,6 @@ class RxLink:
         if unknown:
             raise ValueError(f"verifiers for messages this link does not receive: {', '.join(sorted(unknown))}")
 
-    @property
-    def frame_ids(self) -> list[int]:
-        return list(self._rx)
-
     def filters(self) -> list[dict[str, int | bool]]:
         """python-can receive filters for exactly this link's frames."""
         return [{"can_id": fid, "can_mask": 0x7FF, "extended": False} for fid in self._rx]
