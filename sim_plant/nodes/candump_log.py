@@ -47,3 +47,25 @@ def read_candump(path: Path) -> list[Frame]:
     """Every frame of a candump ``-L`` log, in the order logged (a remote frame with no data)."""
     with can.CanutilsLogReader(path) as reader:
         return [Frame(msg.timestamp, msg.arbitration_id, bytes(msg.data)) for msg in reader]
+
+
+class LogError(ValueError):
+    """A file that is not a candump ``-L`` log; the message names the line."""
+
+
+def read_candump_messages(path: Path) -> list[tuple[int, can.Message]]:
+    """Every frame of a candump ``-L`` log with its line number (from 1), in the order logged.
+
+    The reader skips only blank lines and yields one message for every other line (or fails
+    on it), so the n-th message is the n-th non-blank line: that is how a failure is named."""
+    with open(path, encoding="utf-8", errors="replace") as f:
+        numbers = [n for n, line in enumerate(f, 1) if line.strip()]
+    out: list[tuple[int, can.Message]] = []
+    try:
+        with can.CanutilsLogReader(path) as reader:
+            for msg in reader:
+                out.append((numbers[len(out)], msg))
+    except (ValueError, IndexError, UnicodeDecodeError) as exc:
+        line = numbers[len(out)] if len(out) < len(numbers) else len(numbers)
+        raise LogError(f"{path}: line {line}: not a candump -L frame ({exc})") from None
+    return out
