@@ -133,6 +133,9 @@ class ReplayResult:
     statuses_recorded: int
     mismatches: list[Mismatch]
     max_abs_dangle: float  # rad, over the steps with a recorded command
+    config: mr.ControllerConfig  # the calibration the node ran (effective_config)
+    recorded_statuses: list[StatusOut] = field(default_factory=list)
+    structural: list[Mismatch] = field(default_factory=list)  # cycles the log has no command for
 
     @property
     def agrees(self) -> bool:
@@ -321,11 +324,10 @@ def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_
         r.run_sensors(frames, last_cmd)
     else:
         r.run_clock(frames, last_cmd)
-    result = ReplayResult(log, settings, len(frames), r.sensor_frames, r.steps, len(r.recorded_statuses), [], 0.0)
-    result.mismatches, result.max_abs_dangle = compare(r.steps, r.recorded_statuses, r.cmd_id, r.status_id)
-    result.mismatches = r.mismatches + result.mismatches
+    found, worst = compare(r.steps, r.recorded_statuses, r.cmd_id, r.status_id)
     pair_statuses(r.steps, r.recorded_statuses)
-    return result
+    return ReplayResult(log, settings, len(frames), r.sensor_frames, r.steps, len(r.recorded_statuses),
+                        r.mismatches + found, worst, effective_config(r.node), r.recorded_statuses, r.mismatches)
 
 
 def pair_statuses(steps: list[Step], recorded: list[StatusOut]) -> None:

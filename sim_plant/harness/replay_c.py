@@ -1,0 +1,89 @@
+"""The C port's law on a replay's inputs: ``ports/c/mrs_replay`` (``mrsteer replay --impl c``).
+
+The Python replay (``replay.replay``) has already decoded the frames, run the receive checks,
+the freshness rule and the trigger, and kept what went into ``step()`` at every cycle.  Those
+inputs go to the C driver with the node's effective calibration (the ``.cfg`` form of
+``sim_plant.offline.vectors``); its ``mrs_step`` outputs are put in the command's DBC encoding
+(so an angle is compared at the resolution the bus carries) and compared with the recorded
+frames exactly as the Python replay's are.  What is the node's and not the law's stays the
+Python node's: the ``MeasCounter``, the alive counter, the final zero command at shutdown.  The
+cause bits are not the law's either; the C node (``mrs_node``) has its own, so this replay does
+not compare them.
+
+Why the decoding stays in Python: the receive path is the node's concern (the C node has its
+own, ``mrs_rx``), and keeping it out of this driver means a mismatch here is the port's
+``step()`` and nothing else.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import mrsteer_dbc
+from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE
+from sim_plant.harness.replay import Out, ReplayResult, StatusOut, compare
+from sim_plant.offline.vectors import config_lines
+
+PORT = Path(__file__).resolve().parents[2] / "ports" / "c"
+DRIVER = "mrs_replay_f64"
+
+
+class PortError(RuntimeError):
+    """The C driver could not be built or run; the message says why."""
+
+
+def build() -> Path:
+    """``make -C ports/c mrs_replay_f64`` (nothing to do when it is up to date)."""
+    if not (PORT / "mrs_replay.c").is_file():
+        raise PortError(f"the C port is not here: {PORT}")
+    try:
+        proc = subprocess.run(["make", "-s", "-C", str(PORT), DRIVER], capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise PortError(f"cannot build {DRIVER}: {exc}") from None
+    if proc.returncode != 0:
+        raise PortError(f"cannot build {DRIVER}: {(proc.stderr or proc.stdout).strip().splitlines()[-1:]}")
+    return PORT / DRIVER
+
+
+def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
+    """(u, status, fault_flags) of the C port at every non-final step of ``result``."""
+    exe = build()
+    inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs])
+    with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
+        cfg = Path(tmp) / "replay.cfg"
+        cfg.write_text("\n".join(config_lines(result.config)) + "\n")
+        proc = subprocess.run([str(exe), str(cfg)], input=inputs, capture_output=True, text=True, timeout=120)
+    if proc.returncode != 0:
+        raise PortError(f"{DRIVER} failed: {proc.stderr.strip()}")
+    rows = []
+    for line in proc.stdout.splitlines():
+        u, status, flags = line.split()
+        rows.append((float(u), int(status), int(flags)))
+    return rows
+
+
+def replay_c(result: ReplayResult, contract: mrsteer_dbc.Contract | None = None) -> ReplayResult:
+    """``result`` (a Python replay) with the C port's commands in place of the Python node's."""
+    c = contract or mrsteer_dbc.load()
+    rows = iter(run_driver(result))
+    outs: list[Out] = []
+    statuses: list[StatusOut | None] = []
+    for step in result.steps:
+        if step.kind == "final":  # the node's shutdown, not the law
+            outs.append(step.out)
+            statuses.append(step.status)
+            continue
+        u, status, flags = next(rows)
+        d = c.decode(c.frame_id(MSG_CMD), c.encode(MSG_CMD, {SIG_CMD_STATE: status, SIG_CMD_ANGLE: u,
+                                                            SIG_CMD_MEAS: step.out.meas or 0}, 0))
+        assert d is not None
+        outs.append(replace(step.out, angle=float(d.signals[SIG_CMD_ANGLE]), state=status))
+        statuses.append(None if step.status is None else replace(step.status, state=status, flags=flags, cause=None,
+                                                                 rejected=None))
+    found, worst = compare(result.steps, result.recorded_statuses, c.frame_id(MSG_CMD), c.frame_id(MSG_STATUS),
+                           outs, statuses)
+    steps = [replace(s, out=o) for s, o in zip(result.steps, outs)]
+    return replace(result, steps=steps, mismatches=result.structural + found, max_abs_dangle=worst)
