@@ -233,7 +233,9 @@ int main(int argc, char **argv)
         }
         if (kind == 5u && v == MRS_RX_ACCEPTED) {
             /* accepted once: the same frame a second time must be a repeat */
-            if (mrs_rx_accept(&rx, id, data, len, &f) != MRS_RX_REPEATED) {
+            const mrs_rx_verdict_t again = mrs_rx_accept(&rx, id, data, len, &f);
+            ++by_verdict[again];
+            if (again != MRS_RX_REPEATED) {
                 fprintf(stderr, "fuzz_rx: iteration %ld: a repeated frame was not rejected as such\n", k);
                 ++bad;
             }
