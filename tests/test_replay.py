@@ -19,6 +19,7 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from mrsteer_cli.cli import main
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, MSG_YAW, SIG_CMD_ANGLE, SIG_STATUS_CAUSE
+from sim_plant.harness.replay import replay
 from sim_plant.offline.vectors import config_lines
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,10 +84,12 @@ def test_clean_log_agrees(clean_log: Path, capsys: pytest.CaptureFixture[str]) -
     lines = _lines(clean_log)
     yaw_frames = sum(1 for ln in lines if _frame(ln)[0] == YAW)
     assert code == 0 and s["agrees"] and s["mismatches"] == 0 and s["max_abs_dangle_rad"] == 0.0
-    # every logged command is one cycle: one per yaw-rate frame, the final zero command, and the
-    # controller's watchdog cycle if the plant started more than SENSORS_WATCHDOG_S after it (load)
+    # every logged command is one cycle: one per yaw-rate frame, the final zero command, and a
+    # watchdog cycle for each SENSORS_WATCHDOG_S the controller waited for the plant to start
     assert s["steps"] == s["commands_recorded"] == len(_command_lines(lines))
-    assert yaw_frames + 1 <= s["steps"] <= yaw_frames + 2
+    kinds = [st.kind for st in replay(clean_log).steps]
+    assert kinds.count("yaw") == yaw_frames and kinds[-1] == "final" and kinds.count("final") == 1
+    assert set(kinds[:kinds.index("yaw")]) <= {"watchdog"} and set(kinds[kinds.index("yaw"):-1]) == {"yaw"}
     assert s["statuses_recorded"] == sum(1 for ln in lines if _frame(ln)[0] == STATUS) >= 7
 
 
