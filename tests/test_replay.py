@@ -205,3 +205,25 @@ def test_c_port_replays_the_clean_log_to_the_same_commands(clean_log: Path,
     py, c = doc["replays"]
     assert c["impl"] == "c" and c["agrees"] and c["steps"] == py["steps"] and c["max_abs_dangle_rad"] == 0.0
     assert math.isfinite(c["max_abs_dangle_rad"])
+
+
+def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # The wheel is held in paper-fig9, so a driver-angle frame a late cycle may or may not have
+    # drained cannot change a command (docs/can-runtime.md would not say which it was).
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "hil", "run", "--scenario", "paper-fig9", "--mode",
+                           "realtime", "--duration", "0.7", "--out", str(tmp_path)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300, env=os.environ.copy())
+    assert proc.returncode == 0, proc.stderr
+    log = tmp_path / "traffic.log"
+    code, doc, _ = _replay(capsys, str(log), "--trigger", "clock")
+    assert code == 0 and doc["replays"][0]["commands_recorded"] > 300, doc["replays"][0]["all_mismatches"][:5]
+    lines = _lines(log)
+    i = _command_lines(lines, after=250)[0]
+    nxt = _command_lines(lines, after=251)[0]
+    del lines[i]
+    code, doc, _ = _replay(capsys, str(_write(tmp_path, lines)), "--trigger", "clock")
+    s = doc["replays"][0]
+    # the replayed node's alive counter is one behind from the next command on (nxt: one line up now)
+    assert code == 1 and s["first_mismatch"]["line"] == nxt, s["all_mismatches"][:5]
+    assert any(m["line"] == nxt and m["what"].startswith("counter") for m in s["all_mismatches"])

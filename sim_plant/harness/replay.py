@@ -18,7 +18,11 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
 * ``clock`` (realtime runs): every recorded command is one cycle.  Before it, the node is
   given the logged frames up to the yaw-rate frame the command names by its ``MeasCounter``;
   the frames after that one (the plant sends driver angle and speed before yaw rate) wait for
-  the next cycle.  Which frames a clocked controller had drained is not in the log otherwise.
+  the next cycle.  A command naming an older measurement, or none, gets no new frames (see
+  ``_Replayer._drained``).  Which frames a clocked controller had drained is not in the log
+  otherwise: a driver-angle or speed frame that a late cycle drained just before the yaw-rate
+  frame it did not yet have is given to the next cycle here, which shows as a mismatch when
+  the value changed between the two.
 
 Each replayed command is compared with the recorded one in state, ``MeasCounter``, alive
 counter (a dropped or repeated command shows there even where the angle happens to agree)
@@ -297,15 +301,22 @@ class _Replayer:
 
     def _drained(self, buffered: list[tuple[int, can.Message]], meas: int | None) -> int:
         """How many of the buffered frames the node had received when it computed a command
-        answering yaw-rate counter ``meas``: up to the last yaw-rate frame of that counter, or
-        (an older measurement, or none) the frames before the first buffered yaw-rate frame."""
+        answering yaw-rate counter ``meas``: up to the last yaw-rate frame of that counter.  A
+        command answering an older measurement, or none, ran before the next burst of sensor
+        frames arrived (the plant sends each step's frames together): nothing new, except
+        yaw-rate frames that no receiver can accept (a bad length or CRC, say), which are what
+        made it answer none."""
         yaws = [i for i, (_, m) in enumerate(buffered) if m.arbitration_id == self.yaw_id]
         if meas is not None and meas != MEAS_NONE:
             named = [i for i in yaws if self.yaw_counter(buffered[i][1]) == meas]
             if named:
                 return named[-1] + 1
-        return yaws[0] if yaws else len(buffered)
-
+        take = 0
+        for i in yaws:
+            if self.yaw_counter(buffered[i][1]) is not None:
+                break
+            take = i + 1
+        return take
 
 def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None
            ) -> ReplayResult:
