@@ -227,3 +227,13 @@ def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
     # the replayed node's alive counter is one behind from the next command on (nxt: one line up now)
     assert code == 1 and s["first_mismatch"]["line"] == nxt, s["all_mismatches"][:5]
     assert any(m["line"] == nxt and m["what"].startswith("counter") for m in s["all_mismatches"])
+
+
+def test_help_and_an_out_that_is_a_file(clean_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["replay", "--help"])
+    assert exc.value.code == 0 and "usage: mrsteer replay" in capsys.readouterr().out
+    taken = tmp_path / "taken"
+    taken.write_text("keep me")
+    code, _, err = _replay(capsys, str(clean_log), "--out", str(taken))
+    assert code == 2 and "not a directory" in err and taken.read_text() == "keep me"
