@@ -19,7 +19,7 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
   given the logged frames up to the yaw-rate frame the command names by its ``MeasCounter``;
   the frames after that one (the plant sends driver angle and speed before yaw rate) wait for
   the next cycle.  A command naming an older measurement, or none, gets no new frames (see
-  ``_Replayer._drained``).  Which frames a clocked controller had drained is not in the log
+  ``_Replayer._drained`` for the exceptions).  Which frames a clocked controller had drained is not in the log
   otherwise: a driver-angle or speed frame that a late cycle drained just before the yaw-rate
   frame it did not yet have is given to the next cycle here, which shows as a mismatch when
   the value changed between the two.
@@ -291,7 +291,7 @@ class _Replayer:
                 self.sensor_frames += 1
             elif fid == self.cmd_id:
                 rec = self._command(msg, line, msg.timestamp)
-                take = self._drained(buffered, rec.meas)
+                take = self._drained(buffered, rec.meas, msg.timestamp - self.node.period)
                 for _, m in buffered[:take]:
                     self.node.receive(m)
                 del buffered[:take]
@@ -299,23 +299,28 @@ class _Replayer:
             elif fid == self.status_id:
                 self.recorded_statuses.append(self._status(msg, line, msg.timestamp))
 
-    def _drained(self, buffered: list[tuple[int, can.Message]], meas: int | None) -> int:
+    def _drained(self, buffered: list[tuple[int, can.Message]], meas: int | None, settled: float) -> int:
         """How many of the buffered frames the node had received when it computed a command
         answering yaw-rate counter ``meas``: up to the last yaw-rate frame of that counter.  A
         command answering an older measurement, or none, ran before the next burst of sensor
         frames arrived (the plant sends each step's frames together): nothing new, except
         yaw-rate frames that no receiver can accept (a bad length or CRC, say), which are what
-        made it answer none."""
+        made it answer none.  With no yaw-rate frame buffered at all (the plant stopped, or lost
+        its yaw-rate sensor), the frames logged a period or more before the command
+        (``settled``) had reached the node; bus times say no more than that (a late cycle can
+        miss frames logged well before its command)."""
         yaws = [i for i, (_, m) in enumerate(buffered) if m.arbitration_id == self.yaw_id]
+        take = 0
         if meas is not None and meas != MEAS_NONE:
             named = [i for i in yaws if self.yaw_counter(buffered[i][1]) == meas]
-            if named:
-                return named[-1] + 1
-        take = 0
-        for i in yaws:
-            if self.yaw_counter(buffered[i][1]) is not None:
-                break
-            take = i + 1
+            take = named[-1] + 1 if named else 0
+        if take == 0:
+            for i in yaws:
+                if self.yaw_counter(buffered[i][1]) is not None:
+                    break
+                take = i + 1
+        while not yaws and take < len(buffered) and buffered[take][1].timestamp <= settled:
+            take += 1
         return take
 
 def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None
