@@ -20,7 +20,7 @@ from firmware_py import model_regulator as mr
 from mrsteer_cli.cli import main
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, MSG_YAW, SIG_CMD_ANGLE, SIG_STATUS_CAUSE
 from sim_plant.harness.replay import replay
-from sim_plant.offline.vectors import config_lines
+from firmware_py import calibration_file
 
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
@@ -36,6 +36,12 @@ def clean_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
                           env=os.environ.copy())
     assert proc.returncode == 0, proc.stderr
     return out / "traffic.log"
+
+
+def _half_gain() -> mr.ControllerConfig:
+    """The shipped calibration with half its gain at every scheduled speed."""
+    d = mr.ControllerConfig()
+    return replace(d, schedule_k=tuple(0.5 * k for k in d.schedule_k))
 
 
 def _replay(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, dict, str]:
@@ -159,7 +165,7 @@ def test_altered_status_cause_is_a_cause_mismatch(clean_log: Path, tmp_path: Pat
 def test_the_wrong_recorded_calibration_disagrees(clean_log: Path, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "other.cfg"
-    cfg.write_text("\n".join(config_lines(replace(mr.ControllerConfig(), k=mr.ControllerConfig().k * 0.5))) + "\n")
+    cfg.write_text(calibration_file.dumps(_half_gain()))
     code, doc, _ = _replay(capsys, str(clean_log), "--recorded-calibration", str(cfg))
     s = doc["replays"][0]
     assert code == 1 and s["angle_mismatches"] > 100 and s["max_abs_dangle_rad"] > 1e-3
@@ -168,7 +174,7 @@ def test_the_wrong_recorded_calibration_disagrees(clean_log: Path, tmp_path: Pat
 def test_whatif_reports_the_new_calibrations_commands_with_a_plot(clean_log: Path, tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "half-k.cfg"
-    cfg.write_text("\n".join(config_lines(replace(mr.ControllerConfig(), k=mr.ControllerConfig().k * 0.5))) + "\n")
+    cfg.write_text(calibration_file.dumps(_half_gain()))
     out = tmp_path / "out"
     code, doc, _ = _replay(capsys, str(clean_log), "--calibration", str(cfg), "--out", str(out))
     w = doc["whatif"]

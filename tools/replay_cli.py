@@ -31,7 +31,8 @@ def add_parsers(sub: Any) -> None:
         "compare every replayed command and status frame with the recorded one. Exit 0 only when they agree.")
     p.add_argument("log", type=Path, metavar="LOG", help="candump -L log file")
     p.add_argument("--calibration", type=Path, metavar="FILE",
-                   help="what-if: also replay with this calibration (key = value .cfg, as tests/vectors/*.cfg) and "
+                   help="what-if: also replay with this calibration (a key = value calibration file, as "
+                   "tests/vectors/*.cfg and mrsteer controller --calibration) and "
                    "report its commands against the recorded ones, with a figure in --out")
     p.add_argument("--recorded-calibration", type=Path, metavar="FILE",
                    help="the calibration the log was recorded with (.cfg; default: the shipped one)")
@@ -56,12 +57,12 @@ class _BadInput(Exception):
 
 
 def _calibration(path: Path | None, flag: str, rate_hz: float) -> mr.ControllerConfig:
-    from sim_plant.offline.vectors import read_config
+    from firmware_py import calibration_file
 
     if path is None:
         return mr.ControllerConfig()
     try:
-        cfg = replace(read_config(path), ts=1.0 / rate_hz)  # the log's rate, whatever the file was made for
+        cfg = replace(calibration_file.load(path), ts=1.0 / rate_hz)  # the log's rate, whatever the file was made for
         mr.configure(cfg)
     except OSError as exc:
         raise _BadInput(f"{flag} {path}: {exc.strerror or exc}") from None

@@ -2,24 +2,35 @@
  *
  *   mrs_replay CONFIG.cfg [INPUTS]    (INPUTS: a file, or standard input when absent or "-")
  *
- * CONFIG is a calibration in the key = value form of the tests/vectors .cfg files (read by run_vectors'
- * reader, so both drivers accept exactly the same files). Each input line is one controller
+ * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
+ * read by mrs_config_load). Each input line is one controller
  * cycle, "DELTA_DRIVER YAW_RATE SPEED" (rad, rad/s, m/s; "nan" for an input the receive side
  * found invalid), as sim_plant/harness/replay.py extracts them from the frames; each output line
  * is "U STATUS FAULT_FLAGS" after mrs_step (U to 17 significant digits). The frame decoding,
  * E2E, freshness and cause bits stay on the Python side: this driver isolates the law, so a
  * mismatch it shows is the port's, not the receive path's. Exit 2 on unreadable input.
  */
-#define main run_vectors_main /* run_vectors.c's reader is the one .cfg reader of the C port */
-#include "run_vectors.c"
-#undef main
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mrs_config.h"
+#include "mrs_controller.h"
+
+#define LINE_MAX_LEN 4096
+
+static int fail(const char *what, const char *arg)
+{
+    fprintf(stderr, "mrs_replay: %s: %s\n", what, arg);
+    return 2;
+}
 
 int main(int argc, char **argv)
 {
     mrs_config_t g;
     mrs_coeffs_t c;
     mrs_state_t s;
-    double coeff_ref[64] = {0.0};
+    char err[256];
     char line[LINE_MAX_LEN];
     FILE *in = stdin;
     long n = 0;
@@ -27,8 +38,8 @@ int main(int argc, char **argv)
     if (argc < 2 || argc > 3) {
         return fail("usage", "mrs_replay CONFIG.cfg [INPUTS]");
     }
-    if (read_config(argv[1], &g, coeff_ref) != 0) {
-        return fail("cannot read", argv[1]);
+    if (mrs_config_load(argv[1], &g, err, sizeof err) != 0) {
+        return fail("cannot read", err);
     }
     if (mrs_configure(&g, &c) != 0) {
         return fail("invalid calibration in", argv[1]);

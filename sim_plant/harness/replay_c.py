@@ -2,8 +2,8 @@
 
 The Python replay (``replay.replay``) has already decoded the frames, run the receive checks,
 the freshness rule and the trigger, and kept what went into ``step()`` at every cycle.  Those
-inputs go to the C driver with the node's effective calibration (the ``.cfg`` form of
-``sim_plant.offline.vectors``); its ``mrs_step`` outputs are put in the command's DBC encoding
+inputs go to the C driver with the node's effective calibration (a calibration file,
+``firmware_py.calibration_file``); its ``mrs_step`` outputs are put in the command's DBC encoding
 (so an angle is compared at the resolution the bus carries) and compared with the recorded
 frames exactly as the Python replay's are.  What is the node's and not the law's stays the
 Python node's: the ``MeasCounter``, the alive counter, the final zero command at shutdown.  The
@@ -25,7 +25,7 @@ from pathlib import Path
 import mrsteer_dbc
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE
 from sim_plant.harness.replay import Out, ReplayResult, StatusOut, compare
-from sim_plant.offline.vectors import config_lines
+from firmware_py import calibration_file
 
 PORT = Path(__file__).resolve().parents[2] / "ports" / "c"
 DRIVER = "mrs_replay_f64"
@@ -54,7 +54,7 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
     inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
-        cfg.write_text("\n".join(config_lines(result.config)) + "\n")
+        cfg.write_text(calibration_file.dumps(result.config))
         proc = subprocess.run([str(exe), str(cfg)], input=inputs, capture_output=True, text=True, timeout=120)
     if proc.returncode != 0:
         raise PortError(f"{DRIVER} failed: {proc.stderr.strip()}")
