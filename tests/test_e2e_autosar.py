@@ -67,7 +67,7 @@ def _bodies(name: str) -> st.SearchStrategy[bytes]:
 
 def test_the_setup_matches_variant_1a() -> None:
     assert E2E_MESSAGES == ["MRS_AuxSteerCmd", "MRS_DriverSteer", "MRS_YawRate", "MRS_VehicleSpeed",
-                            "MRS_BenchInject"]
+                            "MRS_RedundantSensors", "MRS_BenchInject"]
     for name in E2E_MESSAGES:
         cfg = C.e2e(name)
         assert cfg.crc_byte == 0  # CRCOffset 0
@@ -185,7 +185,7 @@ def test_which_data_ids_have_a_zero_low_byte() -> None:
 @settings(max_examples=200, deadline=None)
 @given(st.binary(min_size=4, max_size=7))
 def test_no_frame_passes_as_another_message(body: bytes) -> None:
-    """The same bytes 1..n-1 under the five data IDs: five different library CRCs."""
+    """The same bytes 1..n-1 under the six data IDs: six different library CRCs."""
     ids = [C.e2e(n).data_id for n in E2E_MESSAGES]
     crcs = set()
     for did in ids:
