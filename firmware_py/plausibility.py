@@ -86,8 +86,10 @@ class PlausibilityConfig:
 
     ts: float = 0.002
     speed_min: float = 5.0  # m/s: below, a_y / v and K_n(v) say too little; checks pause
-    yaw_bound: float = 0.035  # |a_y / v - r|, rad/s (2 deg/s)
+    yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel |a_y / v|, rad/s (2 deg/s)
+    yaw_rel: float = 0.1
     yaw_count: int = 2  # samples of the redundant frame (50 ms each) over the bound, net
+    yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
     steer_bound: float = 0.004  # |delta - delta_2|, rad (0.23 deg of wheel angle)
     steer_count: int = 3
     model_margin: float = 0.15  # |r - r_model| <= margin + model_rel |r_model|
@@ -108,7 +110,8 @@ class PlausibilityConfig:
 class MonitorCoefficients:
     speed_min: float
     yaw_bound: float
-    inv_yaw_bound: float
+    yaw_rel: float
+    inv_yaw_raw_fraction: float
     yaw_count: int
     steer_bound: float
     inv_steer_bound: float
@@ -136,7 +139,7 @@ class MonitorState:
                  "yaw_last", "yaw_same", "yaw_ref", "lat_last", "lat_same", "lat_ref",
                  "st_last", "st_same", "st_ref", "st2_last", "st2_same", "st2_ref", "latched", "flags", "bits",
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
-                 "have_sample", "raw_prev", "beta_prev")
+                 "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -154,6 +157,7 @@ def reset_monitor(s: MonitorState) -> None:
     s.yaw_last = s.lat_last = s.st_last = s.st2_last = 0.0
     s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
     s.yaw_ref = s.lat_ref = s.st_ref = s.st2_ref = 0.0
+    s.yaw_ref_ok = s.st_ref_ok = False  # yaw_ref, st_ref taken (from the 50 ms frame)
     s.latched = 0
     s.flags = 0
     s.bits = 0
@@ -170,11 +174,13 @@ def reset_monitor(s: MonitorState) -> None:
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
-    _check_positive(cfg, ("ts", "speed_min", "yaw_bound", "steer_bound", "model_margin", "model_tau", "model_time",
+    _check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r"))
-    if not (isinstance(cfg.model_rel, float | int) and 0.0 <= cfg.model_rel < 1e3):
-        raise ValueError(f"model_rel must be in [0, 1000), got {cfg.model_rel!r}")
+    for name in ("model_rel", "yaw_rel"):
+        value = getattr(cfg, name)
+        if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
+            raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
     for name in ("yaw_count", "steer_count"):
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
@@ -183,7 +189,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     k_us = ((cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) * cfg.nominal_mass
             / (cfg.nominal_c_f * cfg.nominal_c_r * wheelbase))
     return MonitorCoefficients(
-        speed_min=cfg.speed_min, yaw_bound=cfg.yaw_bound, inv_yaw_bound=1.0 / cfg.yaw_bound,
+        speed_min=cfg.speed_min, yaw_bound=cfg.yaw_bound, yaw_rel=cfg.yaw_rel,
+        inv_yaw_raw_fraction=1.0 / cfg.yaw_raw_fraction,
         yaw_count=cfg.yaw_count, steer_bound=cfg.steer_bound, inv_steer_bound=1.0 / cfg.steer_bound,
         steer_count=cfg.steer_count, model_margin=cfg.model_margin, model_rel=cfg.model_rel,
         model_alpha=1.0 - math.exp(-cfg.ts / cfg.model_tau), model_steps=max(1, round(cfg.model_time / cfg.ts)),
@@ -251,6 +258,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.steer2_prev = delta_driver_redundant
         s.yaw_last, s.lat_last, s.st_last, s.st2_last = yaw_rate, lat_accel, delta_driver, delta_driver_redundant
         s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
+        s.yaw_ref_ok = s.st_ref_ok = False
         s.started = True
     s.r_model += c.model_alpha * (r_ss - s.r_model)
     e = yaw_rate - s.r_model
@@ -270,12 +278,16 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.since += 1
 
     # --- 1. and 3. at each new redundant sample (either of its values changed)
-    if lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev):
-        # a_y / v - r = beta', midway between this sample and the last, as measured and less the
-        # nominal car's beta' (the difference of its beta over the interval); each averaged over
-        # KIN_WINDOW intervals, and the smaller of the two must exceed the bound: a sensor fault
-        # moves both alike, a transient the nominal car explains moves only the first, one on low
-        # mu (where the nominal car's beta is 1/mu too large) the second more.
+    new_sample = lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev)
+    if new_sample:
+        # a_y / v - r = beta', midway between this sample and the last, as measured ("raw") and
+        # less the nominal car's beta' (the difference of its beta over the interval: "comp");
+        # each averaged over KIN_WINDOW intervals.  A yaw-rate or a_y error moves both alike; a
+        # transient the nominal car explains (a steering step, a yaw moment) moves only raw; one
+        # it does not (a side force, low mu, where its beta is 1/mu too large) moves comp more.
+        # The check trips when comp exceeds the bound and raw yaw_raw_fraction of it: raw alone
+        # would be slow, because the controller's answer to a yaw-rate error is itself a
+        # transient that hides the error from raw for a few hundred ms.
         raw = r_kin - yaw_rate
         # The nominal car's side-slip angle from a_y, delta and r (eq. 14, mu = 1, solved for beta:
         # a_y = -(c_f + c_r) / m beta + moment_m r / v + c_f / m delta), nearly insensitive to r
@@ -298,13 +310,14 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.since = 0
         raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
         comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
-        raw = -raw if raw < 0.0 else raw
+        raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
         comp = -comp if comp < 0.0 else comp
         e = comp if comp < raw else raw
         if s.kin_n < KIN_WINDOW:
             e = 0.0  # the window is not full yet
-        s.kin_err = e * c.inv_yaw_bound
-        if e > c.yaw_bound:
+        bound = c.yaw_bound + c.yaw_rel * (-r_kin if r_kin < 0.0 else r_kin)
+        s.kin_err = e / bound
+        if e > bound:
             s.kin_count += 1
             if s.kin_count >= c.yaw_count:
                 s.kin_count = c.yaw_count
@@ -327,13 +340,17 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.steer2_prev = delta_driver_redundant
 
     # --- 4. frozen: unchanged for frozen_steps counted while the partner is away from where it
-    #     was at this value's last change
+    #     was at this value's last change.  A partner from the 50 ms frame (a_y / v for the yaw
+    #     rate, the second channel for the driver's angle) is taken at its first sample after
+    #     that change: the sample held then may be up to a frame old.
     if yaw_rate != s.yaw_last:
-        s.yaw_last, s.yaw_same, s.yaw_ref = yaw_rate, 0, r_kin
-    else:
+        s.yaw_last, s.yaw_same, s.yaw_ref_ok = yaw_rate, 0, False
+    elif new_sample and not s.yaw_ref_ok:
+        s.yaw_ref, s.yaw_ref_ok = r_kin, True
+    elif lat_ok and s.yaw_ref_ok:
         e = r_kin - s.yaw_ref
         e = -e if e < 0.0 else e
-        if lat_ok and e > c.frozen_move_yaw:  # count only once the partner has moved
+        if e > c.frozen_move_yaw:
             if s.yaw_same < c.frozen_steps:
                 s.yaw_same += 1
             if s.yaw_same >= c.frozen_steps:
@@ -351,8 +368,10 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                     s.latched |= FROZEN_LAT
     if st2_ok:
         if delta_driver != s.st_last:
-            s.st_last, s.st_same, s.st_ref = delta_driver, 0, delta_driver_redundant
-        else:
+            s.st_last, s.st_same, s.st_ref_ok = delta_driver, 0, False
+        elif new_sample and not s.st_ref_ok:
+            s.st_ref, s.st_ref_ok = delta_driver_redundant, True
+        elif s.st_ref_ok:
             e = delta_driver_redundant - s.st_ref
             e = -e if e < 0.0 else e
             if e > c.frozen_move_steer:

@@ -58,7 +58,7 @@ class MonitorRun:
         """When the monitor first reported a fault (PLAUS_YAW or PLAUS_STEER)."""
         return self.first((self.bits & pl.PLAUS_FAULT) != 0)
 
-    def exceeded_time(self, bound: float, hold: float = 0.3) -> float | None:
+    def exceeded_time(self, bound: float | np.ndarray, hold: float = 0.3) -> float | None:
         """When the sensor's error became larger than ``bound`` to stay so for ``hold`` s (or
         until the monitor reported, if sooner): the start of the window the detection target
         counts from.  A brief excursion that falls back within the bound does not start it."""
@@ -80,11 +80,13 @@ class MonitorRun:
         return None
 
 
-def error_bound(sensor: str, cfg: pl.PlausibilityConfig, v: float) -> float:
-    """The plausibility bound a sensor's error is judged against: the yaw rate's ``yaw_bound``,
-    the lateral acceleration's ``yaw_bound`` v (the same residual), a steering channel's
-    ``steer_bound``."""
-    return {"yaw_rate": cfg.yaw_bound, "lat_accel": cfg.yaw_bound * v, "steer": cfg.steer_bound,
+def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
+    """The plausibility bound a sensor's error is judged against, per period: the yaw rate's
+    ``yaw_bound + yaw_rel |r|``, the lateral acceleration's the same times v (the same
+    residual), a steering channel's ``steer_bound``."""
+    r = np.abs(run.r_true)
+    yaw = cfg.yaw_bound + cfg.yaw_rel * r
+    return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"], "steer": cfg.steer_bound,
             "steer_redundant": cfg.steer_bound}[sensor]
 
 
@@ -150,9 +152,10 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
 
 
 def steady_curve(v: float, mu: float, a_y: float = 2.0, duration: float = 2.5, plant: str = "nonlinear",
-                 **kw: Any) -> scn.Scenario:
+                 ramp: float = 0.4, **kw: Any) -> scn.Scenario:
     """The realistic car at ``v`` on ``mu`` steering into a curve of about ``a_y`` (m/s^2, capped
-    at 60 % of the grip) at 0.2 s, the driver then holding the wheel (``steer`` event)."""
+    at 60 % of the grip) from 0.2 s, the wheel turned at a steady rate over ``ramp`` s (in 2 ms
+    ``steer`` steps: a driver steering normally, not a step; 0 = a step), then held."""
     from sim_plant.car.actuator_dynamics import ActuatorModelConfig
     from sim_plant.car.sensors import SensorConfig
     from sim_plant.car.vehicle import VehicleParams, steering_tf
@@ -160,7 +163,9 @@ def steady_curve(v: float, mu: float, a_y: float = 2.0, duration: float = 2.5, p
     a = min(a_y, 0.6 * 9.81 * mu)
     gain = steering_tf(VehicleParams(v=v, mu=1.0)).dc_gain()  # r / delta on a dry road
     delta = a / v / gain
-    return scn.Scenario("curve", duration, v=v, mu=mu, events=(scn.Event(0.2, "steer", delta),), plant=plant,
+    n = max(1, round(ramp / 0.002))
+    events = tuple(scn.Event(0.2 + i * 0.002, "steer", delta * (i + 1) / n) for i in range(n))
+    return scn.Scenario("curve", duration, v=v, mu=mu, events=events, plant=plant,
                         actuator=ActuatorModelConfig.default(), sensors=SensorConfig(seed=kw.pop("seed", 1)), **kw)
 
 
@@ -172,4 +177,4 @@ def detection_latency(sc: scn.Scenario, ts: float = 0.002, monitor: pl.Plausibil
     r = run(sc, ts, cfg)
     if r.fault_sensor is None:
         raise ValueError("the scenario has no sensor fault")
-    return r.exceeded_time(error_bound(r.fault_sensor, cfg, sc.v)), r.fault_time
+    return r.exceeded_time(error_bound(r.fault_sensor, cfg, r)), r.fault_time
