@@ -2,7 +2,7 @@
  *
  *   monitor_vectors < INPUT
  *
- * INPUT: a line "monitor" + the 18 mrs_monitor_config_t numbers in struct order, a line
+ * INPUT: a line "monitor" + the 20 mrs_monitor_config_t numbers in struct order, a line
  * "authority" + the 7 mrs_authority_config_t numbers, then one line per control period:
  * "delta_driver delta_driver_redundant yaw_rate lat_accel speed aux_cmd_applied u_request"
  * (nan for a missing input).  OUTPUT: a line "coeffs" + the monitor's and the authority's
@@ -38,9 +38,9 @@ static void print_defaults(void)
     mrs_authority_config_t a;
     mrs_monitor_default_config(&m);
     mrs_authority_default_config(&a);
-    printf("monitor %.17g %.17g %.17g %d %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
+    printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
            "%.17g\n",
-           m.ts, m.speed_min, m.yaw_bound, m.yaw_count, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
+           m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
            m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r);
     printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
@@ -50,7 +50,7 @@ static void print_defaults(void)
 int main(void)
 {
     char line[LINE_MAX_LEN];
-    double v[18];
+    double v[20];
     mrs_monitor_config_t mg;
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
@@ -65,27 +65,29 @@ int main(void)
         print_defaults();
         return 0;
     }
-    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 18) != 0) {
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 20) != 0) {
         return 2;
     }
     mg.ts = v[0];
     mg.speed_min = v[1];
     mg.yaw_bound = v[2];
-    mg.yaw_count = (int)v[3];
-    mg.steer_bound = v[4];
-    mg.steer_count = (int)v[5];
-    mg.model_margin = v[6];
-    mg.model_rel = v[7];
-    mg.model_tau = v[8];
-    mg.model_time = v[9];
-    mg.frozen_time = v[10];
-    mg.frozen_move_yaw = v[11];
-    mg.frozen_move_steer = v[12];
-    mg.nominal_l_f = v[13];
-    mg.nominal_l_r = v[14];
-    mg.nominal_mass = v[15];
-    mg.nominal_c_f = v[16];
-    mg.nominal_c_r = v[17];
+    mg.yaw_rel = v[3];
+    mg.yaw_count = (int)v[4];
+    mg.yaw_raw_fraction = v[5];
+    mg.steer_bound = v[6];
+    mg.steer_count = (int)v[7];
+    mg.model_margin = v[8];
+    mg.model_rel = v[9];
+    mg.model_tau = v[10];
+    mg.model_time = v[11];
+    mg.frozen_time = v[12];
+    mg.frozen_move_yaw = v[13];
+    mg.frozen_move_steer = v[14];
+    mg.nominal_l_f = v[15];
+    mg.nominal_l_r = v[16];
+    mg.nominal_mass = v[17];
+    mg.nominal_c_f = v[18];
+    mg.nominal_c_r = v[19];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 7) != 0) {
         return 2;

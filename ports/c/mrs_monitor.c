@@ -10,7 +10,9 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->ts = 0.002;
     cfg->speed_min = 5.0;
     cfg->yaw_bound = 0.035;
+    cfg->yaw_rel = 0.1;
     cfg->yaw_count = 2;
+    cfg->yaw_raw_fraction = 0.5;
     cfg->steer_bound = 0.004;
     cfg->steer_count = 3;
     cfg->model_margin = 0.15;
@@ -41,7 +43,7 @@ static int32_t steps_of(double t, double ts)
 
 int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c)
 {
-    const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->steer_bound, g->model_margin, g->model_tau,
+    const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r};
     size_t i;
@@ -51,14 +53,15 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
             return -1;
         }
     }
-    if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
+    if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
         g->steer_count < 1 || g->steer_count > 100) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
     c->speed_min = g->speed_min;
     c->yaw_bound = g->yaw_bound;
-    c->inv_yaw_bound = 1.0 / g->yaw_bound;
+    c->yaw_rel = g->yaw_rel;
+    c->inv_yaw_raw_fraction = 1.0 / g->yaw_raw_fraction;
     c->yaw_count = g->yaw_count;
     c->steer_bound = g->steer_bound;
     c->inv_steer_bound = 1.0 / g->steer_bound;
@@ -93,6 +96,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw_last = s->lat_last = s->st_last = s->st2_last = 0.0;
     s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
     s->yaw_ref = s->lat_ref = s->st_ref = s->st2_ref = 0.0;
+    s->yaw_ref_ok = s->st_ref_ok = 0u;
     s->latched = 0u;
     s->flags = 0u;
     s->bits = 0u;
@@ -163,6 +167,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     const int lat_ok = lat_accel > -1e3 && lat_accel < 1e3;
     const int st2_ok = delta_driver_redundant > -1e3 && delta_driver_redundant < 1e3;
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
+    int new_sample;
 
     if (!(lat_ok && st2_ok)) {
         flags |= MRS_MISSING;
@@ -198,6 +203,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->lat_ref = yaw_rate;
         s->st_ref = delta_driver_redundant;
         s->st2_ref = delta_driver;
+        s->yaw_ref_ok = s->st_ref_ok = 0u;
         s->started = 1u;
     }
     s->r_model += c->model_alpha * (r_ss - s->r_model);
@@ -211,7 +217,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->since += 1;
     }
     /* 1. and 3. at each new redundant sample */
-    if (lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev)) {
+    new_sample = lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev);
+    if (new_sample) {
         double raw = r_kin - yaw_rate;
         double comp, beta;
         beta = (c->moment_m * inv_v * inv_v * yaw_rate + c->cf_m * inv_v * delta - r_kin) * c->inv_cs_m * speed;
@@ -233,14 +240,16 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->raw_prev = raw;
         s->beta_prev = beta;
         s->since = 0;
-        raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW));
+        raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW)) *
+              c->inv_yaw_raw_fraction;
         comp = MRS_MAG((s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW));
         e = comp < raw ? comp : raw;
         if (s->kin_n < MRS_KIN_WINDOW) {
             e = 0.0;
         }
-        s->kin_err = e * c->inv_yaw_bound;
-        MRS_COUNT(s->kin_count, e > c->yaw_bound, c->yaw_count, MRS_CHECK_KINEMATIC);
+        bound = c->yaw_bound + c->yaw_rel * MRS_MAG(r_kin);
+        s->kin_err = e / bound;
+        MRS_COUNT(s->kin_count, e > bound, c->yaw_count, MRS_CHECK_KINEMATIC);
         e = MRS_MAG(delta_driver - delta_driver_redundant);
         s->pair_err = e * c->inv_steer_bound;
         MRS_COUNT(s->pair_count, e > c->steer_bound, c->steer_count, MRS_CHECK_STEER_PAIR);
@@ -255,21 +264,39 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     if (yaw_rate != s->yaw_last) {
         s->yaw_last = yaw_rate;
         s->yaw_same = 0;
+        s->yaw_ref_ok = 0u;
+    } else if (new_sample && !s->yaw_ref_ok) {
         s->yaw_ref = r_kin;
-    } else if (lat_ok && MRS_MAG(r_kin - s->yaw_ref) > c->frozen_move_yaw) {
-        if (s->yaw_same < c->frozen_steps) {
-            s->yaw_same += 1;
-        }
-        if (s->yaw_same >= c->frozen_steps) {
-            s->latched |= MRS_FROZEN_YAW;
+        s->yaw_ref_ok = 1u;
+    } else if (lat_ok && s->yaw_ref_ok) {
+        if (MRS_MAG(r_kin - s->yaw_ref) > c->frozen_move_yaw) {
+            if (s->yaw_same < c->frozen_steps) {
+                s->yaw_same += 1;
+            }
+            if (s->yaw_same >= c->frozen_steps) {
+                s->latched |= MRS_FROZEN_YAW;
+            }
         }
     }
     if (lat_ok) {
         MRS_FROZEN(lat_accel, s->lat_last, s->lat_same, s->lat_ref, yaw_rate, c->frozen_move_yaw, MRS_FROZEN_LAT);
     }
     if (st2_ok) {
-        MRS_FROZEN(delta_driver, s->st_last, s->st_same, s->st_ref, delta_driver_redundant, c->frozen_move_steer,
-                   MRS_FROZEN_STEER);
+        if (delta_driver != s->st_last) {
+            s->st_last = delta_driver;
+            s->st_same = 0;
+            s->st_ref_ok = 0u;
+        } else if (new_sample && !s->st_ref_ok) {
+            s->st_ref = delta_driver_redundant;
+            s->st_ref_ok = 1u;
+        } else if (s->st_ref_ok && MRS_MAG(delta_driver_redundant - s->st_ref) > c->frozen_move_steer) {
+            if (s->st_same < c->frozen_steps) {
+                s->st_same += 1;
+            }
+            if (s->st_same >= c->frozen_steps) {
+                s->latched |= MRS_FROZEN_STEER;
+            }
+        }
         MRS_FROZEN(delta_driver_redundant, s->st2_last, s->st2_same, s->st2_ref, delta_driver, c->frozen_move_steer,
                    MRS_FROZEN_STEER_2);
     }

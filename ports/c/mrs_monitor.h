@@ -40,8 +40,9 @@
 #define MRS_AUTH_FAULT 0x08u
 
 typedef struct {
-    double ts, speed_min, yaw_bound;
+    double ts, speed_min, yaw_bound, yaw_rel;
     int yaw_count;
+    double yaw_raw_fraction;
     double steer_bound;
     int steer_count;
     double model_margin, model_rel, model_tau, model_time, frozen_time, frozen_move_yaw, frozen_move_steer;
@@ -49,7 +50,7 @@ typedef struct {
 } mrs_monitor_config_t;
 
 typedef struct {
-    double speed_min, yaw_bound, inv_yaw_bound;
+    double speed_min, yaw_bound, yaw_rel, inv_yaw_raw_fraction;
     int32_t yaw_count;
     double steer_bound, inv_steer_bound;
     int32_t steer_count;
@@ -59,7 +60,7 @@ typedef struct {
 } mrs_monitor_coeffs_t;
 
 typedef struct {
-    uint8_t started, have_sample, latched, flags, bits;
+    uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, latched, flags, bits;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since;
     int32_t yaw_same, lat_same, st_same, st2_same;
     double lat_prev, steer2_prev, r_model, raw_prev, beta_prev;
