@@ -19,10 +19,8 @@ from sim_plant.offline import plausibility_runs as pr
 
 TS = 0.002
 D = math.radians
-#: The law in the loop.  The shipped constant law (K 43) is unstable on the realistic car (20 ms
-#: actuator, 30 Hz yaw-rate filter: issue 15), so until issue 15's law lands the loop uses the
-#: paper-like K 10, tau 20 ms, which is stable there.
-LAW = replace(mr.ControllerConfig(), k=10.0, tau=0.02)
+#: The law in the loop: the shipped (issue 15's scheduled) calibration.
+LAW = mr.ControllerConfig()
 
 
 def test_bits_are_the_dbc_names() -> None:
