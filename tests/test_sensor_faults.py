@@ -189,3 +189,65 @@ def test_bad_fault_tables_name_the_file(tmp_path) -> None:
     with pytest.raises(SystemExit):
         from sim_plant.nodes import plant
         plant.main(["--sensor-fault", "steer:bias@1", "--interface", "virtual"])
+
+
+# ------------------------------------------------------------------ the fault bridge
+
+from sim_plant.nodes.fault_bridge import Bridge, Fault  # noqa: E402
+
+YAW_ID = C.frame_id(names.MSG_YAW)
+
+
+def _yaw_frame(counter: int, value: float) -> can.Message:
+    return can.Message(arbitration_id=YAW_ID, is_extended_id=False,
+                       data=C.encode(names.MSG_YAW, {names.SIG_YAW_RATE: value}, counter))
+
+
+@pytest.fixture
+def bridge_of(channel: str):
+    buses = [can.Bus(interface="virtual", channel=f"{channel}-{side}") for side in ("a", "b")]
+
+    def make(kind: str, param: float = 1.0, target: str = names.MSG_YAW, signal: str | None = None) -> Bridge:
+        b = Bridge(*buses, Fault(kind, target, 1.0, 2.0, param, signal))
+        b.stats.t0 = 100.0
+        return b
+
+    yield make
+    for b in buses:
+        b.shutdown()
+
+
+@pytest.mark.parametrize("kind, param, expected", [
+    ("sensor_stuck", 0.01, lambda k, x: 0.01), ("sensor_bias", 0.05, lambda k, x: x + 0.05),
+    ("sensor_scale", 1.5, lambda k, x: 1.5 * x), ("sensor_drift", 0.02, lambda k, x: x + 0.02 * (0.002 * k)),
+    ("sensor_frozen", 0.0, lambda k, x: 0.1 + 0.001 * 9),
+])
+def test_the_bridge_falsifies_the_value_in_well_formed_frames(bridge_of, kind: str, param: float, expected) -> None:
+    b = bridge_of(kind, param)
+    rx = RxLink(C, (names.MSG_YAW,))
+    for k in range(10):  # before the window
+        (_, out), = b.transform(_yaw_frame(k, 0.1 + 0.001 * k), 100.9 + 0.002 * k)
+        assert rx.accept(out).signals[names.SIG_YAW_RATE] == pytest.approx(0.1 + 0.001 * k)
+    for k in range(20):
+        value = 0.2 + 0.003 * k
+        (_, out), = b.transform(_yaw_frame((10 + k) % 15, value), 101.0 + 0.002 * k)
+        got = rx.accept(out)
+        assert got.status in (E2EStatus.OK,)  # CRC valid, the counter advancing
+        assert got.signals[names.SIG_YAW_RATE] == pytest.approx(expected(k, value), abs=1.01e-6)
+
+
+def test_the_bridge_noise_and_the_redundant_frames_second_signal(bridge_of) -> None:
+    b = bridge_of("sensor_noise", 0.05, target="redundant", signal=names.SIG_STEER_ANGLE_2)
+    rid = C.frame_id(names.MSG_REDUNDANT)
+    diffs = []
+    for k in range(200):
+        data = C.encode(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 1.0, names.SIG_STEER_ANGLE_2: 0.01}, k % 15)
+        (_, out), = b.transform(can.Message(arbitration_id=rid, data=data, is_extended_id=False), 101.0 + 0.004 * k)
+        got = C.decode(rid, bytes(out.data))
+        assert got.status is E2EStatus.OK and got.signals[names.SIG_LAT_ACCEL] == pytest.approx(1.0)
+        diffs.append(got.signals[names.SIG_STEER_ANGLE_2] - 0.01)
+    assert np.std(diffs) == pytest.approx(0.05, rel=0.25)
+    with pytest.raises(ValueError, match="sensor_"):
+        Fault("drop", names.MSG_YAW, signal=names.SIG_YAW_RATE)
+    with pytest.raises(KeyError):
+        bridge_of("sensor_bias", 1.0, signal="NoSuchSignal")
