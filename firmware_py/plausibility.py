@@ -1,4 +1,4 @@
-"""Plausibility monitor and bounded authority -- a porting reference in ``model_regulator``'s style.
+"""Plausibility monitor -- a porting reference in ``model_regulator``'s style.
 
 E2E and SecOC prove that a frame is the sensor's, unaltered and fresh; this module checks that
 the values in valid frames agree with each other and with the nominal car (issue 18), and
@@ -7,9 +7,9 @@ bounds what the command may do whatever computed it.
 Structure (as ``model_regulator``): ``PlausibilityConfig`` (calibration) -> ``configure()``
 (every coefficient once: the only divisions by calibration values and the only ``exp``) ->
 ``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per control period: scalar
-arithmetic on ``c`` and ``s`` only, no allocation, no calls.  ``authority_step`` likewise with
-``AuthorityConfig`` / ``configure_authority`` / ``AuthorityState``.  Ported bit for bit (float64)
-to ``ports/c/mrs_monitor.c``.
+arithmetic on ``c`` and ``s`` only, no allocation, no calls.  The bounded authority that acts on
+its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to
+``ports/c/mrs_monitor.c``.
 
 The checks (thresholds and their reasoning: docs/controller.md, "Plausibility monitor"):
 
@@ -65,12 +65,6 @@ STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
-
-# Authority limiter flags (AuthorityState.flags): what bound the command this period.
-AUTH_MAGNITUDE = 0x01
-AUTH_RATE = 0x02
-AUTH_TIME = 0x04  # beyond the panic window with inputs not known consistent: faded
-AUTH_FAULT = 0x08  # plausibility fault or a non-finite request: faded
 
 # The nominal car of model_regulator (section 3, mu = 1); the controller's config passes its own.
 NOMINAL_L_F = 1.25
@@ -174,7 +168,7 @@ def reset_monitor(s: MonitorState) -> None:
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
-    _check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
+    check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r"))
     for name in ("model_rel", "yaw_rel"):
@@ -201,7 +195,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         cf_m=cfg.nominal_c_f / cfg.nominal_mass)
 
 
-def _check_positive(cfg: object, names: tuple[str, ...]) -> None:
+def check_positive(cfg: object, names: tuple[str, ...]) -> None:
+    """Each of ``names`` of ``cfg`` a positive finite number, else ValueError naming it."""
     for name in names:
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and math.isfinite(value) and value > 0.0):
@@ -414,96 +409,3 @@ class PlausibilityMonitor:
              speed: float, aux_cmd_applied: float) -> int:
         return monitor_step(self.coefficients, self.state, delta_driver, delta_driver_redundant, yaw_rate,
                             lat_accel, speed, aux_cmd_applied)
-
-
-# ============================================================================ bounded authority
-
-
-@dataclass(frozen=True)
-class AuthorityConfig:
-    """The independent bound on the command (issue 18, item 3), rad and s."""
-
-    ts: float = 0.002
-    u_max: float = math.radians(3.0)  # magnitude: the actuator's range
-    rate_max: float = 2.0  # rad/s (115 deg/s): 3 deg in 26 ms; above the law's own needs
-    fade_rate: float = math.radians(6.0)  # rad/s toward 0 on a fault or when the time is up
-    panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
-    engage: float = math.radians(0.1)  # |u| above this counts as intervening
-    rearm_time: float = 1.0  # s of |u| <= engage before the window starts afresh
-
-
-@dataclass(frozen=True, slots=True)
-class AuthorityCoefficients:
-    u_max: float
-    du_max: float
-    fade_step: float
-    window_steps: int
-    engage: float
-    rearm_steps: int
-
-
-class AuthorityState:
-    __slots__ = ("u", "engaged", "quiet", "flags")
-
-    def __init__(self) -> None:
-        reset_authority(self)
-
-
-def reset_authority(s: AuthorityState) -> None:
-    s.u = 0.0
-    s.engaged = 0  # periods intervening since the window started
-    s.quiet = 0  # periods at rest in a row
-    s.flags = 0
-
-
-def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
-    _check_positive(cfg, tuple(vars(cfg)))
-    return AuthorityCoefficients(u_max=cfg.u_max, du_max=cfg.rate_max * cfg.ts, fade_step=cfg.fade_rate * cfg.ts,
-                                 window_steps=max(1, round(cfg.panic_window / cfg.ts)), engage=cfg.engage,
-                                 rearm_steps=max(1, round(cfg.rearm_time / cfg.ts)))
-
-
-def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int) -> float:
-    """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
-    +-u_max, moving at most ``rate_max``; faded to zero at ``fade_rate`` on a plausibility fault
-    or a non-finite request, and once the intervention has lasted ``panic_window`` unless the
-    inputs are known consistent (every check running: no DEGRADED).  ``s.flags`` says which
-    bound acted."""
-    flags = 0
-    du = c.du_max
-    if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):
-        target = 0.0
-        du = c.fade_step
-        flags |= AUTH_FAULT
-    elif s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
-        target = 0.0
-        du = c.fade_step
-        flags |= AUTH_TIME
-    else:
-        target = u_request
-        if target > c.u_max:
-            target = c.u_max
-            flags |= AUTH_MAGNITUDE
-        elif target < -c.u_max:
-            target = -c.u_max
-            flags |= AUTH_MAGNITUDE
-    d = target - s.u
-    if d > du:
-        d = du
-        flags |= AUTH_RATE if du == c.du_max else 0
-    elif d < -du:
-        d = -du
-        flags |= AUTH_RATE if du == c.du_max else 0
-    u = s.u + d
-    if u > c.engage or u < -c.engage:
-        if s.engaged < c.window_steps:
-            s.engaged += 1
-        s.quiet = 0
-    else:
-        if s.quiet < c.rearm_steps:
-            s.quiet += 1
-        if s.quiet >= c.rearm_steps:
-            s.engaged = 0
-    s.u = u
-    s.flags = flags
-    return u

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from firmware_py import authority as au
 from firmware_py import plausibility as pl
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.offline import plausibility_runs as pr
@@ -33,23 +34,23 @@ def runner(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _config_lines(m: pl.PlausibilityConfig, a: pl.AuthorityConfig) -> str:
+def _config_lines(m: pl.PlausibilityConfig, a: au.AuthorityConfig) -> str:
     return ("monitor " + " ".join(repr(float(getattr(m, f.name))) for f in dataclasses.fields(m)) + "\n"
             + "authority " + " ".join(repr(float(getattr(a, f.name))) for f in dataclasses.fields(a)) + "\n")
 
 
-def _python(m: pl.PlausibilityConfig, a: pl.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
-    mc, ac = pl.configure(m), pl.configure_authority(a)
-    ms, ast = pl.MonitorState(), pl.AuthorityState()
+def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
+    mc, ac = pl.configure(m), au.configure_authority(a)
+    ms, ast = pl.MonitorState(), au.AuthorityState()
     out = []
     for dd, dd2, r, ay, v, aux, u in rows:
         bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux)
-        u_out = pl.authority_step(ac, ast, u, bits)
+        u_out = au.authority_step(ac, ast, u, bits)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags))
     return out
 
 
-def _c(runner: Path, m: pl.PlausibilityConfig, a: pl.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
+def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
     text = _config_lines(m, a) + "".join(" ".join(repr(x) for x in row) + "\n" for row in rows)
     proc = subprocess.run([str(runner)], input=text, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
@@ -100,7 +101,7 @@ CASES = {
 
 @pytest.mark.parametrize("case", CASES)
 def test_the_c_monitor_and_limiter_are_bit_identical_to_python(runner: Path, case: str) -> None:
-    m, a = pl.PlausibilityConfig(), pl.AuthorityConfig(panic_window=0.5)  # a short window: the time bound acts
+    m, a = pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5)  # a short window: the time bound acts
     rows = CASES[case]()
     py, c = _python(m, a, rows), _c(runner, m, a, rows)
     assert len(c) == len(py) == len(rows)
@@ -110,32 +111,32 @@ def test_the_c_monitor_and_limiter_are_bit_identical_to_python(runner: Path, cas
 
 def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     rows = _random_rows(7)
-    out = _python(pl.PlausibilityConfig(), pl.AuthorityConfig(panic_window=0.5), rows)
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
     for bits, f, *_, af in out:
         flags |= f
         auth |= af
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
-    assert auth & pl.AUTH_FAULT and auth & pl.AUTH_RATE
+    assert auth & au.AUTH_FAULT and auth & au.AUTH_RATE
 
 
 def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     proc = subprocess.run([str(runner)], input="defaults\n", capture_output=True, text=True, check=True)
     monitor, authority = proc.stdout.splitlines()
-    m, a = pl.PlausibilityConfig(), pl.AuthorityConfig()
+    m, a = pl.PlausibilityConfig(), au.AuthorityConfig()
     assert [float(x) for x in monitor.split()[1:]] == [float(getattr(m, f.name)) for f in dataclasses.fields(m)]
     assert [float(x) for x in authority.split()[1:]] == [float(getattr(a, f.name)) for f in dataclasses.fields(a)]
     first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
                            check=True).stdout.split()
-    mc, ac = pl.configure(m), pl.configure_authority(a)
+    mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.engage, ac.window_steps, ac.rearm_steps]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
 def test_an_invalid_calibration_is_refused(runner: Path) -> None:
-    bad = _config_lines(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0), pl.AuthorityConfig())
+    bad = _config_lines(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0), au.AuthorityConfig())
     assert subprocess.run([str(runner)], input=bad, capture_output=True, text=True).returncode == 3
     with pytest.raises(ValueError, match="yaw_bound"):
         pl.configure(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0))

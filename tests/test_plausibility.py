@@ -11,6 +11,7 @@ from dataclasses import replace
 import pytest
 
 from firmware_py import model_regulator as mr
+from firmware_py import authority as au
 from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
@@ -108,35 +109,35 @@ def test_bad_calibrations_are_refused() -> None:
         with pytest.raises(ValueError, match=next(iter(bad))):
             pl.configure(replace(pl.PlausibilityConfig(), **bad))
     with pytest.raises(ValueError, match="rate_max"):
-        pl.configure_authority(replace(pl.AuthorityConfig(), rate_max=-1.0))
+        au.configure_authority(replace(au.AuthorityConfig(), rate_max=-1.0))
 
 
 # ------------------------------------------------------------------ authority limiter
 
 def test_authority_bounds_magnitude_and_rate_and_fades_on_a_fault() -> None:
-    c, s = pl.configure_authority(pl.AuthorityConfig()), pl.AuthorityState()
-    u = [pl.authority_step(c, s, 0.1, 0) for _ in range(30)]
-    assert u[0] == pytest.approx(2.0 * TS) and s.flags == pl.AUTH_MAGNITUDE  # rate, then the range
+    c, s = au.configure_authority(au.AuthorityConfig()), au.AuthorityState()
+    u = [au.authority_step(c, s, 0.1, 0) for _ in range(30)]
+    assert u[0] == pytest.approx(2.0 * TS) and s.flags == au.AUTH_MAGNITUDE  # rate, then the range
     assert max(u) == pytest.approx(D(3.0))
-    u = [pl.authority_step(c, s, 0.04, pl.PLAUS_YAW) for _ in range(100)]
-    assert u[0] == pytest.approx(D(3.0) - D(6.0) * TS) and s.flags == pl.AUTH_FAULT
+    u = [au.authority_step(c, s, 0.04, pl.PLAUS_YAW) for _ in range(100)]
+    assert u[0] == pytest.approx(D(3.0) - D(6.0) * TS) and s.flags == au.AUTH_FAULT
     assert u[-1] == pytest.approx(D(3.0) - 100 * D(6.0) * TS)
-    assert pl.authority_step(c, s, math.nan, 0) < u[-1]  # a non-finite request fades too
+    assert au.authority_step(c, s, math.nan, 0) < u[-1]  # a non-finite request fades too
 
 
 def test_authority_ends_an_intervention_at_the_panic_window_only_when_degraded() -> None:
-    c, s = pl.configure_authority(pl.AuthorityConfig()), pl.AuthorityState()
+    c, s = au.configure_authority(au.AuthorityConfig()), au.AuthorityState()
     window = round(2.0 / TS)
-    u = [pl.authority_step(c, s, 0.02, 0) for _ in range(window + 500)]
+    u = [au.authority_step(c, s, 0.02, 0) for _ in range(window + 500)]
     assert u[-1] == pytest.approx(0.02)  # consistent inputs: no time limit
-    u = [pl.authority_step(c, s, 0.02, pl.PLAUS_DEGRADED) for _ in range(500)]
-    assert s.flags == pl.AUTH_TIME and u[-1] == 0.0 and u[0] == pytest.approx(0.02 - D(6.0) * TS)
-    s2 = pl.AuthorityState()
-    u = [pl.authority_step(c, s2, 0.02, pl.PLAUS_DEGRADED) for _ in range(window + 200)]
+    u = [au.authority_step(c, s, 0.02, pl.PLAUS_DEGRADED) for _ in range(500)]
+    assert s.flags == au.AUTH_TIME and u[-1] == 0.0 and u[0] == pytest.approx(0.02 - D(6.0) * TS)
+    s2 = au.AuthorityState()
+    u = [au.authority_step(c, s2, 0.02, pl.PLAUS_DEGRADED) for _ in range(window + 200)]
     assert u[window - 1] == pytest.approx(0.02) and u[-1] < 0.02  # the window, then the fade
-    rest = [pl.authority_step(c, s2, 0.0, pl.PLAUS_DEGRADED) for _ in range(round(1.0 / TS) + 1000)]
+    rest = [au.authority_step(c, s2, 0.0, pl.PLAUS_DEGRADED) for _ in range(round(1.0 / TS) + 1000)]
     assert rest[-1] == 0.0 and s2.engaged == 0  # re-armed after 1 s at rest
-    assert pl.authority_step(c, s2, 0.01, pl.PLAUS_DEGRADED) > 0.0
+    assert au.authority_step(c, s2, 0.01, pl.PLAUS_DEGRADED) > 0.0
 
 
 # ------------------------------------------------------------------ offline, closed loop

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from firmware_py import model_regulator as mr
+from firmware_py import authority as au
 from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 import mrsteer_dbc
@@ -93,7 +94,7 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 # One loop that is the plant node's step and the controller's cycle side by side; long because
 # each of its stages is a few lines that read best in order.
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
-        controller: mr.ControllerConfig | None = None, authority: pl.AuthorityConfig | None = None,
+        controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
         guard: bool = True) -> MonitorRun:
     contract = mrsteer_dbc.load()
     every = {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in CHANNELS}
@@ -104,8 +105,8 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
     reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
     mon = pl.PlausibilityMonitor(monitor if monitor is not None else pl.PlausibilityConfig(ts=ts))
-    ac = pl.configure_authority(authority if authority is not None else pl.AuthorityConfig(ts=ts))
-    ast = pl.AuthorityState()
+    ac = au.configure_authority(authority if authority is not None else au.AuthorityConfig(ts=ts))
+    ast = au.AuthorityState()
     n = int(round(sc.duration / ts)) + 1
     out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
     seen = {ch: np.zeros(n) for ch in CHANNELS}
@@ -135,7 +136,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
                         applied)
         if guard:
-            u = pl.authority_step(ac, ast, u, bits)
+            u = au.authority_step(ac, ast, u, bits)
         pipeline.append(u)
         applied = actuator.step(pipeline.popleft())
         out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
