@@ -145,7 +145,8 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         st = mon.state
         for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err)):
             margins[key] = max(margins[key], value)
-        car.advance(driver + applied, scene.m_z)
+        # as the plant node: the car gets the lagging actuator's mean position over the step
+        car.advance(driver + actuator.mean, scene.m_z)
         if not car.linear:
             scene.v = car.v
     return MonitorRun(np.arange(n) * ts, out["bits"].astype(int), out["r"], out["aux"], out["err"], faulted,
