@@ -13,24 +13,30 @@ from __future__ import annotations
 MSG_STEER = "MRS_DriverSteer"  # driver's front-wheel angle (vehicle -> controller)
 MSG_YAW = "MRS_YawRate"  # yaw rate, the feedback signal (vehicle -> controller)
 MSG_SPEED = "MRS_VehicleSpeed"  # speed over ground (vehicle -> controller)
+MSG_REDUNDANT = "MRS_RedundantSensors"  # lateral acceleration, second steering channel (plausibility)
 MSG_CMD = "MRS_AuxSteerCmd"  # the auxiliary steering command (controller -> actuator)
 MSG_STATUS = "MRS_CtrlStatus"  # controller status and diagnostics
 MSG_SYNC = "MRS_SecOCSync"  # SecOC freshness epoch (actuator -> controller)
 MSG_BENCH = "MRS_BenchInject"  # test-bench disturbance and friction injection
 
-SENSORS = (MSG_STEER, MSG_YAW, MSG_SPEED)  # the vehicle's sensor messages, in DBC order
+SENSORS = (MSG_STEER, MSG_YAW, MSG_SPEED)  # the control law's sensor messages, in DBC order
+REDUNDANT_SENSORS = (MSG_REDUNDANT,)  # the plausibility monitor's further sensor messages
+VEHICLE_SENSORS = SENSORS + REDUNDANT_SENSORS  # every sensor message the vehicle sends (and signs)
 
 # ------------------------------------------------------------------ signals
 
 SIG_STEER_ANGLE = "DriverSteer_Angle"
 SIG_YAW_RATE = "YawRate_YawRate"
 SIG_SPEED = "VehicleSpeed_Speed"
+SIG_LAT_ACCEL = "RedundantSensors_LatAccel"
+SIG_STEER_ANGLE_2 = "RedundantSensors_SteerAngle"
 SIG_CMD_STATE = "AuxSteerCmd_State"
 SIG_CMD_ANGLE = "AuxSteerCmd_Angle"
 SIG_CMD_MEAS = "AuxSteerCmd_MeasCounter"
 SIG_STATUS_STATE = "CtrlStatus_State"
 SIG_STATUS_FLAGS = "CtrlStatus_InputFlags"
 SIG_STATUS_CAUSE = "CtrlStatus_Cause"
+SIG_STATUS_PLAUS = "CtrlStatus_Plausibility"
 SIG_STATUS_REJECTED = "CtrlStatus_Rejected"
 SIG_STATUS_OVERRUNS = "CtrlStatus_Overruns"
 SIG_STATUS_LATENESS = "CtrlStatus_MaxLateness"
@@ -51,5 +57,14 @@ CAUSE_RANGE = 0x10
 CAUSE_LOW_SPEED = 0x20
 # SecOC on: no valid freshness sync (the actuator will not apply commands), or sensor frames failing their MAC
 CAUSE_AUTH = 0x40
+
+# The plausibility monitor (firmware_py.plausibility): its fault is this cause bit, and which check
+# tripped is in CtrlStatus_Plausibility.
+CAUSE_PLAUSIBILITY = 0x80
+
+# CtrlStatus_Plausibility bits.
+PLAUS_YAW = 0x01  # yaw rate against lateral acceleration or the steering model, or yaw / a_y frozen
+PLAUS_STEER = 0x02  # the two steering-angle channels disagree, or one is frozen
+PLAUS_DEGRADED = 0x04  # a redundant input missing: fewer checks, authority limited to the panic window
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement (the DBC's "NONE")

@@ -184,7 +184,7 @@ def test_c_e2e_crc_equals_the_autosar_e2e_library(tmp_path: Path) -> None:
     proc = subprocess.run([str(exe)], input="crc\n" + "\n".join(lines) + "\n", capture_output=True, text=True,
                           timeout=60, check=True)
     got = [int(x) for x in proc.stdout.split()]
-    assert len(got) == len(expected) == 5 * 300
+    assert len(got) == len(expected) == 6 * 300  # six E2E messages
     assert got == expected
     assert int(subprocess.run([str(exe)], input="crc\n4353 0 52000000000000\n", capture_output=True, text=True,
                               check=True).stdout) == 0xBB  # issue 17's demo frame

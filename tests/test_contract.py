@@ -209,7 +209,8 @@ def test_every_name_in_names_is_in_the_dbc(contract: mrsteer_dbc.Contract) -> No
 
     messages = {v for k, v in vars(names).items() if k.startswith("MSG_")}
     assert messages == {m.name for m in contract.db.messages}  # every message named, none invented
-    assert set(names.SENSORS) == {m.name for m in contract.db.messages if m.senders == ["VEHICLE"]} - {names.MSG_SYNC}
+    assert set(names.VEHICLE_SENSORS) == {m.name for m in contract.db.messages if m.senders == ["VEHICLE"]} - {names.MSG_SYNC}
+    assert set(names.SENSORS).isdisjoint(names.REDUNDANT_SENSORS)
     signals = {v for k, v in vars(names).items() if k.startswith("SIG_")}
     in_dbc = {s.name: m.name for m in contract.db.messages for s in m.signals}
     assert signals <= set(in_dbc)
@@ -224,10 +225,14 @@ def test_cause_bits_and_meas_none_are_what_the_dbc_says(contract: mrsteer_dbc.Co
     said = {names.CAUSE_STEER_MISSING: "1 driver angle missing", names.CAUSE_YAW_MISSING: "2 yaw rate missing",
             names.CAUSE_SPEED_MISSING: "4 speed missing", names.CAUSE_E2E: "8 E2E errors",
             names.CAUSE_RANGE: "16 input out of range", names.CAUSE_LOW_SPEED: "32 below activation speed",
-            names.CAUSE_AUTH: "64 (SecOC on)"}
+            names.CAUSE_AUTH: "64 (SecOC on)", names.CAUSE_PLAUSIBILITY: "128 plausibility fault"}
     for bit, words in said.items():
         assert words in comment and int(words.split()[0]) == bit
     causes = [v for k, v in vars(names).items() if k.startswith("CAUSE_")]
-    assert sorted(causes) == sorted(said) and sum(causes) == 0x7F  # distinct single bits
+    assert sorted(causes) == sorted(said) and sum(causes) == 0xFF  # distinct single bits
+    plaus = contract.message(names.MSG_STATUS).get_signal_by_name(names.SIG_STATUS_PLAUS).comment
+    for bit, words in {names.PLAUS_YAW: "1 yaw rate implausible", names.PLAUS_STEER: "2 steering angle implausible",
+                       names.PLAUS_DEGRADED: "4 degraded"}.items():
+        assert words in plaus and int(words.split()[0]) == bit
     meas = contract.message(names.MSG_CMD).get_signal_by_name(names.SIG_CMD_MEAS)
     assert {int(k): str(v) for k, v in meas.choices.items()} == {names.MEAS_NONE: "NONE"}

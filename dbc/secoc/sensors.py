@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from mrsteer_dbc.contract import Contract, ContractError
-from mrsteer_dbc.names import SENSORS
+from mrsteer_dbc.names import SENSORS, VEHICLE_SENSORS
 from mrsteer_dbc.secoc.cmac import COUNTER_BITS, TruncatedCmac, epoch_named, frame_mac, freshness
 from mrsteer_dbc.secoc.frames import AuthFields, sign_frame
 from mrsteer_dbc.secoc.keys import SecOCError
@@ -51,7 +51,7 @@ def counter_advance(alive_delta: int, low_delta: int) -> int:
 class _SensorPeer:
     def __init__(self, contract: Contract, key: bytes) -> None:
         try:
-            self.fields = {name: SensorFields.of(contract, name) for name in SENSORS}
+            self.fields = {name: SensorFields.of(contract, name) for name in VEHICLE_SENSORS}
         except ContractError as exc:
             raise SecOCError(str(exc)) from None
         self.by_id = {f.frame_id: f for f in self.fields.values()}
@@ -65,8 +65,8 @@ class SensorSigner(_SensorPeer):
     def __init__(self, contract: Contract, key: bytes) -> None:
         super().__init__(contract, key)
         self.epoch: int | None = None  # None: frames go out unsigned
-        self._epoch: dict[str, int | None] = dict.fromkeys(SENSORS)
-        self._counter = dict.fromkeys(SENSORS, 0)
+        self._epoch: dict[str, int | None] = dict.fromkeys(VEHICLE_SENSORS)
+        self._counter = dict.fromkeys(VEHICLE_SENSORS, 0)
 
     def adopt(self, epoch: int | None) -> None:
         """Sign from now on for ``epoch`` (each message's counter restarts at its next frame)."""
@@ -112,7 +112,7 @@ class SensorVerifier(_SensorPeer):
         self.current: int | None = None
         self.previous: int | None = None
         self._last: dict[int, _SensorLast | None] = dict.fromkeys(self.by_id)
-        self.failed = dict.fromkeys(SENSORS, 0)
+        self.failed = dict.fromkeys(VEHICLE_SENSORS, 0)
 
     def adopt(self, epoch: int) -> None:
         if self.current is None or epoch > self.current:

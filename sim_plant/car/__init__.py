@@ -6,7 +6,9 @@
 * ``disturbances``: split-μ braking, side-wind gust, tyre blow-out.
 * ``actuator``: the actuator's handling of commands (timeout, fade, slew back, ±3°);
   ``actuator_dynamics``: its position response (lag, rate limit, dead time).
-* ``sensors``: noise, bias, low-pass and DBC quantisation of the measurements.
+* ``sensors``: noise, bias, low-pass and DBC quantisation of the measurements (and of the
+  redundant ones: lateral acceleration, the second steering channel); ``sensor_faults``: wrong
+  values in well-formed frames (stuck, bias, scale, drift, noise, frozen).
 * ``scenario``: operating point, events, driver model; built-ins and TOML files;
   ``model_files``: reading the actuator and sensor TOML files.
 * ``options``: the command-line options that choose the car.

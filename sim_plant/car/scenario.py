@@ -36,6 +36,15 @@ paper's ideal plant, so a file without them runs as before::
     split_mu_braking = { mu_left = 1.0, mu_right = 0.2 }   # scenario's): split_mu_braking,
                                                            # side_wind or blowout
 
+Sensor faults in well-formed frames (``sensor_faults``: sensor, kind, value in the signal's SI
+unit, onset; optional ``stop``), on any car::
+
+    [[sensor_fault]]
+    sensor = "yaw_rate"     # yaw_rate, lat_accel, steer, steer_redundant, speed
+    kind = "bias"           # stuck (value optional: the value at onset), bias, scale, drift, noise, frozen
+    value = 0.05            # rad/s here
+    start = 1.0             # s
+
 The linear plant takes only yaw-moment loads: a physical disturbance (a lateral force, a
 deceleration, a change of grip) needs ``plant = "nonlinear"``, and is refused otherwise.
 
@@ -65,6 +74,7 @@ from sim_plant.car import disturbances as dist
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.car.model_files import ModelFileError
 from sim_plant.car.plants import LINEAR, PLANTS
+from sim_plant.car.sensor_faults import SensorFault, faults_from_list
 from sim_plant.car.sensors import MAX_SEED, SensorConfig
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams, steering_tf
 
@@ -111,6 +121,16 @@ class Scenario:
     plant: str = LINEAR
     actuator: ActuatorModelConfig = field(default_factory=ActuatorModelConfig.ideal)
     sensors: SensorConfig = field(default_factory=SensorConfig.ideal)
+    sensor_faults: tuple[SensorFault, ...] = ()
+
+    @property
+    def sensor_config(self) -> SensorConfig:
+        """The sensors with this scenario's sensor faults: what the plant measures with."""
+        return replace(self.sensors, faults=self.sensors.faults + self.sensor_faults)
+
+    def with_sensor_faults(self, faults: tuple[SensorFault, ...]) -> "Scenario":
+        """The same scenario with ``faults`` added to its own."""
+        return replace(self, sensor_faults=self.sensor_faults + tuple(faults))
 
     @property
     def ideal_car(self) -> bool:
@@ -229,7 +249,7 @@ def load(spec: str) -> Scenario:
 
 def parse(data: dict[str, Any], where: str) -> Scenario:
     allowed = {"name", "description", "duration", "v", "mu", "mass", "driver", "events", "plant", "actuator",
-               "sensors"}
+               "sensors", "sensor_fault"}
     _no_unknown(data, allowed, where)
     if "duration" not in data:
         raise ScenarioError(f"{where}: 'duration' is required")
@@ -253,6 +273,7 @@ def parse(data: dict[str, Any], where: str) -> Scenario:
                     if "actuator" in data else ActuatorModelConfig.ideal())
         sensors = (SensorConfig.from_mapping(_table(data, "sensors", where), f"{where} [sensors]")
                    if "sensors" in data else SensorConfig.ideal())
+        sensor_faults = faults_from_list(data.get("sensor_fault", []), where)
     except ModelFileError as exc:
         raise ScenarioError(str(exc)) from None
     sc = Scenario(
@@ -267,6 +288,7 @@ def parse(data: dict[str, Any], where: str) -> Scenario:
         plant=plant,
         actuator=actuator,
         sensors=sensors,
+        sensor_faults=sensor_faults,
     )
     _check(sc, where)
     return sc

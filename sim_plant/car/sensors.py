@@ -18,11 +18,26 @@ Yaw rate, per plant step ts (fs = 1 / ts):
 * Q: quantisation to the DBC signal's resolution (YawRate_YawRate's scale), read from the
   contract, so offline simulations see what the bus carries.
 
+Lateral acceleration (``MRS_RedundantSensors``, for the plausibility monitor): the true
+a_y = v (beta' + r) of the plant through the same chain as the yaw rate, with ``noise_density``
+in micro-g/sqrt(Hz) (default 180: Bosch BMI160's accelerometer, datasheet BST-BMI160-DS000-07,
+Table 1, "output noise density"; 1 g = 9.80665 m/s^2), ``bias_m_s2`` and the same 30 Hz filter,
+quantised to RedundantSensors_LatAccel's scale.
+
 Steering angle and speed: optional white noise (``noise_deg``, ``noise_m_s``: RMS per sample)
-and quantisation to DriverSteer_Angle's and VehicleSpeed_Speed's scale.
+and quantisation to DriverSteer_Angle's and VehicleSpeed_Speed's scale.  The steering-angle
+sensor's second channel (``steer_redundant``) is its own channel: by default 0.01 deg RMS of
+front-wheel angle (0.16 deg at the steering wheel, about one LSB of a production sensor's
+0.1 deg resolution), quantised to RedundantSensors_SteerAngle's scale.
+
+Sensor faults (``sensor_faults``; the ``faults`` of a SensorConfig, a scenario's
+``[[sensor_fault]]`` tables) act on a channel's input, before its noise, filter and
+quantisation, except ``frozen``, which holds the channel's output; ``Sensors.at(t)`` tells the
+sensors the time before a step's readings.
 
 Noise is seeded: one ``seed`` makes a numpy SeedSequence whose spawned children feed one
-Generator per sensor, so runs are reproducible and the sensors' streams independent.
+Generator per sensor (yaw rate, steer, speed, lateral acceleration, second steering channel, then
+one per noise fault: the first three streams are those of the three-sensor model before), so runs are reproducible and the sensors' streams independent.
 ``SensorConfig.ideal()`` keeps today's exact sensors (output = input).
 """
 
@@ -37,21 +52,27 @@ import numpy as np
 import mrsteer_dbc
 from mrsteer_dbc import names
 from sim_plant.car.model_files import ModelFileError, boolean, integer, number, read_table, reject_unknown, table
+from sim_plant.car.sensor_faults import FaultedChannel, SensorFault
+
+G = 9.80665  # m/s^2 per g
 
 #: (message, signal) of each measured quantity in the DBC.
 DBC_SIGNALS = {"yaw_rate": (names.MSG_YAW, names.SIG_YAW_RATE), "steer": (names.MSG_STEER, names.SIG_STEER_ANGLE),
-               "speed": (names.MSG_SPEED, names.SIG_SPEED)}
+               "speed": (names.MSG_SPEED, names.SIG_SPEED),
+               "lat_accel": (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
+               "steer_redundant": (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2)}
 MAX_SEED = 2**63 - 1
 
 
 def dbc_resolution(quantity: str) -> float:
-    """The DBC scale (one LSB) of the signal carrying ``quantity`` (yaw_rate, steer, speed)."""
+    """The DBC scale (one LSB) of the signal carrying ``quantity`` (a key of DBC_SIGNALS)."""
     message, signal = DBC_SIGNALS[quantity]
     return float(mrsteer_dbc.load().message(message).get_signal_by_name(signal).scale)
 
 
 #: key: (low, high) of each number of a sensor table.
 YAW_RANGES = {"noise_density": (0.0, 10.0), "bias_deg_s": (-50.0, 50.0), "lowpass_hz": (0.0, 1000.0)}
+LAT_RANGES = {"noise_density": (0.0, 100000.0), "bias_m_s2": (-5.0, 5.0), "lowpass_hz": (0.0, 1000.0)}
 CHANNEL_RANGES = {"noise": (0.0, 5.0)}
 
 
@@ -75,6 +96,18 @@ class YawRateSensorConfig:
 
 
 @dataclass(frozen=True)
+class LatAccelSensorConfig:
+    noise_density: float = 180.0  # micro-g/sqrt(Hz), one-sided (Bosch BMI160 accelerometer)
+    bias_m_s2: float = 0.0
+    lowpass_hz: float = 30.0  # 0 = none
+    quantise: bool = True
+
+    def __post_init__(self) -> None:
+        for k, (lo, hi) in LAT_RANGES.items():
+            number(vars(self), k, 0.0, lo, hi, type(self).__name__)
+
+
+@dataclass(frozen=True)
 class ChannelConfig:
     """Steering angle (noise in deg RMS) or speed (noise in m/s RMS)."""
 
@@ -94,6 +127,9 @@ class SensorConfig:
     speed: ChannelConfig = field(default_factory=ChannelConfig)
     seed: int = 0
     exact: bool = False
+    lat_accel: LatAccelSensorConfig = field(default_factory=LatAccelSensorConfig)
+    steer_redundant: ChannelConfig = field(default_factory=lambda: ChannelConfig(noise=0.01))
+    faults: tuple[SensorFault, ...] = ()
 
     @classmethod
     def ideal(cls) -> "SensorConfig":
@@ -105,12 +141,17 @@ class SensorConfig:
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any], where: str) -> "SensorConfig":
-        """From a TOML table: ``seed`` and the tables [yaw_rate], [steer], [speed]."""
-        reject_unknown(data, {"seed", "yaw_rate", "steer", "speed"}, where)
+        """From a TOML table: ``seed`` and the tables [yaw_rate], [steer], [speed], [lat_accel],
+        [steer_redundant]."""
+        reject_unknown(data, {"seed", "yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"}, where)
         yaw_cfg = _checked(YawRateSensorConfig, table(data, "yaw_rate", where), YAW_RANGES, f"{where} [yaw_rate]")
+        lat_cfg = _checked(LatAccelSensorConfig, table(data, "lat_accel", where), LAT_RANGES, f"{where} [lat_accel]")
         steer, speed = (_checked(ChannelConfig, table(data, name, where), CHANNEL_RANGES, f"{where} [{name}]")
                         for name in ("steer", "speed"))
-        return cls(yaw_cfg, steer, speed, integer(data, "seed", 0, 0, MAX_SEED, where))
+        second = table(data, "steer_redundant", where)
+        steer2 = _checked(ChannelConfig, {"noise": 0.01, **second}, CHANNEL_RANGES, f"{where} [steer_redundant]")
+        return cls(yaw_cfg, steer, speed, integer(data, "seed", 0, 0, MAX_SEED, where), lat_accel=lat_cfg,
+                   steer_redundant=steer2)
 
     @classmethod
     def load(cls, spec: str) -> "SensorConfig":
@@ -126,71 +167,106 @@ def _quantiser(on: bool, quantity: str):
     return (lambda x: round(x / step) * step) if step else (lambda x: x)
 
 
+class _Lowpass:
+    """scipy.signal.lfilter's direct form II transposed, one sample at a time, started at rest
+    on its first input (lfilter_zi) so it adds no start-up transient."""
+
+    def __init__(self, hz: float, fs: float) -> None:
+        # Imported here: scipy.signal costs the plant process half a second of start-up,
+        # which every run with ideal sensors (the default) would pay for nothing.
+        from scipy.signal import butter
+
+        b, a = butter(2, hz, fs=fs)
+        self.ba: tuple[np.ndarray, np.ndarray] = (b / a[0], a / a[0])
+        self.z: list[float] | None = None
+
+    def __call__(self, x: float) -> float:
+        b, a = self.ba
+        if self.z is None:
+            from scipy.signal import lfilter_zi
+
+            self.z = (lfilter_zi(b, a) * x).tolist()
+        z = self.z
+        y = b[0] * x + z[0]
+        z[0] = b[1] * x - a[1] * y + z[1]
+        z[1] = b[2] * x - a[2] * y
+        return float(y)
+
+
+#: The channels in the order of their noise streams.
+CHANNELS = ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant")
+
+
 class Sensors:
-    """The three sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s, m/s)."""
+    """The five sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s,
+    m/s, m/s^2).  ``at(t)`` before a step's readings sets the time the faults see."""
 
     def __init__(self, config: SensorConfig, ts: float) -> None:
         if not (math.isfinite(ts) and ts > 0.0):
             raise ModelFileError(f"sensor step ts must be positive, got {ts!r}")
         self.config, self.ts = config, ts
         fs = 1.0 / ts
-        yaw = config.yaw_rate
-        if yaw.lowpass_hz >= fs / 2:
-            raise ModelFileError(f"yaw_rate lowpass_hz {yaw.lowpass_hz:g} must be below the Nyquist "
-                                 f"frequency {fs / 2:g} Hz of the plant step")
+        yaw, lat = config.yaw_rate, config.lat_accel
+        for name, hz in (("yaw_rate", yaw.lowpass_hz), ("lat_accel", lat.lowpass_hz)):
+            if hz >= fs / 2:
+                raise ModelFileError(f"{name} lowpass_hz {hz:g} must be below the Nyquist "
+                                     f"frequency {fs / 2:g} Hz of the plant step")
         self.yaw_sigma = math.radians(yaw.noise_density) * math.sqrt(fs / 2.0)
         self.yaw_bias = math.radians(yaw.bias_deg_s)
-        self.steer_sigma = math.radians(config.steer.noise)
-        self.speed_sigma = config.speed.noise
-        if yaw.lowpass_hz > 0.0 and not config.exact:  # exact sensors filter nothing
-            # Imported here: scipy.signal costs the plant process half a second of start-up,
-            # which every run with ideal sensors (the default) would pay for nothing.
-            from scipy.signal import butter
-
-            b, a = butter(2, yaw.lowpass_hz, fs=fs)
-            self.lowpass: tuple[np.ndarray, np.ndarray] | None = (b / a[0], a / a[0])
-        else:
-            self.lowpass = None
-        self._q_yaw = _quantiser(yaw.quantise, "yaw_rate")
-        self._q_steer = _quantiser(config.steer.quantise, "steer")
-        self._q_speed = _quantiser(config.speed.quantise, "speed")
+        self.lat_sigma = lat.noise_density * 1e-6 * G * math.sqrt(fs / 2.0)
+        self.lat_bias = lat.bias_m_s2
+        self.sigma = {"yaw_rate": self.yaw_sigma, "steer": math.radians(config.steer.noise),
+                      "speed": config.speed.noise, "lat_accel": self.lat_sigma,
+                      "steer_redundant": math.radians(config.steer_redundant.noise)}
+        self.bias = {"yaw_rate": self.yaw_bias, "lat_accel": self.lat_bias}
+        self._hz = {"yaw_rate": yaw.lowpass_hz, "lat_accel": lat.lowpass_hz}
+        filtered = not config.exact  # exact sensors filter nothing
+        self.lowpass = _Lowpass(yaw.lowpass_hz, fs).ba if filtered and yaw.lowpass_hz > 0.0 else None
+        self._q = {name: _quantiser(getattr(config, name).quantise, name) for name in CHANNELS}
+        for f in config.faults:
+            if f.sensor not in CHANNELS:
+                raise ModelFileError(f"sensor fault: sensor must be one of {', '.join(CHANNELS)}, got {f.sensor!r}")
         self.reset()
 
     def reset(self) -> None:
-        """Back to the start: the same noise sequence again, the filter unstarted."""
-        children = np.random.SeedSequence(self.config.seed).spawn(3)
-        self._rng_yaw, self._rng_steer, self._rng_speed = (np.random.default_rng(c) for c in children)
-        self._z: list[float] | None = None
+        """Back to the start: the same noise sequence again, the filters unstarted, the faults
+        not yet begun."""
+        n_fault = len(self.config.faults)
+        children = np.random.SeedSequence(self.config.seed).spawn(len(CHANNELS) + n_fault)
+        self._rng = {name: np.random.default_rng(c) for name, c in zip(CHANNELS, children)}
+        fs = 1.0 / self.ts
+        self._lpf = {name: _Lowpass(hz, fs) for name, hz in self._hz.items() if hz > 0.0 and not self.config.exact}
+        self._faults = {name: FaultedChannel(tuple(f for f in self.config.faults if f.sensor == name),
+                                             [np.random.default_rng(children[len(CHANNELS) + i])
+                                              for i, f in enumerate(self.config.faults) if f.sensor == name])
+                        for name in CHANNELS}
+        self.t = 0.0
 
-    def _filter(self, x: float) -> float:
-        if self.lowpass is None:
-            return x
-        b, a = self.lowpass
-        if self._z is None:  # at rest on the first value
-            from scipy.signal import lfilter_zi
+    def at(self, t: float) -> None:
+        """The time of the next readings (s since the start of the run), for the faults."""
+        self.t = t
 
-            self._z = (lfilter_zi(b, a) * x).tolist()
-        z = self._z
-        # scipy.signal.lfilter's direct form II transposed, one sample at a time
-        y = b[0] * x + z[0]
-        z[0] = b[1] * x - a[1] * y + z[1]
-        z[1] = b[2] * x - a[2] * y
-        return float(y)
+    def _measure(self, name: str, x: float) -> float:
+        fault = self._faults[name]
+        x = fault.input(self.t, x)
+        if not self.config.exact:
+            sigma = self.sigma[name]
+            x = x + self.bias.get(name, 0.0) + (sigma * self._rng[name].standard_normal() if sigma else 0.0)
+            lpf = self._lpf.get(name)
+            x = self._q[name](lpf(x) if lpf is not None else x)
+        return fault.output(self.t, x)
 
     def yaw_rate(self, r: float) -> float:
-        if self.config.exact:
-            return r
-        noisy = r + self.yaw_bias + (self.yaw_sigma * self._rng_yaw.standard_normal() if self.yaw_sigma else 0.0)
-        return self._q_yaw(self._filter(noisy))
+        return self._measure("yaw_rate", r)
 
     def steer(self, delta: float) -> float:
-        if self.config.exact:
-            return delta
-        noise = self.steer_sigma * self._rng_steer.standard_normal() if self.steer_sigma else 0.0
-        return self._q_steer(delta + noise)
+        return self._measure("steer", delta)
 
     def speed(self, v: float) -> float:
-        if self.config.exact:
-            return v
-        noise = self.speed_sigma * self._rng_speed.standard_normal() if self.speed_sigma else 0.0
-        return self._q_speed(v + noise)
+        return self._measure("speed", v)
+
+    def lat_accel(self, a_y: float) -> float:
+        return self._measure("lat_accel", a_y)
+
+    def steer_redundant(self, delta: float) -> float:
+        return self._measure("steer_redundant", delta)

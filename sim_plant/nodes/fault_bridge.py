@@ -7,7 +7,7 @@ inside its time window (seconds after the vehicle's first frame).  Frame content
 changed through the DBC (cantools) and the contract's E2E functions, never by bit position.
 
 Fault kinds (``kind``), applied to the frames of ``target`` (a message name, ``sensors`` for the
-three sensor messages, or ``commands`` for MRS_AuxSteerCmd):
+three sensor messages, ``redundant`` for MRS_RedundantSensors, or ``commands`` for MRS_AuxSteerCmd):
 
 =================  ===================================================================
 drop               drop each frame with probability ``param`` (1: a burst, all of them)
@@ -29,6 +29,13 @@ flood              also send 8-byte frames of an unused ID (0x7F0) on the contro
 spoof_command      after each real MRS_AuxSteerCmd (target ``commands``), also send a forged one
                    with angle ``param`` rad: the next alive counter and FV counter, a valid CRC
                    and a random MAC (the best a forger without the SecOC key can do)
+sensor_stuck       a wrong sensor in well-formed frames (``signal``: which physical signal,
+sensor_frozen      default the message's first): stuck at ``param``; frozen at its last value
+sensor_bias        before the window (value-frozen: the alive counter advances); + ``param``;
+sensor_scale       * ``param``; + ``param`` * (seconds into the window); + ``param`` * N(0, 1).
+sensor_drift       The frame is re-encoded through the DBC with its own alive counter and the
+sensor_noise       CRC made valid; its SecOC MAC cannot be (the bridge has no key), so with
+                   SecOC on, inject sensor faults in the plant (``mrsteer plant --sensor-fault``)
 =================  ===================================================================
 """
 
@@ -53,8 +60,9 @@ from firmware_py.platform.cli import Parser, check_output_file
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.rx_queue import deepen
 
+SENSOR_KINDS = ("sensor_stuck", "sensor_frozen", "sensor_bias", "sensor_scale", "sensor_drift", "sensor_noise")
 KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "corrupt_crc", "corrupt_counter",
-         "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command")
+         "wrong_length", "replay", "substitute", "out_of_range", "flood", "spoof_command", *SENSOR_KINDS)
 SENSORS = names.SENSORS
 COMMAND = names.MSG_CMD
 FLOOD_ID = 0x7F0
@@ -70,16 +78,21 @@ class Fault:
     start: float = 1.0
     stop: float = 1.3
     param: float = 1.0
+    signal: str | None = None  # sensor_* kinds: the signal to falsify (default: the first physical one)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"fault kind must be one of {', '.join(KINDS)}; got {self.kind!r}")
+        if self.signal is not None and self.kind not in SENSOR_KINDS:
+            raise ValueError(f"'signal' is for the sensor_* kinds only, not {self.kind!r}")
         if not (0.0 <= self.start < self.stop):
             raise ValueError(f"fault window must satisfy 0 <= start < stop, got {self.start}..{self.stop}")
 
     def targets(self) -> tuple[str, ...]:
         if self.target == "sensors":
             return SENSORS
+        if self.target == "redundant":
+            return names.REDUNDANT_SENSORS
         if self.target == "commands":
             return (COMMAND,)
         return (self.target,)
@@ -112,6 +125,10 @@ class Bridge:
         self._lock = threading.Lock()
         self._history: dict[int, collections.deque[tuple[float, bytes]]] = collections.defaultdict(collections.deque)
         self._held: dict[int, can.Message] = {}
+        self._frozen: dict[int, float] = {}  # sensor_frozen: the value held, per frame ID
+        if fault.signal is not None:
+            for name in fault.targets():
+                self.contract.message(name).get_signal_by_name(fault.signal)  # KeyError: not this message's
 
     def stop(self, *_: Any) -> None:
         self._stopped_at = min(self._stopped_at, time.time())
@@ -191,7 +208,39 @@ class Bridge:
             m = self.contract.message(self.contract.name_of(msg.arbitration_id))
             first = next(s for s in m.signals if not s.name.endswith(PROTECTION_SUFFIXES))
             data = bytearray(self._reencode(msg, {first.name: f.param}))
+        elif kind in SENSOR_KINDS:
+            data = bytearray(self._falsify(msg, now))
         return [(now, _copy(msg, bytes(data)))]
+
+    def _signal_of(self, msg: can.Message) -> str:
+        m = self.contract.message(self.contract.name_of(msg.arbitration_id))
+        if self.fault.signal is not None:
+            return m.get_signal_by_name(self.fault.signal).name
+        return next(s.name for s in m.signals if not s.name.endswith(PROTECTION_SUFFIXES))
+
+    def _falsify(self, msg: can.Message, now: float) -> bytes:
+        """The frame with its sensor value made wrong (the counter kept, the CRC valid)."""
+        f, name = self.fault, self._signal_of(msg)
+        m = self.contract.message(self.contract.name_of(msg.arbitration_id))
+        value = float(m.decode(bytes(msg.data), decode_choices=False)[name])
+        if f.kind == "sensor_stuck":
+            value = f.param
+        elif f.kind == "sensor_frozen":
+            held = self._frozen.get(msg.arbitration_id)
+            if held is None:
+                hist = self._history[msg.arbitration_id]  # this frame is its last entry
+                before = hist[-2][1] if len(hist) > 1 else bytes(msg.data)
+                held = self._frozen[msg.arbitration_id] = float(m.decode(before, decode_choices=False)[name])
+            value = held
+        elif f.kind == "sensor_bias":
+            value += f.param
+        elif f.kind == "sensor_scale":
+            value *= f.param
+        elif f.kind == "sensor_drift":
+            value += f.param * (now - (self.stats.t0 or now) - f.start)
+        else:  # sensor_noise
+            value += f.param * self.rng.gauss(0.0, 1.0)
+        return self._reencode(msg, {name: value})
 
     def _forge(self, real: can.Message) -> bytes:
         name = self.contract.name_of(real.arbitration_id)
@@ -311,6 +360,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
         if not isinstance(spec, dict):
             raise ValueError("the fault must be a JSON object")
         fault = Fault(**spec)
+        for name in fault.targets():
+            if name not in {m.name for m in mrsteer_dbc.load().db.messages}:
+                raise ValueError(f"no message {name!r} in the DBC")
+            if fault.signal is not None and fault.signal not in {
+                    sig.name for sig in mrsteer_dbc.load().message(name).signals}:
+                raise ValueError(f"{name} has no signal {fault.signal!r}")
     except (ValueError, TypeError) as exc:
         p.error(f"--fault: {exc}")
     if args.vehicle == args.controller:

@@ -13,11 +13,14 @@ the sensor models of ``docs/realistic-car.md``.  Each plant step (period ``ts``)
    auxiliary command: only frames the receive link accepts count (``mrsteer_dbc.link.RxLink``:
    length, CRC, range, SecOC when a key is given, alive counter); with no valid command for
    ``cmd_timeout`` it fades to zero at a bounded rate;
-4. the sensors (``sim_plant.car.sensors``) measure the driver angle, the speed and the yaw
-   rate, and the messages due at this step are published (with SecOC, first
+4. the sensors (``sim_plant.car.sensors``) measure the driver angle, the speed, the yaw
+   rate and, for the plausibility monitor, the lateral acceleration a_y = v (beta' + r) and the
+   steering-angle sensor's second channel (``MRS_RedundantSensors``), each with the scenario's
+   sensor faults (``sim_plant.car.sensor_faults``: well-formed frames carrying wrong values),
+   and the messages due at this step are published (with SecOC, first
    ``MRS_SecOCSync`` at its DBC cycle time: the actuator is the freshness master, and the
    sensor frames are signed for the epoch it announced) (each at its DBC cycle time, never
-   faster than the plant step): driver angle, speed, then yaw rate last, so a controller
+   faster than the plant step): driver angle, speed, redundant sensors, then yaw rate last, so a controller
    triggered by the yaw-rate frame sees a complete set;
 5. the actuator's position (``sim_plant.car.actuator_dynamics.PositionActuator``, when not
    ideal) follows what the command handling gave, once per step, and the car advances with
@@ -53,15 +56,17 @@ from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, 
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
-from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW, SENSORS, SIG_BENCH_MU,
-                               SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_SPEED, SIG_STEER_ANGLE,
-                               SIG_YAW_RATE)
+from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW,
+                               SIG_BENCH_MU, SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_LAT_ACCEL, SIG_SPEED,
+                               SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE, VEHICLE_SENSORS)
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
 from sim_plant.car.options import add_car_args
 from sim_plant.car.plants import Car
+from sim_plant.car.model_files import ModelFileError
+from sim_plant.car.sensor_faults import parse_spec
 from sim_plant.car.sensors import Sensors
 
 MODES = ("realtime", "lockstep")
@@ -90,7 +95,7 @@ class PlantStats:
 class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
                      "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "yaw_rate_measured_rad_s",
-                     "wall_s")
+                     "steer_measured_rad", "lat_accel_measured_m_s2", "steer_redundant_measured_rad", "wall_s")
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = CMD_TIMEOUT_S, lockstep_timeout: float = 1.0,
@@ -106,7 +111,7 @@ class PlantNode:
         self.plant = Car(sc.plant, self.scene.params(), ts)
         # The ideal actuator is the command handling alone (today's plant, exactly).
         self.position = None if sc.actuator == ActuatorModelConfig.ideal() else PositionActuator(sc.actuator, ts)
-        self.sensors = Sensors(sc.sensors, ts)
+        self.sensors = Sensors(sc.sensor_config, ts)
         # The actuator's own range, not the signal's: the DBC's +-0.0524 rad is 3.0023 deg, so a
         # command at the signal's edge (a forgery, on a bus without SecOC) would pass +-3 deg.
         limit = min(ActuatorConfig().limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1])
@@ -118,8 +123,8 @@ class PlantNode:
         self.rx = RxLink(c, (MSG_CMD, MSG_BENCH), {MSG_CMD: self.verifier} if self.verifier is not None else None)
         bus.set_filters(self.rx.filters())
         # strict=False: a real sensor saturates its range; the controller range-checks.
-        self.tx = TxLink(c, (MSG_SYNC, *SENSORS), self.sensor_signer, strict=False)
-        self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in SENSORS}
+        self.tx = TxLink(c, (MSG_SYNC, *VEHICLE_SENSORS), self.sensor_signer, strict=False)
+        self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in VEHICLE_SENSORS}
         self.lockstep_timeout = lockstep_timeout
         self.expect_controller = expect_controller
         self.stats = PlantStats()
@@ -164,9 +169,9 @@ class PlantNode:
 
     # ---------------------------------------------------------------- step
 
-    def _publish(self, k: int, driver: float, speed: float, yaw_rate: float) -> int:
-        """Send this step's frames (the measured values); the yaw-rate frame's alive counter, or
-        -1 if none was due."""
+    def _publish(self, k: int, m: dict[str, float]) -> int:
+        """Send this step's frames (``m``: the measured values by signal); the yaw-rate frame's
+        alive counter, or -1 if none was due."""
         send = self.bus.send
         if self.verifier is not None and k % self.sync_every == 0:
             send(self.tx.frame(MSG_SYNC, self.verifier.new_epoch()))
@@ -175,12 +180,14 @@ class PlantNode:
             self.sensor_signer.adopt(self.verifier.current)
         sends = []
         if k % self.every[MSG_STEER] == 0:
-            sends.append((MSG_STEER, {SIG_STEER_ANGLE: driver}))
+            sends.append((MSG_STEER, {SIG_STEER_ANGLE: m[SIG_STEER_ANGLE]}))
         if k % self.every[MSG_SPEED] == 0:
-            sends.append((MSG_SPEED, {SIG_SPEED: speed}))
+            sends.append((MSG_SPEED, {SIG_SPEED: m[SIG_SPEED]}))
+        if k % self.every[MSG_REDUNDANT] == 0:
+            sends.append((MSG_REDUNDANT, {SIG_LAT_ACCEL: m[SIG_LAT_ACCEL], SIG_STEER_ANGLE_2: m[SIG_STEER_ANGLE_2]}))
         yaw_counter = -1
         if k % self.every[MSG_YAW] == 0:
-            sends.append((MSG_YAW, {SIG_YAW_RATE: yaw_rate}))
+            sends.append((MSG_YAW, {SIG_YAW_RATE: m[SIG_YAW_RATE]}))
         for name, values in sends:
             send(self.tx.frame(name, values))
             self.stats.tx_frames += 1
@@ -210,8 +217,14 @@ class PlantNode:
         position = self.position
         y = self.plant.outputs(driver + (actuator.applied if position is None else position.position), m_z)
         sensors = self.sensors
-        measured_yaw = sensors.yaw_rate(float(y[0]))
-        yaw_counter = self._publish(k, sensors.steer(driver), sensors.speed(self.scene.v), measured_yaw)
+        sensors.at(t)
+        # Every channel is read at every step (their filters and faults run at the plant step);
+        # a frame carries the reading of the step it is sent at.
+        measured = {SIG_STEER_ANGLE: sensors.steer(driver), SIG_SPEED: sensors.speed(self.scene.v),
+                    SIG_LAT_ACCEL: sensors.lat_accel(float(y[2])), SIG_STEER_ANGLE_2: sensors.steer_redundant(driver),
+                    SIG_YAW_RATE: sensors.yaw_rate(float(y[0]))}
+        measured_yaw = measured[SIG_YAW_RATE]
+        yaw_counter = self._publish(k, measured)
 
         if self.mode == "lockstep":
             answer = self._await_command(yaw_counter)
@@ -225,7 +238,8 @@ class PlantNode:
         if self.record_trace:
             # m_z: the whole yaw moment on the car, the physical disturbances' included.
             self.stats.trace.append((t, driver, applied, m_z + self.plant.loads.m_z, self.scene.mu, self.scene.v, float(y[0]), float(y[1]),
-                                     float(y[2]), self.latest_cmd, measured_yaw, time.time()))
+                                     float(y[2]), self.latest_cmd, measured_yaw, measured[SIG_STEER_ANGLE],
+                                     measured[SIG_LAT_ACCEL], measured[SIG_STEER_ANGLE_2], time.time()))
         # A lagging actuator moves within the step: the car gets the position's mean over it.
         self.plant.advance(driver + (applied if position is None else position.mean), m_z)
         if not self.plant.linear:
@@ -299,6 +313,11 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
     add_car_args(p)  # each overrides the scenario's car
+    p.add_argument("--sensor-fault", action="append", default=[], metavar="SENSOR:KIND[:VALUE]@START",
+                   help="a sensor fault in well-formed frames, added to the scenario's [[sensor_fault]] tables "
+                   "(repeatable): SENSOR yaw_rate, lat_accel, steer, steer_redundant or speed; KIND stuck (VALUE "
+                   "optional: else the value at onset), bias, scale, drift (VALUE per s), noise (VALUE RMS) or "
+                   "frozen (no VALUE); VALUE in the signal's SI unit; START in s, e.g. yaw_rate:bias:0.05@1.0")
     p.add_argument("--actuator-rate", type=float, default=RATE_LIMIT_RAD_S, metavar="RAD_S",
                    help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
                    "(default 0: follows the command at once)")
@@ -331,7 +350,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass,
                                                    duration=args.duration).with_models(
             args.plant, args.actuator, args.sensors, args.seed)
-    except scn.ScenarioError as exc:
+        sc = sc.with_sensor_faults(tuple(parse_spec(spec) for spec in args.sensor_fault))
+    except (scn.ScenarioError, ModelFileError) as exc:
         parser.error(str(exc))
     key = secoc_key(args, parser)
     check_output_file(parser, "--stats-out", args.stats_out)

@@ -10,4 +10,6 @@
 * ``margins``, ``tuning``, ``sweep``: the discrete design over the operating envelope.
 * ``paper``, ``figures``: the paper's Figures 8-10 and their comparison table.
 * ``vectors``: the golden vectors the C port is checked against.
+* ``plausibility_runs``: the closed loop with the plausibility monitor and the authority limiter
+  (detection times and false-alarm margins of ``firmware_py.plausibility``).
 """

@@ -1,0 +1,112 @@
+"""Bounded authority (issue 18, item 3) -- a porting reference in ``model_regulator``'s style.
+
+An independent limit on how far and how long the auxiliary command may act, whatever computed
+it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
+``authority_step(c, s, u_request, plaus_bits)`` once per control period (scalar arithmetic, no
+allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
+bit (float64) in ``ports/c/mrs_monitor.c``; the reasoning is in docs/controller.md, "Bounded
+authority".  Meant to run where the command leaves the controller and again at the actuator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, check_positive
+
+# Authority limiter flags (AuthorityState.flags): what bound the command this period.
+AUTH_MAGNITUDE = 0x01
+AUTH_RATE = 0x02
+AUTH_TIME = 0x04  # beyond the panic window with inputs not known consistent: faded
+AUTH_FAULT = 0x08  # plausibility fault or a non-finite request: faded
+
+
+@dataclass(frozen=True)
+class AuthorityConfig:
+    """The independent bound on the command (issue 18, item 3), rad and s."""
+
+    ts: float = 0.002
+    u_max: float = math.radians(3.0)  # magnitude: the actuator's range
+    rate_max: float = 2.0  # rad/s (115 deg/s): 3 deg in 26 ms; above the law's own needs
+    fade_rate: float = math.radians(6.0)  # rad/s toward 0 on a fault or when the time is up
+    panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
+    engage: float = math.radians(0.1)  # |u| above this counts as intervening
+    rearm_time: float = 1.0  # s of |u| <= engage before the window starts afresh
+
+
+@dataclass(frozen=True, slots=True)
+class AuthorityCoefficients:
+    u_max: float
+    du_max: float
+    fade_step: float
+    window_steps: int
+    engage: float
+    rearm_steps: int
+
+
+class AuthorityState:
+    __slots__ = ("u", "engaged", "quiet", "flags")
+
+    def __init__(self) -> None:
+        reset_authority(self)
+
+
+def reset_authority(s: AuthorityState) -> None:
+    s.u = 0.0
+    s.engaged = 0  # periods intervening since the window started
+    s.quiet = 0  # periods at rest in a row
+    s.flags = 0
+
+
+def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
+    check_positive(cfg, tuple(vars(cfg)))
+    return AuthorityCoefficients(u_max=cfg.u_max, du_max=cfg.rate_max * cfg.ts, fade_step=cfg.fade_rate * cfg.ts,
+                                 window_steps=max(1, round(cfg.panic_window / cfg.ts)), engage=cfg.engage,
+                                 rearm_steps=max(1, round(cfg.rearm_time / cfg.ts)))
+
+
+def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int) -> float:
+    """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
+    +-u_max, moving at most ``rate_max``; faded to zero at ``fade_rate`` on a plausibility fault
+    or a non-finite request, and once the intervention has lasted ``panic_window`` unless the
+    inputs are known consistent (every check running: no DEGRADED).  ``s.flags`` says which
+    bound acted."""
+    flags = 0
+    du = c.du_max
+    if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):
+        target = 0.0
+        du = c.fade_step
+        flags |= AUTH_FAULT
+    elif s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
+        target = 0.0
+        du = c.fade_step
+        flags |= AUTH_TIME
+    else:
+        target = u_request
+        if target > c.u_max:
+            target = c.u_max
+            flags |= AUTH_MAGNITUDE
+        elif target < -c.u_max:
+            target = -c.u_max
+            flags |= AUTH_MAGNITUDE
+    d = target - s.u
+    if d > du:
+        d = du
+        flags |= AUTH_RATE if du == c.du_max else 0
+    elif d < -du:
+        d = -du
+        flags |= AUTH_RATE if du == c.du_max else 0
+    u = s.u + d
+    if u > c.engage or u < -c.engage:
+        if s.engaged < c.window_steps:
+            s.engaged += 1
+        s.quiet = 0
+    else:
+        if s.quiet < c.rearm_steps:
+            s.quiet += 1
+        if s.quiet >= c.rearm_steps:
+            s.engaged = 0
+    s.u = u
+    s.flags = flags
+    return u

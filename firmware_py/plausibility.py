@@ -1,0 +1,411 @@
+"""Plausibility monitor -- a porting reference in ``model_regulator``'s style.
+
+E2E and SecOC prove that a frame is the sensor's, unaltered and fresh; this module checks that
+the values in valid frames agree with each other and with the nominal car (issue 18), and
+bounds what the command may do whatever computed it.
+
+Structure (as ``model_regulator``): ``PlausibilityConfig`` (calibration) -> ``configure()``
+(every coefficient once: the only divisions by calibration values and the only ``exp``) ->
+``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per control period: scalar
+arithmetic on ``c`` and ``s`` only, no allocation, no calls.  The bounded authority that acts on
+its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to
+``ports/c/mrs_monitor.c``.
+
+The checks (thresholds and their reasoning: docs/controller.md, "Plausibility monitor"):
+
+1. **Kinematic** (yaw rate against lateral acceleration): a_y = v (beta' + r), so in steady
+   state r = a_y / v; the residual a_y / v - r is beta', which the car keeps small.  Evaluated
+   at each new ``MRS_RedundantSensors`` sample (50 ms), against the yaw rate of the same cycle
+   (the plant sends both frames in the same step, so the comparison has no hold error).
+2. **Model** (yaw rate against the steering): the nominal (mu = 1) car's steady-state yaw
+   rate K_n(v) (delta_driver + aux) of eq. (15), lagged by a first-order filter, against the
+   yaw rate.  Low mu makes the car yaw *less* than the model, disturbances (the yaw moments the
+   controller exists for) make it yaw otherwise, so this bound is wide: a gross check that
+   still works when the lateral acceleration is missing.
+3. **Steering pair**: the driver's angle against the steering sensor's second channel, at each
+   new redundant sample.
+4. **Frozen**: a value that does not change at all (bit for bit) for ``frozen_time`` while its
+   partner (yaw rate <-> a_y / v, one steering channel <-> the other) moves by more than
+   ``frozen_move_*``: a real sensor's noise toggles its LSB, so an unchanging value while the
+   car's motion changes is a frozen output.
+
+Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
+within it, and trips at ``*_count``; 2 likewise per control period, tripping at
+``model_time``.  A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing
+redundant input (NaN: the node's freshness check) pauses the checks that need it and sets
+DEGRADED; below ``speed_min`` every check pauses and its counters restart.
+
+``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
+is a fault (the command fades to zero), ``PLAUS_DEGRADED`` a degraded state (fewer checks; the
+authority limiter then ends an intervention at the panic window).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+# CtrlStatus_Plausibility (mrsteer_dbc.names.PLAUS_*; equal by test, this module imports stdlib only).
+PLAUS_YAW = 0x01
+PLAUS_STEER = 0x02
+PLAUS_DEGRADED = 0x04
+PLAUS_FAULT = PLAUS_YAW | PLAUS_STEER
+
+# The detailed checks (MonitorState.flags).
+CHECK_KINEMATIC = 0x01  # yaw rate against a_y / v
+CHECK_MODEL = 0x02  # yaw rate against the nominal car's response to the steering
+CHECK_STEER_PAIR = 0x04  # the two steering channels
+FROZEN_YAW = 0x08
+FROZEN_LAT = 0x10
+FROZEN_STEER = 0x20
+FROZEN_STEER_2 = 0x40
+MISSING = 0x80  # a redundant input is missing (not latched)
+YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT
+STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
+
+#: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
+KIN_WINDOW = 4
+
+# The nominal car of model_regulator (section 3, mu = 1); the controller's config passes its own.
+NOMINAL_L_F = 1.25
+NOMINAL_L_R = 1.32
+NOMINAL_MASS = 1296.0
+NOMINAL_C_F = 84000.0
+NOMINAL_C_R = 96000.0
+
+
+@dataclass(frozen=True)
+class PlausibilityConfig:
+    """Calibration of the monitor.  Angles in rad (front wheel), rates in rad/s, times in s."""
+
+    ts: float = 0.002
+    speed_min: float = 5.0  # m/s: below, a_y / v and K_n(v) say too little; checks pause
+    yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel |a_y / v|, rad/s (2 deg/s)
+    yaw_rel: float = 0.1
+    yaw_count: int = 2  # samples of the redundant frame (50 ms each) over the bound, net
+    yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
+    steer_bound: float = 0.004  # |delta - delta_2|, rad (0.23 deg of wheel angle)
+    steer_count: int = 3
+    model_margin: float = 0.15  # |r - r_model| <= margin + model_rel |r_model|
+    model_rel: float = 1.0
+    model_tau: float = 0.15  # lag of the nominal car's yaw response, s
+    model_time: float = 0.15  # s over the model bound to trip
+    frozen_time: float = 0.2  # s unchanged while the partner has moved, to trip
+    frozen_move_yaw: float = 0.02  # rad/s the partner (a_y / v or r) must move
+    frozen_move_steer: float = 0.003  # rad the other steering channel must move
+    nominal_l_f: float = NOMINAL_L_F
+    nominal_l_r: float = NOMINAL_L_R
+    nominal_mass: float = NOMINAL_MASS
+    nominal_c_f: float = NOMINAL_C_F
+    nominal_c_r: float = NOMINAL_C_R
+
+
+@dataclass(frozen=True, slots=True)
+class MonitorCoefficients:
+    speed_min: float
+    yaw_bound: float
+    yaw_rel: float
+    inv_yaw_raw_fraction: float
+    yaw_count: int
+    steer_bound: float
+    inv_steer_bound: float
+    steer_count: int
+    model_margin: float
+    model_rel: float
+    model_alpha: float  # first-order lag per period: 1 - exp(-ts / model_tau)
+    model_steps: int
+    frozen_steps: int
+    frozen_move_yaw: float
+    frozen_move_steer: float
+    wheelbase: float  # K_n(v) = v / (wheelbase + k_us v^2), eq. (15) at mu = 1
+    k_us: float
+    ts: float
+    # The nominal car's a_y / v = -cs_m / v beta + moment_m / v^2 r + cf_m / v delta (eq. 14, mu = 1)
+    inv_cs_m: float  # m / (c_f + c_r)
+    moment_m: float  # (c_r l_r - c_f l_f) / m
+    cf_m: float  # c_f / m
+
+
+class MonitorState:
+    """Preallocated monitor state (a C struct)."""
+
+    __slots__ = ("started", "lat_prev", "steer2_prev", "kin_count", "pair_count", "model_count", "r_model",
+                 "yaw_last", "yaw_same", "yaw_ref", "lat_last", "lat_same", "lat_ref",
+                 "st_last", "st_same", "st_ref", "st2_last", "st2_same", "st2_ref", "latched", "flags", "bits",
+                 "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
+                 "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok")
+
+    def __init__(self) -> None:
+        reset_monitor(self)
+
+
+def reset_monitor(s: MonitorState) -> None:
+    """Power-on state: no sample seen, nothing latched."""
+    s.started = False  # r_model and the *_prev values hold a sample
+    s.lat_prev = 0.0
+    s.steer2_prev = 0.0
+    s.kin_count = 0
+    s.pair_count = 0
+    s.model_count = 0
+    s.r_model = 0.0
+    s.yaw_last = s.lat_last = s.st_last = s.st2_last = 0.0
+    s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
+    s.yaw_ref = s.lat_ref = s.st_ref = s.st2_ref = 0.0
+    s.yaw_ref_ok = s.st_ref_ok = False  # yaw_ref, st_ref taken (from the 50 ms frame)
+    s.latched = 0
+    s.flags = 0
+    s.bits = 0
+    # The last residuals, as fractions of their bounds (diagnostics: the false-alarm margins).
+    s.kin_err = s.pair_err = s.model_err = 0.0
+    s.since = 0  # control periods since the last redundant sample
+    s.have_sample = False  # raw_prev and beta_prev hold the last sample's
+    s.raw_prev = 0.0
+    s.beta_prev = 0.0
+    s.kin_raw = [0.0] * KIN_WINDOW  # the last samples of a_y / v - r (C: double[4])
+    s.kin_comp = [0.0] * KIN_WINDOW  # the same less the nominal car's beta'
+    s.kin_idx = 0
+    s.kin_n = 0  # samples in the window so far
+
+
+def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
+    check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
+                          "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
+                          "nominal_mass", "nominal_c_f", "nominal_c_r"))
+    for name in ("model_rel", "yaw_rel"):
+        value = getattr(cfg, name)
+        if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
+            raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
+    for name in ("yaw_count", "steer_count"):
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
+            raise ValueError(f"{name} must be an integer in [1, 100], got {value!r}")
+    wheelbase = cfg.nominal_l_f + cfg.nominal_l_r
+    k_us = ((cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) * cfg.nominal_mass
+            / (cfg.nominal_c_f * cfg.nominal_c_r * wheelbase))
+    return MonitorCoefficients(
+        speed_min=cfg.speed_min, yaw_bound=cfg.yaw_bound, yaw_rel=cfg.yaw_rel,
+        inv_yaw_raw_fraction=1.0 / cfg.yaw_raw_fraction,
+        yaw_count=cfg.yaw_count, steer_bound=cfg.steer_bound, inv_steer_bound=1.0 / cfg.steer_bound,
+        steer_count=cfg.steer_count, model_margin=cfg.model_margin, model_rel=cfg.model_rel,
+        model_alpha=1.0 - math.exp(-cfg.ts / cfg.model_tau), model_steps=max(1, round(cfg.model_time / cfg.ts)),
+        frozen_steps=max(1, round(cfg.frozen_time / cfg.ts)), frozen_move_yaw=cfg.frozen_move_yaw,
+        frozen_move_steer=cfg.frozen_move_steer, wheelbase=wheelbase, k_us=k_us, ts=cfg.ts,
+        inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
+        moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
+        cf_m=cfg.nominal_c_f / cfg.nominal_mass)
+
+
+def check_positive(cfg: object, names: tuple[str, ...]) -> None:
+    """Each of ``names`` of ``cfg`` a positive finite number, else ValueError naming it."""
+    for name in names:
+        value = getattr(cfg, name)
+        if not (isinstance(value, float | int) and math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be positive and finite, got {value!r}")
+
+
+# One control period; long because it is the four checks inline, in the order the C port has
+# them (no calls, by the porting rules), each a few lines.
+def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
+                 yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float) -> int:
+    """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
+    detailed checks).  ``aux_cmd_applied``: the auxiliary angle acting on the car now.  NaN for
+    a missing input: a missing primary input pauses every check (step() faults on it), a
+    missing redundant one the checks that need it (DEGRADED)."""
+    flags = s.latched
+    # A NaN fails every comparison: these are False for NaN and +-inf.
+    primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
+        -1e3 < aux_cmd_applied < 1e3)
+    lat_ok = -1e3 < lat_accel < 1e3
+    st2_ok = -1e3 < delta_driver_redundant < 1e3
+    if not (lat_ok and st2_ok):
+        flags |= MISSING
+        s.kin_n = 0  # the kinematic window restarts when the frame is back
+        s.have_sample = False
+    if not primary_ok:
+        # Paused (too slow, or step() faults on the input): restart the windows, keep the latch.
+        s.kin_count = s.pair_count = s.model_count = 0
+        s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
+        s.kin_n = 0
+        s.started = False
+        bits = 0
+        if flags & YAW_CHECKS:
+            bits |= PLAUS_YAW
+        if flags & STEER_CHECKS:
+            bits |= PLAUS_STEER
+        if flags & MISSING:
+            bits |= PLAUS_DEGRADED
+        s.flags = flags
+        s.bits = bits
+        return bits
+
+    inv_v = 1.0 / speed
+    r_kin = lat_accel * inv_v if lat_ok else 0.0
+    delta = delta_driver + aux_cmd_applied
+    # --- 2. model: the nominal car's steady-state yaw rate, lagged
+    r_ss = delta * speed / (c.wheelbase + c.k_us * speed * speed)
+    if not s.started:
+        s.r_model = r_ss
+        s.kin_n = 0
+        s.kin_idx = 0
+        s.since = 0
+        s.have_sample = False
+        s.lat_prev = lat_accel
+        s.steer2_prev = delta_driver_redundant
+        s.yaw_last, s.lat_last, s.st_last, s.st2_last = yaw_rate, lat_accel, delta_driver, delta_driver_redundant
+        s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
+        s.yaw_ref_ok = s.st_ref_ok = False
+        s.started = True
+    s.r_model += c.model_alpha * (r_ss - s.r_model)
+    e = yaw_rate - s.r_model
+    e = -e if e < 0.0 else e
+    rm = -s.r_model if s.r_model < 0.0 else s.r_model
+    bound = c.model_margin + c.model_rel * rm
+    s.model_err = e / bound
+    if e > bound:
+        s.model_count += 1
+        if s.model_count >= c.model_steps:
+            s.model_count = c.model_steps  # saturated: C counts in 32 bits
+            s.latched |= CHECK_MODEL
+    elif s.model_count > 0:
+        s.model_count -= 1
+
+    if s.since < 1000000:
+        s.since += 1
+
+    # --- 1. and 3. at each new redundant sample (either of its values changed)
+    new_sample = lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev)
+    if new_sample:
+        # a_y / v - r = beta', midway between this sample and the last, as measured ("raw") and
+        # less the nominal car's beta' (the difference of its beta over the interval: "comp");
+        # each averaged over KIN_WINDOW intervals.  A yaw-rate or a_y error moves both alike; a
+        # transient the nominal car explains (a steering step, a yaw moment) moves only raw; one
+        # it does not (a side force, low mu, where its beta is 1/mu too large) moves comp more.
+        # The check trips when comp exceeds the bound and raw yaw_raw_fraction of it: raw alone
+        # would be slow, because the controller's answer to a yaw-rate error is itself a
+        # transient that hides the error from raw for a few hundred ms.
+        raw = r_kin - yaw_rate
+        # The nominal car's side-slip angle from a_y, delta and r (eq. 14, mu = 1, solved for beta:
+        # a_y = -(c_f + c_r) / m beta + moment_m r / v + c_f / m delta), nearly insensitive to r
+        # (moment_m / v is the small understeer term), so a yaw-rate error hardly moves it.
+        beta = (c.moment_m * inv_v * inv_v * yaw_rate + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * speed
+        if s.have_sample:
+            mid = 0.5 * (raw + s.raw_prev)
+            i = s.kin_idx
+            s.kin_raw[i] = mid
+            s.kin_comp[i] = mid - (beta - s.beta_prev) / (s.since * c.ts)
+            i += 1
+            if i >= KIN_WINDOW:
+                i = 0
+            s.kin_idx = i
+            if s.kin_n < KIN_WINDOW:
+                s.kin_n += 1
+        s.have_sample = True
+        s.raw_prev = raw
+        s.beta_prev = beta
+        s.since = 0
+        raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
+        comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
+        raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
+        comp = -comp if comp < 0.0 else comp
+        e = comp if comp < raw else raw
+        if s.kin_n < KIN_WINDOW:
+            e = 0.0  # the window is not full yet
+        bound = c.yaw_bound + c.yaw_rel * (-r_kin if r_kin < 0.0 else r_kin)
+        s.kin_err = e / bound
+        if e > bound:
+            s.kin_count += 1
+            if s.kin_count >= c.yaw_count:
+                s.kin_count = c.yaw_count
+                s.latched |= CHECK_KINEMATIC
+        elif s.kin_count > 0:
+            s.kin_count -= 1
+        e = delta_driver - delta_driver_redundant
+        e = -e if e < 0.0 else e
+        s.pair_err = e * c.inv_steer_bound
+        if e > c.steer_bound:
+            s.pair_count += 1
+            if s.pair_count >= c.steer_count:
+                s.pair_count = c.steer_count
+                s.latched |= CHECK_STEER_PAIR
+        elif s.pair_count > 0:
+            s.pair_count -= 1
+    if lat_ok:
+        s.lat_prev = lat_accel
+    if st2_ok:
+        s.steer2_prev = delta_driver_redundant
+
+    # --- 4. frozen: unchanged for frozen_steps counted while the partner is away from where it
+    #     was at this value's last change.  A partner from the 50 ms frame (a_y / v for the yaw
+    #     rate, the second channel for the driver's angle) is taken at its first sample after
+    #     that change: the sample held then may be up to a frame old.
+    if yaw_rate != s.yaw_last:
+        s.yaw_last, s.yaw_same, s.yaw_ref_ok = yaw_rate, 0, False
+    elif new_sample and not s.yaw_ref_ok:
+        s.yaw_ref, s.yaw_ref_ok = r_kin, True
+    elif lat_ok and s.yaw_ref_ok:
+        e = r_kin - s.yaw_ref
+        e = -e if e < 0.0 else e
+        if e > c.frozen_move_yaw:
+            if s.yaw_same < c.frozen_steps:
+                s.yaw_same += 1
+            if s.yaw_same >= c.frozen_steps:
+                s.latched |= FROZEN_YAW
+    if lat_ok:
+        if lat_accel != s.lat_last:
+            s.lat_last, s.lat_same, s.lat_ref = lat_accel, 0, yaw_rate
+        else:
+            e = yaw_rate - s.lat_ref
+            e = -e if e < 0.0 else e
+            if e > c.frozen_move_yaw:
+                if s.lat_same < c.frozen_steps:
+                    s.lat_same += 1
+                if s.lat_same >= c.frozen_steps:
+                    s.latched |= FROZEN_LAT
+    if st2_ok:
+        if delta_driver != s.st_last:
+            s.st_last, s.st_same, s.st_ref_ok = delta_driver, 0, False
+        elif new_sample and not s.st_ref_ok:
+            s.st_ref, s.st_ref_ok = delta_driver_redundant, True
+        elif s.st_ref_ok:
+            e = delta_driver_redundant - s.st_ref
+            e = -e if e < 0.0 else e
+            if e > c.frozen_move_steer:
+                if s.st_same < c.frozen_steps:
+                    s.st_same += 1
+                if s.st_same >= c.frozen_steps:
+                    s.latched |= FROZEN_STEER
+        if delta_driver_redundant != s.st2_last:
+            s.st2_last, s.st2_same, s.st2_ref = delta_driver_redundant, 0, delta_driver
+        else:
+            e = delta_driver - s.st2_ref
+            e = -e if e < 0.0 else e
+            if e > c.frozen_move_steer:
+                if s.st2_same < c.frozen_steps:
+                    s.st2_same += 1
+                if s.st2_same >= c.frozen_steps:
+                    s.latched |= FROZEN_STEER_2
+    flags |= s.latched
+    bits = 0
+    if flags & YAW_CHECKS:
+        bits |= PLAUS_YAW
+    if flags & STEER_CHECKS:
+        bits |= PLAUS_STEER
+    if flags & MISSING:
+        bits |= PLAUS_DEGRADED
+    s.flags = flags
+    s.bits = bits
+    return bits
+
+
+class PlausibilityMonitor:
+    """Convenience owner of one configured monitor."""
+
+    def __init__(self, config: PlausibilityConfig | None = None) -> None:
+        self.config = config if config is not None else PlausibilityConfig()
+        self.coefficients = configure(self.config)
+        self.state = MonitorState()
+
+    def step(self, delta_driver: float, delta_driver_redundant: float, yaw_rate: float, lat_accel: float,
+             speed: float, aux_cmd_applied: float) -> int:
+        return monitor_step(self.coefficients, self.state, delta_driver, delta_driver_redundant, yaw_rate,
+                            lat_accel, speed, aux_cmd_applied)

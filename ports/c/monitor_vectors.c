@@ -1,0 +1,122 @@
+/* Replays input vectors through the C plausibility monitor and authority limiter.
+ *
+ *   monitor_vectors < INPUT
+ *
+ * INPUT: a line "monitor" + the 20 mrs_monitor_config_t numbers in struct order, a line
+ * "authority" + the 7 mrs_authority_config_t numbers, then one line per control period:
+ * "delta_driver delta_driver_redundant yaw_rate lat_accel speed aux_cmd_applied u_request"
+ * (nan for a missing input).  OUTPUT: a line "coeffs" + the monitor's and the authority's
+ * coefficients, then per period "bits flags kin_err pair_err model_err u auth_flags", every
+ * real as %.17g so that a double reads back exactly.  "defaults" alone prints the default
+ * configurations instead.  Exit 2 on unreadable input, 3 on an invalid calibration.
+ * tests/test_c_monitor.py drives it against firmware_py/plausibility.py. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mrs_monitor.h"
+
+#define LINE_MAX_LEN 1024
+
+static int read_numbers(char *line, double *out, int n)
+{
+    char *p = line, *end;
+    int i;
+    for (i = 0; i < n; ++i) {
+        out[i] = strtod(p, &end);
+        if (end == p) {
+            return -1;
+        }
+        p = end;
+    }
+    return 0;
+}
+
+static void print_defaults(void)
+{
+    mrs_monitor_config_t m;
+    mrs_authority_config_t a;
+    mrs_monitor_default_config(&m);
+    mrs_authority_default_config(&a);
+    printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
+           "%.17g\n",
+           m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
+           m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
+           m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r);
+    printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
+           a.panic_window, a.engage, a.rearm_time);
+}
+
+int main(void)
+{
+    char line[LINE_MAX_LEN];
+    double v[20];
+    mrs_monitor_config_t mg;
+    mrs_authority_config_t ag;
+    mrs_monitor_coeffs_t mc;
+    mrs_authority_coeffs_t ac;
+    mrs_monitor_state_t ms;
+    mrs_authority_state_t as;
+
+    if (fgets(line, sizeof line, stdin) == NULL) {
+        return 2;
+    }
+    if (strncmp(line, "defaults", 8) == 0) {
+        print_defaults();
+        return 0;
+    }
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 20) != 0) {
+        return 2;
+    }
+    mg.ts = v[0];
+    mg.speed_min = v[1];
+    mg.yaw_bound = v[2];
+    mg.yaw_rel = v[3];
+    mg.yaw_count = (int)v[4];
+    mg.yaw_raw_fraction = v[5];
+    mg.steer_bound = v[6];
+    mg.steer_count = (int)v[7];
+    mg.model_margin = v[8];
+    mg.model_rel = v[9];
+    mg.model_tau = v[10];
+    mg.model_time = v[11];
+    mg.frozen_time = v[12];
+    mg.frozen_move_yaw = v[13];
+    mg.frozen_move_steer = v[14];
+    mg.nominal_l_f = v[15];
+    mg.nominal_l_r = v[16];
+    mg.nominal_mass = v[17];
+    mg.nominal_c_f = v[18];
+    mg.nominal_c_r = v[19];
+    if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
+        read_numbers(line + 9, v, 7) != 0) {
+        return 2;
+    }
+    ag.ts = v[0];
+    ag.u_max = v[1];
+    ag.rate_max = v[2];
+    ag.fade_rate = v[3];
+    ag.panic_window = v[4];
+    ag.engage = v[5];
+    ag.rearm_time = v[6];
+    if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
+        return 3;
+    }
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %d %d\n", mc.model_alpha, mc.k_us,
+           (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m, mc.moment_m, mc.cf_m,
+           ac.du_max, ac.fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps);
+    mrs_monitor_reset(&ms);
+    mrs_authority_reset(&as);
+    while (fgets(line, sizeof line, stdin) != NULL) {
+        uint8_t bits;
+        double u;
+        if (read_numbers(line, v, 7) != 0) {
+            return 2;
+        }
+        bits = mrs_monitor_step(&mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5]);
+        u = mrs_authority_step(&ac, &as, v[6], bits);
+        printf("%u %u %.17g %.17g %.17g %.17g %u\n", (unsigned)bits, (unsigned)ms.flags, ms.kin_err, ms.pair_err,
+               ms.model_err, u, (unsigned)as.flags);
+    }
+    return 0;
+}

@@ -1,0 +1,393 @@
+/* C99 port of firmware_py/plausibility.py: see mrs_monitor.h.  Each statement follows the
+ * Python module's, in the same order and association, so that double results are identical. */
+#include "mrs_monitor.h"
+
+#include <math.h> /* exp() and floor() in the configure functions only; isfinite is a macro */
+#include <stddef.h>
+
+void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
+{
+    cfg->ts = 0.002;
+    cfg->speed_min = 5.0;
+    cfg->yaw_bound = 0.035;
+    cfg->yaw_rel = 0.1;
+    cfg->yaw_count = 2;
+    cfg->yaw_raw_fraction = 0.5;
+    cfg->steer_bound = 0.004;
+    cfg->steer_count = 3;
+    cfg->model_margin = 0.15;
+    cfg->model_rel = 1.0;
+    cfg->model_tau = 0.15;
+    cfg->model_time = 0.15;
+    cfg->frozen_time = 0.2;
+    cfg->frozen_move_yaw = 0.02;
+    cfg->frozen_move_steer = 0.003;
+    cfg->nominal_l_f = 1.25;
+    cfg->nominal_l_r = 1.32;
+    cfg->nominal_mass = 1296.0;
+    cfg->nominal_c_f = 84000.0;
+    cfg->nominal_c_r = 96000.0;
+}
+
+static int positive(double x)
+{
+    return isfinite(x) && x > 0.0;
+}
+
+/* Python's round() for the non-negative, non-tie values the calibration gives (half up). */
+static int32_t steps_of(double t, double ts)
+{
+    double n = floor(t / ts + 0.5);
+    return n < 1.0 ? 1 : (int32_t)n;
+}
+
+int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c)
+{
+    const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
+                        g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
+                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r};
+    size_t i;
+    double wheelbase;
+    for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
+        if (!positive(p[i])) {
+            return -1;
+        }
+    }
+    if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
+        g->steer_count < 1 || g->steer_count > 100) {
+        return -1;
+    }
+    wheelbase = g->nominal_l_f + g->nominal_l_r;
+    c->speed_min = g->speed_min;
+    c->yaw_bound = g->yaw_bound;
+    c->yaw_rel = g->yaw_rel;
+    c->inv_yaw_raw_fraction = 1.0 / g->yaw_raw_fraction;
+    c->yaw_count = g->yaw_count;
+    c->steer_bound = g->steer_bound;
+    c->inv_steer_bound = 1.0 / g->steer_bound;
+    c->steer_count = g->steer_count;
+    c->model_margin = g->model_margin;
+    c->model_rel = g->model_rel;
+    c->model_alpha = 1.0 - exp(-g->ts / g->model_tau);
+    c->model_steps = steps_of(g->model_time, g->ts);
+    c->frozen_steps = steps_of(g->frozen_time, g->ts);
+    c->frozen_move_yaw = g->frozen_move_yaw;
+    c->frozen_move_steer = g->frozen_move_steer;
+    c->wheelbase = wheelbase;
+    c->k_us = (g->nominal_c_r * g->nominal_l_r - g->nominal_c_f * g->nominal_l_f) * g->nominal_mass /
+              (g->nominal_c_f * g->nominal_c_r * wheelbase);
+    c->ts = g->ts;
+    c->inv_cs_m = g->nominal_mass / (g->nominal_c_f + g->nominal_c_r);
+    c->moment_m = (g->nominal_c_r * g->nominal_l_r - g->nominal_c_f * g->nominal_l_f) / g->nominal_mass;
+    c->cf_m = g->nominal_c_f / g->nominal_mass;
+    return 0;
+}
+
+void mrs_monitor_reset(mrs_monitor_state_t *s)
+{
+    int i;
+    s->started = 0u;
+    s->lat_prev = 0.0;
+    s->steer2_prev = 0.0;
+    s->kin_count = 0;
+    s->pair_count = 0;
+    s->model_count = 0;
+    s->r_model = 0.0;
+    s->yaw_last = s->lat_last = s->st_last = s->st2_last = 0.0;
+    s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
+    s->yaw_ref = s->lat_ref = s->st_ref = s->st2_ref = 0.0;
+    s->yaw_ref_ok = s->st_ref_ok = 0u;
+    s->latched = 0u;
+    s->flags = 0u;
+    s->bits = 0u;
+    s->kin_err = s->pair_err = s->model_err = 0.0;
+    s->since = 0;
+    s->have_sample = 0u;
+    s->raw_prev = 0.0;
+    s->beta_prev = 0.0;
+    for (i = 0; i < MRS_KIN_WINDOW; ++i) {
+        s->kin_raw[i] = 0.0;
+        s->kin_comp[i] = 0.0;
+    }
+    s->kin_idx = 0;
+    s->kin_n = 0;
+}
+
+/* |x| without a call (x is a side-effect-free expression everywhere below). */
+#define MRS_MAG(x) ((x) < 0.0 ? -(x) : (x))
+
+/* Up/down counter: +1 over the bound (saturating at n, then the check latches), -1 within. */
+#define MRS_COUNT(cnt, over, n, bit)       \
+    do {                                   \
+        if (over) {                        \
+            (cnt) += 1;                    \
+            if ((cnt) >= (n)) {            \
+                (cnt) = (n);               \
+                s->latched |= (bit);       \
+            }                              \
+        } else if ((cnt) > 0) {            \
+            (cnt) -= 1;                    \
+        }                                  \
+    } while (0)
+
+/* Frozen: unchanged for frozen_steps counted while the partner is away from its reference. */
+#define MRS_FROZEN(x, last, same, ref, partner, move, bit) \
+    do {                                                   \
+        if ((x) != (last)) {                               \
+            (last) = (x);                                  \
+            (same) = 0;                                    \
+            (ref) = (partner);                             \
+        } else if (MRS_MAG((partner) - (ref)) > (move)) {      \
+            if ((same) < c->frozen_steps) {                \
+                (same) += 1;                               \
+            }                                              \
+            if ((same) >= c->frozen_steps) {               \
+                s->latched |= (bit);                       \
+            }                                              \
+        }                                                  \
+    } while (0)
+
+/* The bus bits of the detailed flags, stored in the state. */
+#define MRS_BITS(flags)                                                                          \
+    do {                                                                                         \
+        s->flags = (flags);                                                                      \
+        s->bits = (uint8_t)((((flags) & MRS_YAW_CHECKS) != 0u ? MRS_PLAUS_YAW : 0u) |            \
+                            (((flags) & MRS_STEER_CHECKS) != 0u ? MRS_PLAUS_STEER : 0u) |        \
+                            (((flags) & MRS_MISSING) != 0u ? MRS_PLAUS_DEGRADED : 0u));          \
+    } while (0)
+
+uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
+                         double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
+                         double aux_cmd_applied)
+{
+    uint8_t flags = s->latched;
+    const int primary_ok = (delta_driver > -1e3 && delta_driver < 1e3) && (yaw_rate > -1e3 && yaw_rate < 1e3) &&
+                           (speed >= c->speed_min && speed < 1e3) &&
+                           (aux_cmd_applied > -1e3 && aux_cmd_applied < 1e3);
+    const int lat_ok = lat_accel > -1e3 && lat_accel < 1e3;
+    const int st2_ok = delta_driver_redundant > -1e3 && delta_driver_redundant < 1e3;
+    double inv_v, r_kin, delta, r_ss, e, rm, bound;
+    int new_sample;
+
+    if (!(lat_ok && st2_ok)) {
+        flags |= MRS_MISSING;
+        s->kin_n = 0;
+        s->have_sample = 0u;
+    }
+    if (!primary_ok) {
+        s->kin_count = s->pair_count = s->model_count = 0;
+        s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
+        s->kin_n = 0;
+        s->started = 0u;
+        MRS_BITS(flags);
+        return s->bits;
+    }
+    inv_v = 1.0 / speed;
+    r_kin = lat_ok ? lat_accel * inv_v : 0.0;
+    delta = delta_driver + aux_cmd_applied;
+    /* 2. model */
+    r_ss = delta * speed / (c->wheelbase + c->k_us * speed * speed);
+    if (!s->started) {
+        s->r_model = r_ss;
+        s->kin_n = 0;
+        s->kin_idx = 0;
+        s->since = 0;
+        s->have_sample = 0u;
+        s->lat_prev = lat_accel;
+        s->steer2_prev = delta_driver_redundant;
+        s->yaw_last = yaw_rate;
+        s->lat_last = lat_accel;
+        s->st_last = delta_driver;
+        s->st2_last = delta_driver_redundant;
+        s->yaw_ref = r_kin;
+        s->lat_ref = yaw_rate;
+        s->st_ref = delta_driver_redundant;
+        s->st2_ref = delta_driver;
+        s->yaw_ref_ok = s->st_ref_ok = 0u;
+        s->started = 1u;
+    }
+    s->r_model += c->model_alpha * (r_ss - s->r_model);
+    e = MRS_MAG(yaw_rate - s->r_model);
+    rm = MRS_MAG(s->r_model);
+    bound = c->model_margin + c->model_rel * rm;
+    s->model_err = e / bound;
+    MRS_COUNT(s->model_count, e > bound, c->model_steps, MRS_CHECK_MODEL);
+
+    if (s->since < 1000000) {
+        s->since += 1;
+    }
+    /* 1. and 3. at each new redundant sample */
+    new_sample = lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev);
+    if (new_sample) {
+        double raw = r_kin - yaw_rate;
+        double comp, beta;
+        beta = (c->moment_m * inv_v * inv_v * yaw_rate + c->cf_m * inv_v * delta - r_kin) * c->inv_cs_m * speed;
+        if (s->have_sample) {
+            double mid = 0.5 * (raw + s->raw_prev);
+            int32_t i = s->kin_idx;
+            s->kin_raw[i] = mid;
+            s->kin_comp[i] = mid - (beta - s->beta_prev) / ((double)s->since * c->ts);
+            i += 1;
+            if (i >= MRS_KIN_WINDOW) {
+                i = 0;
+            }
+            s->kin_idx = i;
+            if (s->kin_n < MRS_KIN_WINDOW) {
+                s->kin_n += 1;
+            }
+        }
+        s->have_sample = 1u;
+        s->raw_prev = raw;
+        s->beta_prev = beta;
+        s->since = 0;
+        raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW)) *
+              c->inv_yaw_raw_fraction;
+        comp = MRS_MAG((s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW));
+        e = comp < raw ? comp : raw;
+        if (s->kin_n < MRS_KIN_WINDOW) {
+            e = 0.0;
+        }
+        bound = c->yaw_bound + c->yaw_rel * MRS_MAG(r_kin);
+        s->kin_err = e / bound;
+        MRS_COUNT(s->kin_count, e > bound, c->yaw_count, MRS_CHECK_KINEMATIC);
+        e = MRS_MAG(delta_driver - delta_driver_redundant);
+        s->pair_err = e * c->inv_steer_bound;
+        MRS_COUNT(s->pair_count, e > c->steer_bound, c->steer_count, MRS_CHECK_STEER_PAIR);
+    }
+    if (lat_ok) {
+        s->lat_prev = lat_accel;
+    }
+    if (st2_ok) {
+        s->steer2_prev = delta_driver_redundant;
+    }
+    /* 4. frozen */
+    if (yaw_rate != s->yaw_last) {
+        s->yaw_last = yaw_rate;
+        s->yaw_same = 0;
+        s->yaw_ref_ok = 0u;
+    } else if (new_sample && !s->yaw_ref_ok) {
+        s->yaw_ref = r_kin;
+        s->yaw_ref_ok = 1u;
+    } else if (lat_ok && s->yaw_ref_ok) {
+        if (MRS_MAG(r_kin - s->yaw_ref) > c->frozen_move_yaw) {
+            if (s->yaw_same < c->frozen_steps) {
+                s->yaw_same += 1;
+            }
+            if (s->yaw_same >= c->frozen_steps) {
+                s->latched |= MRS_FROZEN_YAW;
+            }
+        }
+    }
+    if (lat_ok) {
+        MRS_FROZEN(lat_accel, s->lat_last, s->lat_same, s->lat_ref, yaw_rate, c->frozen_move_yaw, MRS_FROZEN_LAT);
+    }
+    if (st2_ok) {
+        if (delta_driver != s->st_last) {
+            s->st_last = delta_driver;
+            s->st_same = 0;
+            s->st_ref_ok = 0u;
+        } else if (new_sample && !s->st_ref_ok) {
+            s->st_ref = delta_driver_redundant;
+            s->st_ref_ok = 1u;
+        } else if (s->st_ref_ok && MRS_MAG(delta_driver_redundant - s->st_ref) > c->frozen_move_steer) {
+            if (s->st_same < c->frozen_steps) {
+                s->st_same += 1;
+            }
+            if (s->st_same >= c->frozen_steps) {
+                s->latched |= MRS_FROZEN_STEER;
+            }
+        }
+        MRS_FROZEN(delta_driver_redundant, s->st2_last, s->st2_same, s->st2_ref, delta_driver, c->frozen_move_steer,
+                   MRS_FROZEN_STEER_2);
+    }
+    flags |= s->latched;
+    MRS_BITS(flags);
+    return s->bits;
+}
+
+/* ------------------------------------------------------------------ bounded authority */
+
+void mrs_authority_default_config(mrs_authority_config_t *cfg)
+{
+    cfg->ts = 0.002;
+    cfg->u_max = 0.05235987755982989; /* 3 deg */
+    cfg->rate_max = 2.0;
+    cfg->fade_rate = 0.10471975511965978; /* 6 deg/s */
+    cfg->panic_window = 2.0;
+    cfg->engage = 0.0017453292519943296; /* 0.1 deg */
+    cfg->rearm_time = 1.0;
+}
+
+int mrs_authority_configure(const mrs_authority_config_t *g, mrs_authority_coeffs_t *c)
+{
+    if (!positive(g->ts) || !positive(g->u_max) || !positive(g->rate_max) || !positive(g->fade_rate) ||
+        !positive(g->panic_window) || !positive(g->engage) || !positive(g->rearm_time)) {
+        return -1;
+    }
+    c->u_max = g->u_max;
+    c->du_max = g->rate_max * g->ts;
+    c->fade_step = g->fade_rate * g->ts;
+    c->window_steps = steps_of(g->panic_window, g->ts);
+    c->engage = g->engage;
+    c->rearm_steps = steps_of(g->rearm_time, g->ts);
+    return 0;
+}
+
+void mrs_authority_reset(mrs_authority_state_t *s)
+{
+    s->u = 0.0;
+    s->engaged = 0;
+    s->quiet = 0;
+    s->flags = 0u;
+}
+
+double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
+                          uint8_t plaus_bits)
+{
+    uint8_t flags = 0u;
+    double du = c->du_max;
+    double target, d, u;
+    if ((plaus_bits & MRS_PLAUS_FAULT) != 0u || !(u_request > -1e3 && u_request < 1e3)) {
+        target = 0.0;
+        du = c->fade_step;
+        flags |= MRS_AUTH_FAULT;
+    } else if (s->engaged >= c->window_steps && (plaus_bits & MRS_PLAUS_DEGRADED) != 0u) {
+        target = 0.0;
+        du = c->fade_step;
+        flags |= MRS_AUTH_TIME;
+    } else {
+        target = u_request;
+        if (target > c->u_max) {
+            target = c->u_max;
+            flags |= MRS_AUTH_MAGNITUDE;
+        } else if (target < -c->u_max) {
+            target = -c->u_max;
+            flags |= MRS_AUTH_MAGNITUDE;
+        }
+    }
+    d = target - s->u;
+    if (d > du) {
+        d = du;
+        flags |= (du == c->du_max) ? MRS_AUTH_RATE : 0u;
+    } else if (d < -du) {
+        d = -du;
+        flags |= (du == c->du_max) ? MRS_AUTH_RATE : 0u;
+    }
+    u = s->u + d;
+    if (u > c->engage || u < -c->engage) {
+        if (s->engaged < c->window_steps) {
+            s->engaged += 1;
+        }
+        s->quiet = 0;
+    } else {
+        if (s->quiet < c->rearm_steps) {
+            s->quiet += 1;
+        }
+        if (s->quiet >= c->rearm_steps) {
+            s->engaged = 0;
+        }
+    }
+    s->u = u;
+    s->flags = flags;
+    return u;
+}

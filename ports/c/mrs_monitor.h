@@ -1,0 +1,105 @@
+/*
+ * mrsteer plausibility monitor and bounded authority: C99 port of firmware_py/plausibility.py,
+ * bit for bit in double precision (tests/test_c_monitor.py replays the Python module's runs).
+ *
+ * As mrs_controller: mrs_monitor_configure() computes every coefficient once (the only
+ * divisions by calibration values and the only exp()); mrs_monitor_step() and
+ * mrs_authority_step() are one control period of scalar arithmetic on the structs: no heap,
+ * no recursion, no library call.  docs/controller.md, "Plausibility monitor", gives the
+ * thresholds and the reasoning.
+ */
+#ifndef MRS_MONITOR_H
+#define MRS_MONITOR_H
+
+#include <stdint.h>
+
+/* CtrlStatus_Plausibility bits (mrsteer.dbc). */
+#define MRS_PLAUS_YAW 0x01u
+#define MRS_PLAUS_STEER 0x02u
+#define MRS_PLAUS_DEGRADED 0x04u
+#define MRS_PLAUS_FAULT (MRS_PLAUS_YAW | MRS_PLAUS_STEER)
+
+/* The detailed checks (mrs_monitor_state_t.flags). */
+#define MRS_CHECK_KINEMATIC 0x01u
+#define MRS_CHECK_MODEL 0x02u
+#define MRS_CHECK_STEER_PAIR 0x04u
+#define MRS_FROZEN_YAW 0x08u
+#define MRS_FROZEN_LAT 0x10u
+#define MRS_FROZEN_STEER 0x20u
+#define MRS_FROZEN_STEER_2 0x40u
+#define MRS_MISSING 0x80u
+#define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT)
+#define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
+
+#define MRS_KIN_WINDOW 4
+
+/* Authority limiter flags. */
+#define MRS_AUTH_MAGNITUDE 0x01u
+#define MRS_AUTH_RATE 0x02u
+#define MRS_AUTH_TIME 0x04u
+#define MRS_AUTH_FAULT 0x08u
+
+typedef struct {
+    double ts, speed_min, yaw_bound, yaw_rel;
+    int yaw_count;
+    double yaw_raw_fraction;
+    double steer_bound;
+    int steer_count;
+    double model_margin, model_rel, model_tau, model_time, frozen_time, frozen_move_yaw, frozen_move_steer;
+    double nominal_l_f, nominal_l_r, nominal_mass, nominal_c_f, nominal_c_r;
+} mrs_monitor_config_t;
+
+typedef struct {
+    double speed_min, yaw_bound, yaw_rel, inv_yaw_raw_fraction;
+    int32_t yaw_count;
+    double steer_bound, inv_steer_bound;
+    int32_t steer_count;
+    double model_margin, model_rel, model_alpha;
+    int32_t model_steps, frozen_steps;
+    double frozen_move_yaw, frozen_move_steer, wheelbase, k_us, ts, inv_cs_m, moment_m, cf_m;
+} mrs_monitor_coeffs_t;
+
+typedef struct {
+    uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, latched, flags, bits;
+    int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since;
+    int32_t yaw_same, lat_same, st_same, st2_same;
+    double lat_prev, steer2_prev, r_model, raw_prev, beta_prev;
+    double yaw_last, yaw_ref, lat_last, lat_ref, st_last, st_ref, st2_last, st2_ref;
+    double kin_err, pair_err, model_err;
+    double kin_raw[MRS_KIN_WINDOW], kin_comp[MRS_KIN_WINDOW];
+} mrs_monitor_state_t;
+
+typedef struct {
+    double ts, u_max, rate_max, fade_rate, panic_window, engage, rearm_time;
+} mrs_authority_config_t;
+
+typedef struct {
+    double u_max, du_max, fade_step;
+    int32_t window_steps;
+    double engage;
+    int32_t rearm_steps;
+} mrs_authority_coeffs_t;
+
+typedef struct {
+    double u;
+    int32_t engaged, quiet;
+    uint8_t flags;
+} mrs_authority_state_t;
+
+void mrs_monitor_default_config(mrs_monitor_config_t *cfg);
+/* 0 on success, -1 if the calibration is invalid. */
+int mrs_monitor_configure(const mrs_monitor_config_t *cfg, mrs_monitor_coeffs_t *c);
+void mrs_monitor_reset(mrs_monitor_state_t *s);
+/* One control period; returns the CtrlStatus_Plausibility bits. NaN marks a missing input. */
+uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
+                         double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
+                         double aux_cmd_applied);
+
+void mrs_authority_default_config(mrs_authority_config_t *cfg);
+int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);
+void mrs_authority_reset(mrs_authority_state_t *s);
+/* The command allowed this period for u_request (rad), given the monitor's bits. */
+double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
+                          uint8_t plaus_bits);
+
+#endif

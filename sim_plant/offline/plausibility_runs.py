@@ -1,0 +1,182 @@
+"""Offline closed loop with the plausibility monitor and the authority limiter: the evidence
+behind ``firmware_py.plausibility``'s thresholds (docs/controller.md, "Plausibility monitor").
+
+``run`` plays a scenario on its car (``sim_plant.car``: plant, loads, driver model, actuator,
+sensors with their faults) with the firmware's ``step()`` in the loop, as the plant node and the
+controller do on the bus, without a bus: each sensor value is held at its DBC cycle (driver angle
+and yaw rate every control period, speed every 10 ms, ``MRS_RedundantSensors`` every 50 ms,
+all sampled at the step they are sent at), the command acts one period later.  The monitor sees
+what the controller sees; its bits go through ``authority_step`` to the actuator, which is how
+the lead's integration fades the command (until then: ``guard=False`` leaves the command as
+step() gave it).
+
+The error of a faulted sensor is measured against a second, fault-free copy of the same sensor
+models (same seed, same streams), so it is the fault's own contribution, noise excluded.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from firmware_py import model_regulator as mr
+from firmware_py import authority as au
+from firmware_py import plausibility as pl
+from mrsteer_dbc import names
+import mrsteer_dbc
+from sim_plant.car import scenario as scn
+from sim_plant.car.actuator_dynamics import PositionActuator
+from sim_plant.car.plants import Car
+from sim_plant.car.sensors import CHANNELS, Sensors
+
+#: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
+_MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.MSG_SPEED,
+            "lat_accel": names.MSG_REDUNDANT, "steer_redundant": names.MSG_REDUNDANT}
+
+
+@dataclass
+class MonitorRun:
+    t: np.ndarray
+    bits: np.ndarray  # CtrlStatus_Plausibility per period
+    r_true: np.ndarray
+    aux: np.ndarray  # the command applied
+    error: np.ndarray  # the faulted sensor's error (0 without a fault)
+    fault_sensor: str | None
+    margins: dict[str, float]  # each check's largest residual over the run / its bound
+    held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel
+    beta: np.ndarray
+
+    def first(self, mask: np.ndarray) -> float | None:
+        idx = np.flatnonzero(mask)
+        return float(self.t[idx[0]]) if idx.size else None
+
+    @property
+    def fault_time(self) -> float | None:
+        """When the monitor first reported a fault (PLAUS_YAW or PLAUS_STEER)."""
+        return self.first((self.bits & pl.PLAUS_FAULT) != 0)
+
+    def exceeded_time(self, bound: float | np.ndarray, hold: float = 0.3) -> float | None:
+        """When the sensor's error became larger than ``bound`` to stay so for ``hold`` s (or
+        until the monitor reported, if sooner): the start of the window the detection target
+        counts from.  A brief excursion that falls back within the bound does not start it."""
+        over = np.abs(self.error) > bound
+        dt = float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
+        need = max(1, int(round(hold / dt)))
+        reported = self.fault_time
+        start = None
+        for k in np.flatnonzero(over):
+            if start is not None and k < start:
+                continue
+            end = min(k + need, over.size)
+            if reported is not None and self.t[k] <= reported:
+                end = min(end, int(round(reported / dt)) + 1)
+            run = over[k:end]
+            if run.all():
+                return float(self.t[k])
+            start = k + int(np.argmin(run))  # the first sample back within the bound
+        return None
+
+
+def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
+    """The plausibility bound a sensor's error is judged against, per period: the yaw rate's
+    ``yaw_bound + yaw_rel |r|``, the lateral acceleration's the same times v (the same
+    residual), a steering channel's ``steer_bound``."""
+    r = np.abs(run.r_true)
+    yaw = cfg.yaw_bound + cfg.yaw_rel * r
+    return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"], "steer": cfg.steer_bound,
+            "steer_redundant": cfg.steer_bound}[sensor]
+
+
+# One loop that is the plant node's step and the controller's cycle side by side; long because
+# each of its stages is a few lines that read best in order.
+def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
+        controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
+        guard: bool = True) -> MonitorRun:
+    contract = mrsteer_dbc.load()
+    every = {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in CHANNELS}
+    scene = scn.ScenarioState(sc)
+    car = Car(sc.plant, scene.params(), ts)
+    actuator = PositionActuator(sc.actuator, ts)
+    sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
+    faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
+    reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
+    mon = pl.PlausibilityMonitor(monitor if monitor is not None else pl.PlausibilityConfig(ts=ts))
+    ac = au.configure_authority(authority if authority is not None else au.AuthorityConfig(ts=ts))
+    ast = au.AuthorityState()
+    n = int(round(sc.duration / ts)) + 1
+    out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
+    seen = {ch: np.zeros(n) for ch in CHANNELS}
+    held: dict[str, float] = {}
+    margins = dict.fromkeys(("kinematic", "steer_pair", "model"), 0.0)
+    pipeline: deque[float] = deque([0.0])
+    applied = 0.0
+    for k in range(n):
+        t = k * ts
+        if scene.advance_to(t):
+            car.set_params(scene.params())
+        car.set_loads(scene.loads(t))
+        r_now = float(car.x[1])
+        driver = scene.driver_angle(t, r_now, ts)
+        y = car.outputs(driver + applied, scene.m_z)
+        truth = {"yaw_rate": float(y[0]), "steer": driver, "speed": scene.v, "lat_accel": float(y[2]),
+                 "steer_redundant": driver}
+        sensors.at(t)
+        clean.at(t)
+        read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        if faulted is not None:
+            out["err"][k] = read[faulted] - getattr(clean, faulted)(truth[faulted])
+        for ch in CHANNELS:
+            if k % every[ch] == 0:
+                held[ch] = read[ch]
+        u = reg.step(held["steer"], held["yaw_rate"], held["speed"])
+        bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
+                        applied)
+        if guard:
+            u = au.authority_step(ac, ast, u, bits)
+        pipeline.append(u)
+        applied = actuator.step(pipeline.popleft())
+        out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
+        for ch in CHANNELS:
+            seen[ch][k] = held[ch]
+        st = mon.state
+        for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err)):
+            margins[key] = max(margins[key], value)
+        # as the plant node: the car gets the lagging actuator's mean position over the step
+        car.advance(driver + actuator.mean, scene.m_z)
+        if not car.linear:
+            scene.v = car.v
+    return MonitorRun(np.arange(n) * ts, out["bits"].astype(int), out["r"], out["aux"], out["err"], faulted,
+                     margins, seen, out["beta"])
+
+
+def steady_curve(v: float, mu: float, a_y: float = 2.0, duration: float = 2.5, plant: str = "nonlinear",
+                 ramp: float = 0.4, **kw: Any) -> scn.Scenario:
+    """The realistic car at ``v`` on ``mu`` steering into a curve of about ``a_y`` (m/s^2, capped
+    at 60 % of the grip) from 0.2 s, the wheel turned at a steady rate over ``ramp`` s (in 2 ms
+    ``steer`` steps: a driver steering normally, not a step; 0 = a step), then held."""
+    from sim_plant.car.actuator_dynamics import ActuatorModelConfig
+    from sim_plant.car.sensors import SensorConfig
+    from sim_plant.car.vehicle import VehicleParams, steering_tf
+
+    a = min(a_y, 0.6 * 9.81 * mu)
+    gain = steering_tf(VehicleParams(v=v, mu=1.0)).dc_gain()  # r / delta on a dry road
+    delta = a / v / gain
+    n = max(1, round(ramp / 0.002))
+    events = tuple(scn.Event(0.2 + i * 0.002, "steer", delta * (i + 1) / n) for i in range(n))
+    return scn.Scenario("curve", duration, v=v, mu=mu, events=events, plant=plant,
+                        actuator=ActuatorModelConfig.default(), sensors=SensorConfig(seed=kw.pop("seed", 1)), **kw)
+
+
+def detection_latency(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None) -> tuple[
+        float | None, float | None]:
+    """(when the fault's error first exceeded its bound, when the monitor reported it) for ``sc``
+    with one sensor fault; either None if it did not happen."""
+    cfg = monitor if monitor is not None else pl.PlausibilityConfig(ts=ts)
+    r = run(sc, ts, cfg)
+    if r.fault_sensor is None:
+        raise ValueError("the scenario has no sensor fault")
+    return r.exceeded_time(error_bound(r.fault_sensor, cfg, r)), r.fault_time

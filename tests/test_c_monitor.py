@@ -1,0 +1,155 @@
+"""The C port of the plausibility monitor and the authority limiter (ports/c/mrs_monitor.c)
+against firmware_py/plausibility.py: the same inputs, bit-identical outputs in double."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import random
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_py import authority as au
+from firmware_py import plausibility as pl
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.offline import plausibility_runs as pr
+
+PORT = Path(__file__).resolve().parents[1] / "ports" / "c"
+CC = shutil.which("gcc")
+CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-ffp-contract=off"]
+
+pytestmark = pytest.mark.skipif(CC is None, reason="gcc is not installed (.ci/run installs it)")
+
+
+@pytest.fixture(scope="module")
+def runner(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("monitor") / "monitor_vectors"
+    proc = subprocess.run([CC, *CFLAGS, f"-I{PORT}", "-o", str(out), str(PORT / "mrs_monitor.c"),
+                           str(PORT / "monitor_vectors.c"), "-lm"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def _config_lines(m: pl.PlausibilityConfig, a: au.AuthorityConfig) -> str:
+    return ("monitor " + " ".join(repr(float(getattr(m, f.name))) for f in dataclasses.fields(m)) + "\n"
+            + "authority " + " ".join(repr(float(getattr(a, f.name))) for f in dataclasses.fields(a)) + "\n")
+
+
+def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
+    mc, ac = pl.configure(m), au.configure_authority(a)
+    ms, ast = pl.MonitorState(), au.AuthorityState()
+    out = []
+    for dd, dd2, r, ay, v, aux, u in rows:
+        bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux)
+        u_out = au.authority_step(ac, ast, u, bits)
+        out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags))
+    return out
+
+
+def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[float, ...]]) -> list[tuple]:
+    text = _config_lines(m, a) + "".join(" ".join(repr(x) for x in row) + "\n" for row in rows)
+    proc = subprocess.run([str(runner)], input=text, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("coeffs ")
+    out = []
+    for line in lines[1:]:
+        f = line.split()
+        out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6])))
+    return out
+
+
+def _run_rows(sc) -> list[tuple[float, ...]]:
+    r = pr.run(sc)
+    h = r.held
+    aux = np.concatenate([[0.0], r.aux[:-1]])  # the angle acting on the car at each period
+    return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"],
+                                                         h["lat_accel"], h["speed"], aux, r.aux)]
+
+
+def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
+    rng = random.Random(seed)
+    rows, held, speed = [], [0.0, 0.0], 20.0
+    for k in range(n):
+        if k % 25 == 0:
+            held = [rng.gauss(0, 2), rng.gauss(0, 0.02)]
+        if k % 400 == 0:
+            speed = rng.choice((3.0, 12.0, 25.0, 40.0))
+        row = [rng.gauss(0, 0.02), held[1], rng.gauss(0, 0.1), held[0], speed, rng.gauss(0, 0.02),
+               rng.gauss(0, 0.06)]
+        if rng.random() < 0.002:
+            row[rng.randrange(7)] = math.nan
+        if rng.random() < 0.001:
+            row[rng.randrange(7)] = rng.choice((math.inf, -math.inf))
+        rows.append(tuple(row))
+    return rows
+
+
+CASES = {
+    "split-mu, fault-free": lambda: _run_rows(pr.scn.load("split-mu")),
+    "yaw bias in a curve": lambda: _run_rows(pr.steady_curve(20.0, 1.0).with_sensor_faults(
+        (SensorFault("yaw_rate", "bias", 1.0, math.radians(3.0)),))),
+    "frozen second steering channel": lambda: _run_rows(pr.steady_curve(30.0, 0.5).with_sensor_faults(
+        (SensorFault("steer_redundant", "frozen", 0.1),))),
+    "random inputs with NaN and inf": lambda: _random_rows(7),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_the_c_monitor_and_limiter_are_bit_identical_to_python(runner: Path, case: str) -> None:
+    m, a = pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5)  # a short window: the time bound acts
+    rows = CASES[case]()
+    py, c = _python(m, a, rows), _c(runner, m, a, rows)
+    assert len(c) == len(py) == len(rows)
+    for k, (x, y) in enumerate(zip(py, c)):
+        assert x == y, f"period {k}: python {x} != C {y}"
+
+
+def test_the_random_case_exercises_every_branch(runner: Path) -> None:
+    rows = _random_rows(7)
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+    flags = 0
+    auth = 0
+    for bits, f, *_, af in out:
+        flags |= f
+        auth |= af
+    assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
+    assert auth & au.AUTH_FAULT and auth & au.AUTH_RATE
+
+
+def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
+    proc = subprocess.run([str(runner)], input="defaults\n", capture_output=True, text=True, check=True)
+    monitor, authority = proc.stdout.splitlines()
+    m, a = pl.PlausibilityConfig(), au.AuthorityConfig()
+    assert [float(x) for x in monitor.split()[1:]] == [float(getattr(m, f.name)) for f in dataclasses.fields(m)]
+    assert [float(x) for x in authority.split()[1:]] == [float(getattr(a, f.name)) for f in dataclasses.fields(a)]
+    first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
+                           check=True).stdout.split()
+    mc, ac = pl.configure(m), au.configure_authority(a)
+    expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
+                mc.cf_m, ac.du_max, ac.fade_step, ac.engage, ac.window_steps, ac.rearm_steps]
+    assert [float(x) for x in first[1:]] == [float(x) for x in expected]
+
+
+def test_an_invalid_calibration_is_refused(runner: Path) -> None:
+    bad = _config_lines(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0), au.AuthorityConfig())
+    assert subprocess.run([str(runner)], input=bad, capture_output=True, text=True).returncode == 3
+    with pytest.raises(ValueError, match="yaw_bound"):
+        pl.configure(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0))
+
+
+def test_the_step_functions_call_nothing(tmp_path: Path) -> None:
+    obj = tmp_path / "mrs_monitor.o"
+    subprocess.run([CC, *CFLAGS, "-c", "-o", str(obj), str(PORT / "mrs_monitor.c")], check=True)
+    undefined = set(subprocess.run(["nm", "-u", str(obj)], capture_output=True, text=True,
+                                   check=True).stdout.split()) - {"U"}
+    assert undefined <= {"exp", "floor"}  # in the configure functions only
+    dis = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(obj)], capture_output=True, text=True,
+                         check=True).stdout
+    for fn in ("mrs_monitor_step", "mrs_authority_step"):
+        body = dis.split(f"<{fn}>:")[1].split("\n\n")[0]
+        assert "call" not in body, fn
