@@ -10,13 +10,13 @@ chunk file that exists is complete: that is what resuming relies on.
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from firmware_py.platform.files import write_atomic
 from sim_plant.campaign import engine
 from sim_plant.campaign.params import INDEX, NOISE_SEED, PARAMETERS, SampleSet
 from sim_plant.campaign.spec import Campaign, calibration
@@ -57,9 +57,7 @@ def write_chunk(out: Path, chunk: int, data: bytes) -> None:
     """The chunk's file, whole: written beside and renamed into place."""
     path = chunk_path(out, chunk)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    write_atomic(path, data)
 
 
 def done_chunks(out: Path) -> set[int]:

@@ -27,6 +27,7 @@ from typing import Callable
 
 import numpy as np
 
+from firmware_py.platform.files import write_atomic
 from sim_plant.campaign import results, sampling
 from sim_plant.campaign.spec import Campaign, SpecError
 
@@ -54,9 +55,7 @@ def prepare(c: Campaign, out: Path, resume: bool) -> set[int]:
     if resume:
         raise SpecError(f"--resume: {out} holds no campaign to resume")
     out.mkdir(parents=True, exist_ok=True)
-    tmp = spec.with_suffix(".tmp")
-    tmp.write_text(c.text)
-    os.replace(tmp, spec)
+    write_atomic(spec, c.text)
     return set()
 
 
