@@ -7,7 +7,7 @@
     seed = 2026                # the design and every sample's sensor noise follow from it
     sampling = "lhs"           # "lhs" (Latin hypercube, scipy.stats.qmc) or "random"
     duration = 5.0             # s of each scenario
-    chunk = 8192               # samples per task and per Parquet file
+    chunk = 16384              # samples per task and per Parquet file
     calibrations = ["shipped", "paper"]   # shipped, paper, previous, none, or a .cfg file
 
     [parameters]               # every key of params.PARAMETERS; an absent one keeps its default
@@ -132,7 +132,7 @@ def parse(text: str, where: str) -> Campaign:
     if not isinstance(name, str) or not name:
         raise SpecError(f"{where}: 'name' must be a non-empty string")
     return Campaign(name, samples, _int(data, "seed", 0, 0, 2**63 - 1, where), sampling, float(duration),
-                    _int(data, "chunk", 8192, 1, 10**6, where), tuple(cals), dists, criteria, text)
+                    _int(data, "chunk", 16384, 1, 10**6, where), tuple(cals), dists, criteria, text)
 
 
 def calibration(name: str, base: Path = Path("."), where: str = "campaign") -> mr.ControllerConfig | None:
