@@ -25,10 +25,18 @@ class BatchLaw:
     def __init__(self, config: mr.ControllerConfig, n: int) -> None:
         self.c = c = mr.configure(config)
         self.m = c.model_delay
+        self.table = _Schedule(c)
+        # The nominal actuator and yaw-rate filter of the model (issue 15); neutral without them.
+        self.act = (getattr(c, "act_a", 0.0), getattr(c, "act_b", 1.0))
+        self.flt = tuple(getattr(c, f"flt_{k}", d) for k, d in (("b0", 1.0), ("b1", 0.0), ("b2", 0.0), ("a1", 0.0),
+                                                               ("a2", 0.0)))
         self.z = np.zeros(n)
         self.u_prev = np.zeros(n)
         self.u_hist = np.zeros((max(self.m, 1), n))
         self.hist_idx = np.zeros(n, dtype=np.int64)
+        self.p_n = np.zeros(n)
+        self.f_s1 = np.zeros(n)
+        self.f_s2 = np.zeros(n)
         self.needs_init = np.ones(n, dtype=bool)
         self.recovering = np.zeros(n, dtype=bool)
         self.status = np.full(n, mr.STATUS_INACTIVE, dtype=np.int8)
@@ -54,19 +62,21 @@ class BatchLaw:
         safe_speed = np.where(idle, c.speed_active_min, speed)
         inv_kn = c.wheelbase / safe_speed + c.k_us * safe_speed
         rho = inv_kn * yaw_rate
+        law = self.table.at(safe_speed)
+        keep = self._state()
         init = self.needs_init & ~idle
-        z, recovering = self._reinit(init, delta_driver, rho)
+        recovering = self._reinit(init, delta_driver, rho, law)
 
         du = np.where(recovering & (c.fade_step < c.du_max), c.fade_step, c.du_max)
         lo_slew = u_prev - du
         hi_slew = u_prev + du
         lo = np.maximum(lo_slew, -c.u_max)
         hi = np.minimum(hi_slew, c.u_max)
-        u, z_next = self._law(delta_driver, rho, z, lo, hi, ~idle)
+        u = self._law(delta_driver, rho, lo, hi, law)
         still = recovering & ~((lo_slew < u) & (u < hi_slew))
         active_status = np.where((u >= c.u_max) | (u <= -c.u_max), mr.STATUS_SATURATED, mr.STATUS_ACTIVE)
 
-        self.z = np.where(idle, self.z, z_next)
+        self._restore(idle, keep)  # an idle row's state is the scalar's: untouched
         self.recovering = np.where(idle, self.recovering, still)
         self.needs_init = idle | (self.needs_init & ~init)
         out = np.where(idle, faded, u)
@@ -75,36 +85,90 @@ class BatchLaw:
                                active_status).astype(np.int8)
         return out
 
-    def _reinit(self, init: np.ndarray, delta_driver: np.ndarray, rho: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """The re-start at the steady state for the present inputs with the command held."""
+    _STATE = ("z", "p_n", "f_s1", "f_s2", "hist_idx")
+
+    def _state(self) -> tuple[np.ndarray, ...]:
+        return tuple(getattr(self, k) for k in self._STATE) + (self.u_hist.copy(),)
+
+    def _restore(self, idle: np.ndarray, kept: tuple[np.ndarray, ...]) -> None:
+        if not idle.any():
+            return
+        for k, old in zip(self._STATE, kept):
+            setattr(self, k, np.where(idle, old, getattr(self, k)))
+        self.u_hist = np.where(idle, kept[-1], self.u_hist)
+
+    def _reinit(self, init: np.ndarray, delta_driver: np.ndarray, rho: np.ndarray, law) -> np.ndarray:
+        """The re-start of every filter at its steady state for the present inputs with the
+        command held; the rows now recovering."""
         if not init.any():
-            return self.z, self.recovering
-        c = self.c
+            return self.recovering
+        a, g_w0, g_w1, g_r0, g_r1, q0 = law
+        b0, b1, b2, a1, a2 = self.flt
         w0 = delta_driver + self.u_prev
-        z = np.where(init, c.q0 * (w0 - rho) - (c.g_w0 * w0 - c.g_r0 * rho), self.z)
+        self.z = np.where(init, q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho), self.z)
         for i in range(self.m):
             self.u_hist[i] = np.where(init, self.u_prev, self.u_hist[i])
         self.hist_idx = np.where(init, 0, self.hist_idx)
-        return z, self.recovering | init
+        self.p_n = np.where(init, self.u_prev, self.p_n)
+        self.f_s1 = np.where(init, (1.0 - b0) * w0, self.f_s1)
+        self.f_s2 = np.where(init, (b2 - a2) * w0, self.f_s2)
+        return self.recovering | init
 
-    def _law(self, delta_driver: np.ndarray, rho: np.ndarray, z: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-             valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The recursion of the law (docs/controller.md): the clamped command and the next z.
-        Rows not ``valid`` this step keep their model history."""
-        c = self.c
-        if self.m == 0:
-            p = c.g_w0 * delta_driver - c.g_r0 * rho + z
-            u = np.where(p * c.inv_one_minus_g_w0 < lo, lo, np.where(p * c.inv_one_minus_g_w0 > hi, hi,
-                                                                     p * c.inv_one_minus_g_w0))
-            y = p + c.g_w0 * u
+    def _law(self, delta_driver: np.ndarray, rho: np.ndarray, lo: np.ndarray, hi: np.ndarray, law) -> np.ndarray:
+        """The recursion of the law (docs/controller.md): the clamped command; z and the
+        model's states advanced."""
+        a, g_w0, g_w1, g_r0, g_r1, _ = law
+        if self.m == 0:  # constant law only
+            p = g_w0 * delta_driver - g_r0 * rho + self.z
+            v = p * self.c.inv_one_minus_g_w0
+            u = np.where(v < lo, lo, np.where(v > hi, hi, v))
+            y = p + g_w0 * u
             w = delta_driver + u
         else:
+            act_a, act_b = self.act
+            b0, b1, b2, a1, a2 = self.flt
             i = self.hist_idx
-            w = delta_driver + self.u_hist[i, self._cols]
-            y = c.g_w0 * w - c.g_r0 * rho + z
+            self.p_n = act_a * self.p_n + act_b * self.u_hist[i, self._cols]
+            x = delta_driver + self.p_n
+            w = b0 * x + self.f_s1
+            self.f_s1 = b1 * x - a1 * w + self.f_s2
+            self.f_s2 = b2 * x - a2 * w
+            y = g_w0 * w - g_r0 * rho + self.z
             u = np.where(y < lo, lo, np.where(y > hi, hi, y))
-            self.u_hist[i, self._cols] = np.where(valid, u, self.u_hist[i, self._cols])
+            self.u_hist[i, self._cols] = u
             nxt = i + 1
-            self.hist_idx = np.where(valid, np.where(nxt >= self.m, 0, nxt), i)
-        return u, c.g_w1 * w - c.g_r1 * rho + c.a * y
+            self.hist_idx = np.where(nxt >= self.m, 0, nxt)
+        self.z = g_w1 * w - g_r1 * rho + a * y
+        return u
+
+
+class _Schedule:
+    """The law's coefficient set (a, g_w0, g_w1, g_r0, g_r1, q0) at each row's speed, with
+    ``model_regulator.step``'s interpolation: linear between breakpoints, held outside."""
+
+    def __init__(self, c: mr.Coefficients) -> None:
+        if not hasattr(c, "sched_v"):  # a constant law of the firmware before issue 15's schedule
+            self.const = (c.a, c.g_w0, c.g_w1, c.g_r0, c.g_r1, c.q0)
+            return
+        self.const = None
+        self.n = c.n_sched
+        self.v = np.asarray(c.sched_v)
+        self.inv_dv = np.asarray(c.sched_inv_dv + (0.0,))
+        self.tables = [np.asarray(t) for t in (c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0, c.sched_g_r1,
+                                               c.sched_q0)]
+        if self.n == 1:
+            self.const = tuple(t[0] + 0.0 * (t[0] - t[0]) for t in self.tables)
+
+    def at(self, speed: np.ndarray):
+        if self.const is not None:
+            return self.const
+        n, sv = self.n, self.v
+        j = np.zeros(speed.size, dtype=np.int64)
+        for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
+            j += speed >= sv[i]
+        inside = (speed > sv[0]) & (speed < sv[n - 1])
+        top = (speed > sv[0]) & (speed >= sv[n - 1])
+        j = np.where(inside, j, np.where(top, n - 1, 0))
+        j1 = np.where(inside, j + 1, j)
+        f = np.where(inside, (speed - sv[j]) * self.inv_dv[j], 0.0)
+        return tuple(t[j] + f * (t[j1] - t[j]) for t in self.tables)

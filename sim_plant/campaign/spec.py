@@ -136,28 +136,40 @@ def parse(text: str, where: str) -> Campaign:
 
 
 def calibration(name: str, base: Path = Path("."), where: str = "campaign") -> mr.ControllerConfig | None:
-    """The controller configuration a calibration name stands for (None: no controller)."""
+    """The controller configuration a calibration name stands for (None: no controller).
+
+    ``paper`` is the paper's K = 10, tau = 6 ms as a plain law (no nominal actuator or filter)
+    at the firmware's 500 Hz with one modelled sample; ``previous`` the calibration shipped
+    before issue 15's scheduled law."""
     if name == "none":
         return None
     if name == "shipped":
         return mr.ControllerConfig()
     if name == "paper":
+        if hasattr(mr, "plain_law"):
+            return mr.plain_law(mr.ControllerConfig(), mr.PAPER_K, mr.PAPER_TAU, mr.DEFAULT_TAU_N)
         return replace(mr.ControllerConfig(), k=mr.PAPER_K, tau=mr.PAPER_TAU)
     if name == "previous":
         return getattr(mr, "PREVIOUS_CONFIG", mr.ControllerConfig())
     path = Path(name) if Path(name).is_absolute() else base / name
     if path.suffix != ".cfg" or not path.is_file():
         raise SpecError(f"{where}: calibration {name!r} is none of {', '.join(NAMED_CALIBRATIONS)} nor a .cfg file")
-    from sim_plant.offline.vectors import read_config
-
     try:
-        cfg = read_config(path)
+        cfg = _read_cfg(path)
         mr.configure(cfg)
     except (KeyError, ValueError, OSError) as exc:
-        raise SpecError(f"{where}: calibration {name!r}: {exc}") from None
+        raise SpecError(f"{where}: calibration {name!r}: {str(exc).splitlines()[0]}") from None
     if abs(cfg.ts - TS) > 1e-15:
         raise SpecError(f"{where}: calibration {name!r} runs at ts {cfg.ts:g} s; campaigns run at {TS:g} s")
     return cfg
+
+
+def _read_cfg(path: Path) -> mr.ControllerConfig:
+    try:
+        from firmware_py.calibration_file import load as read
+    except ImportError:  # before issue 15's calibration files
+        from sim_plant.offline.vectors import read_config as read
+    return read(path)
 
 
 def _distribution(value: Any, key: str, p: Parameter, where: str) -> Distribution:
