@@ -59,6 +59,7 @@ class BatchCar:
         self.beta = np.zeros_like(v)
         self.r = np.zeros_like(v)
         self.v = v.astype(float).copy()
+        self._fixed_substeps: np.ndarray | None = None
 
     def wheel(self, front: bool, stiffness: np.ndarray, peak: np.ndarray, mu: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +99,12 @@ class BatchCar:
                 wheels, mu_max: np.ndarray) -> None:
         """``NonlinearPlant.advance``: one step, inputs held.  ``f_y`` None: no side force;
         ``a_x`` None: the speed stays; ``wheels`` None: intact axles, else the four wheels' (B, D)."""
-        n = self.substeps(mu_max)
+        if a_x is None and wheels is None:  # speed and grip constant: so is the sub-step count
+            if self._fixed_substeps is None:
+                self._fixed_substeps = self.substeps(mu_max)
+            n = self._fixed_substeps
+        else:
+            n = self.substeps(mu_max)
         n_max = int(n.max())
         h = self.ts / n if n_max > 1 else self.ts
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
@@ -181,7 +187,8 @@ class BatchSensors:
         self.b, self.a = b.tolist(), a.tolist()
         self.zi = lfilter_zi(b, a).tolist()
         self.q_yaw, self.q_steer, self.q_speed = (dbc_resolution(q) for q in ("yaw_rate", "steer", "speed"))
-        self._rngs = [np.random.default_rng(np.random.SeedSequence(int(s)).spawn(3)[0]) for s in seeds.tolist()]
+        # Sensors.reset's SeedSequence(seed).spawn(3)[0], the yaw-rate stream, made directly
+        self._rngs = [np.random.default_rng(np.random.SeedSequence(s, spawn_key=(0,))) for s in seeds.tolist()]
         self._noise = np.zeros((0, seeds.size))
         self._k = 0
         self._z: tuple[np.ndarray, np.ndarray] | None = None

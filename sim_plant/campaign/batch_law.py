@@ -47,23 +47,24 @@ class BatchLaw:
         """One control period of every row; the commands (rad).  ``status`` and
         ``fault_flags`` per row as the scalar ``State`` has them."""
         c = self.c
-        flags = np.where(~((-c.driver_angle_max <= delta_driver) & (delta_driver <= c.driver_angle_max)),
-                         mr.FAULT_DRIVER_ANGLE, 0)
-        flags |= np.where(~((-c.yaw_rate_max <= yaw_rate) & (yaw_rate <= c.yaw_rate_max)), mr.FAULT_YAW_RATE, 0)
-        flags |= np.where(~((0.0 <= speed) & (speed <= c.speed_max)), mr.FAULT_SPEED, 0)
+        # |x| <= max is -max <= x <= max, NaN failing both
+        flags = np.where(np.abs(delta_driver) <= c.driver_angle_max, 0, mr.FAULT_DRIVER_ANGLE)
+        flags |= np.where(np.abs(yaw_rate) <= c.yaw_rate_max, 0, mr.FAULT_YAW_RATE)
+        flags |= np.where((0.0 <= speed) & (speed <= c.speed_max), 0, mr.FAULT_SPEED)
         self.fault_flags = flags.astype(np.int8)
         idle = (flags != 0) | (speed < c.speed_active_min)
+        any_idle = bool(idle.any())
 
         u_prev = self.u_prev
         fs = c.fade_step
-        faded = np.where(u_prev > fs, u_prev - fs, np.where(u_prev < -fs, u_prev + fs, 0.0))
+        faded = np.where(u_prev > fs, u_prev - fs, np.where(u_prev < -fs, u_prev + fs, 0.0)) if any_idle else None
 
         # The active path for every row (an idle row's speed is made harmless, its result dropped).
-        safe_speed = np.where(idle, c.speed_active_min, speed)
+        safe_speed = np.where(idle, c.speed_active_min, speed) if any_idle else speed
         inv_kn = c.wheelbase / safe_speed + c.k_us * safe_speed
         rho = inv_kn * yaw_rate
         law = self.table.at(safe_speed)
-        keep = self._state()
+        keep = self._state() if any_idle else ()
         init = self.needs_init & ~idle
         recovering = self._reinit(init, delta_driver, rho, law)
 
@@ -76,6 +77,12 @@ class BatchLaw:
         still = recovering & ~((lo_slew < u) & (u < hi_slew))
         active_status = np.where((u >= c.u_max) | (u <= -c.u_max), mr.STATUS_SATURATED, mr.STATUS_ACTIVE)
 
+        if not any_idle:
+            self.recovering = still
+            self.needs_init = self.needs_init & ~init
+            self.u_prev = u
+            self.status = active_status.astype(np.int8)
+            return u
         self._restore(idle, keep)  # an idle row's state is the scalar's: untouched
         self.recovering = np.where(idle, self.recovering, still)
         self.needs_init = idle | (self.needs_init & ~init)
