@@ -16,6 +16,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_atomic
 from sim_plant.campaign import engine
 from sim_plant.campaign.params import INDEX, NOISE_SEED, PARAMETERS, SampleSet
@@ -36,11 +37,16 @@ def judge(metrics: dict[str, np.ndarray], criteria: dict[str, float]) -> dict[st
     return out
 
 
-def run_chunk(c: Campaign, s: SampleSet, base: Path) -> bytes:
+def calibrations(c: Campaign, base: Path) -> dict[str, mr.ControllerConfig | None]:
+    """The campaign's calibrations by name, resolved here (a .cfg file need not be on a worker)."""
+    return {name: calibration(name, base) for name in c.calibrations}
+
+
+def run_chunk(c: Campaign, s: SampleSet, configs: dict[str, mr.ControllerConfig | None]) -> bytes:
     """Every calibration over the samples ``s``: the chunk's table as Parquet bytes."""
     tables = []
-    for name in c.calibrations:
-        metrics = engine.simulate(s, calibration(name, base), c.duration, record=False)
+    for name, config in configs.items():
+        metrics = engine.simulate(s, config, c.duration, record=False)
         cols: dict[str, object] = {INDEX: s[INDEX], "calibration": [name] * len(s)}
         for key, p in PARAMETERS.items():
             cols[key] = [p.choices[int(x)] for x in s[key]] if p.choices else s[key]

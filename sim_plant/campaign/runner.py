@@ -71,6 +71,7 @@ def run(c: Campaign, base: Path, out: Path, scheduler: str | None = None, worker
     total = c.samples * len(c.calibrations)
     done_samples = sum(chunk_rows(c, k).size for k in done) * len(c.calibrations)
     t0 = time.monotonic()
+    configs = results.calibrations(c, base)
     design = sampling.unit_design(c, np.arange(c.samples)) if c.sampling == "lhs" and todo else None
 
     def chunk_samples(k: int):
@@ -90,13 +91,13 @@ def run(c: Campaign, base: Path, out: Path, scheduler: str | None = None, worker
         return RunSummary(c.chunks, 0, c.samples, 0.0, 0)
     if workers == 0 and scheduler is None:
         for k in todo:
-            finished(k, results.run_chunk(c, chunk_samples(k), base))
+            finished(k, results.run_chunk(c, chunk_samples(k), configs))
         return RunSummary(c.chunks, len(todo), c.samples, time.monotonic() - t0, 1)
-    n_workers = _run_dask(c, base, todo, chunk_samples, finished, scheduler, workers)
+    n_workers = _run_dask(c, configs, todo, chunk_samples, finished, scheduler, workers)
     return RunSummary(c.chunks, len(todo), c.samples, time.monotonic() - t0, n_workers)
 
 
-def _run_dask(c: Campaign, base: Path, todo: list[int], chunk_samples, finished, scheduler: str | None,
+def _run_dask(c: Campaign, configs: dict, todo: list[int], chunk_samples, finished, scheduler: str | None,
               workers: int | None) -> int:
     """The chunks on a Dask cluster, at most two per worker in flight (the design stays here)."""
     from distributed import Client, LocalCluster, as_completed
@@ -115,7 +116,7 @@ def _run_dask(c: Campaign, base: Path, todo: list[int], chunk_samples, finished,
 
         def submit():
             k = pending.pop(0)
-            fut = client.submit(results.run_chunk, c, chunk_samples(k), base, key=f"campaign-{c.digest}-{k}",
+            fut = client.submit(results.run_chunk, c, chunk_samples(k), configs, key=f"campaign-{c.digest}-{k}",
                                 pure=False)
             futures[fut] = k
             return fut
