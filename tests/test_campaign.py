@@ -150,3 +150,13 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
 
 def test_metrics_are_the_engine_figures() -> None:
     assert set(spec.CRITERIA) <= set(engine.METRICS)
+
+
+@pytest.mark.parametrize("name", ["example.toml", "shipped-vs-paper.toml"])
+def test_shipped_campaign_files_parse(name: str) -> None:
+    c = spec.load(ROOT / "campaigns" / name)
+    assert c.samples > 0 and c.criteria and len(c.sampled) >= 10
+    s = sampling.samples(c, np.array([0, c.samples - 1]))
+    for i in range(2):  # a sample is a valid scenario file's content
+        sc = params.scenario_for(s.row(i), c.duration)
+        assert scn.parse({"duration": sc.duration, "v": sc.v, "mu": sc.mu, "mass": sc.mass}, "x").v == sc.v
