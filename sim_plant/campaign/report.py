@@ -15,11 +15,13 @@ It returns the summary numbers (also what ``campaign report --json`` prints).
 from __future__ import annotations
 
 import html
+import io
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from firmware_py.platform.files import write_files
 from sim_plant.campaign import results
 from sim_plant.campaign.engine import METRICS
 from sim_plant.campaign.params import INDEX, KINDS, PARAMETERS
@@ -68,8 +70,7 @@ def build(out: Path) -> dict[str, Any]:
     summary = summarise(out)
     cols = {k: np.asarray(v) for k, v in results.read_all(out).to_pydict().items()}
     rep = out / "report"
-    rep.mkdir(parents=True, exist_ok=True)
-    figures = []
+    files: dict[str, bytes | str] = {}
     for name in summary["calibrations"]:
         m = cols["calibration"] == name
         fig, ax = plt.subplots(figsize=(5.5, 4.5))
@@ -81,7 +82,7 @@ def build(out: Path) -> dict[str, Any]:
         im = ax.pcolormesh(ye, xe, rate, vmin=0.0, vmax=1.0, cmap="RdYlGn")
         fig.colorbar(im, ax=ax, label="pass rate")
         ax.set(xlabel="v at the start (m/s)", ylabel="road mu", title=f"{name}: pass rate over mu x v")
-        figures.append(_save(fig, rep / f"pass_map_{_safe(name)}.png"))
+        files[f"pass_map_{_safe(name)}.png"] = _png(fig)
     for metric in CRITERIA:
         fig, ax = plt.subplots(figsize=(5.5, 4.0))
         for name in summary["calibrations"]:
@@ -92,10 +93,11 @@ def build(out: Path) -> dict[str, Any]:
         unit = METRICS[metric][0]
         ax.set(xlabel=f"{metric} ({unit})" if unit else metric, ylabel="samples", yscale="log")
         ax.legend()
-        figures.append(_save(fig, rep / f"hist_{metric}.png"))
+        files[f"hist_{metric}.png"] = _png(fig)
     plt.close("all")
-    (rep / "index.html").write_text(_html(summary, [f.name for f in figures]))
-    summary["files"] = [str(f) for f in figures] + [str(rep / "index.html")]
+    files["index.html"] = _html(summary, list(files))
+    rep.mkdir(parents=True, exist_ok=True)
+    summary["files"] = [str(p) for p in write_files(rep, files)]  # all of them or none
     return summary
 
 
@@ -103,10 +105,11 @@ def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in Path(name).stem)
 
 
-def _save(fig, path: Path) -> Path:
+def _png(fig) -> bytes:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    return path
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
 
 
 def _html(s: dict[str, Any], images: list[str]) -> str:
