@@ -208,7 +208,7 @@ def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> 
     from sim_plant.offline import tuning as T
 
     k, tau, tau_n, m = CALIBRATIONS[rate]
-    cfg = replace(mr.ControllerConfig(), k=k, tau=tau, tau_n=tau_n, model_delay_steps=m, ts=1.0 / rate)
+    cfg = replace(mr.PREVIOUS_CONFIG, k=k, tau=tau, tau_n=tau_n, model_delay_steps=m, ts=1.0 / rate)
     res = M.envelope_margins(cfg, 1)
     assert res.stable
     w = res.worst()
