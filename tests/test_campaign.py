@@ -111,6 +111,9 @@ def test_export_plays_the_same_scenario_as_the_campaign_ran(tmp_path: Path) -> N
                            str(file)], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert proc.returncode == 0, proc.stderr
     sc = scn.load(str(file))
+    from firmware_py import calibration_file
+
+    assert calibration_file.load(file.with_suffix(".cfg")) == mr.ControllerConfig()  # the campaign's first
     assert sc == params.scenario_for(sampling.samples(c, np.array([worst])).row(0), c.duration)
     ref = reference.run(sc, mr.ControllerConfig())
     row = next(j for j, (i, cal) in enumerate(zip(cols["index"], cols["calibration"])) if i == worst and cal == "shipped")

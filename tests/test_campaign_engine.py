@@ -10,6 +10,8 @@ and a rate-limited actuator.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from firmware_py import model_regulator as mr
 from sim_plant.campaign import engine, reference, sampling, spec
 from sim_plant.campaign.params import KINDS, SampleSet, scenario_for
 
+ROOT = Path(__file__).resolve().parents[1]
 DURATION = 1.5
 TOL = 1e-12
 
@@ -79,5 +82,17 @@ def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
     res = _compare(s, mr.ControllerConfig())
     assert res["fault_steps"][:2].min() > 0, "the spin must reach the fault path"
     _compare(s, None)
-    paper = spec.calibration("paper")
-    _compare(s, paper)
+
+
+@pytest.mark.parametrize("name", ["previous", "paper", "../tests/vectors/previous_500hz.cfg"])
+def test_batch_equals_scalar_with_the_other_calibrations(name: str) -> None:
+    """The constant laws (no schedule; the paper's without nominal actuator and filter)."""
+    c = spec.parse(WIDE.format(seed=23), "wide.toml")
+    config = spec.calibration(name, ROOT / "campaigns")
+    assert not config.scheduled
+    _compare(sampling.samples(c, np.arange(5)), config)
+
+
+def test_the_shipped_law_is_scheduled_with_its_nominal_actuator_and_filter() -> None:
+    c = mr.configure(mr.ControllerConfig())  # what the equality tests above exercise
+    assert c.n_sched > 1 and c.act_a > 0.0 and c.flt_a1 != 0.0 and c.model_delay == 1

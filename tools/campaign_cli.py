@@ -39,10 +39,13 @@ def add_parsers(sub: Any) -> None:
     p.set_defaults(handler=_cmd_report)
     p = csub.add_parser("export", help="write sample N as a scenario file for `mrsteer hil run --scenario`",
                         description="Write the N-th sample of a campaign as a scenario TOML that `mrsteer hil run "
-                        "--scenario FILE` plays on the bus; its campaign figures are in the file's comments.")
+                        "--scenario FILE` plays on the bus, and beside it (FILE with .cfg) the calibration to replay "
+                        "it with (`--calibration FILE.cfg`); the campaign's figures are in the file's comments.")
     p.add_argument("dir", type=Path, metavar="DIR", help="the campaign's results directory")
     p.add_argument("index", type=int_in("sample index", 0, 10**8), metavar="N", help="the sample's index")
     p.add_argument("--out", type=Path, required=True, metavar="FILE.toml", help="the scenario file to write")
+    p.add_argument("--calibration", metavar="NAME", help="which of the campaign's calibrations to write beside it "
+                   "(default: its first)")
     p.set_defaults(handler=_cmd_export, parser=p)
 
 
@@ -105,7 +108,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from firmware_py.platform.files import write_atomic
+    from firmware_py import calibration_file
+    from firmware_py.platform.files import write_files
     from sim_plant.campaign import export, params, results, sampling, spec
     from sim_plant.campaign.runner import SPEC_FILE
 
@@ -116,9 +120,15 @@ def _cmd_export(args: argparse.Namespace) -> int:
     c = spec.parse(spec_path.read_text(), str(spec_path))
     if args.index >= c.samples:
         raise ValueError(f"sample index {args.index} out of range: the campaign has {c.samples} samples")
-    s = sampling.samples(c, np.array([args.index]))
-    sc = params.scenario_for(s.row(0), c.duration)
-    notes = [f"campaign {c.name} ({spec_path}), sample {args.index}: mrsteer hil run --scenario {args.out}"]
+    name = args.calibration or c.calibrations[0]
+    if name not in c.calibrations:
+        raise ValueError(f"--calibration {name!r} is not one of the campaign's ({', '.join(c.calibrations)})")
+    config = results.calibrations(c, args.dir)[name]
+    sc = params.scenario_for(sampling.samples(c, np.array([args.index])).row(0), c.duration)
+    cfg_name = args.out.with_suffix(".cfg").name
+    replay = (f"mrsteer hil run --scenario {args.out} " +
+              ("--controller none" if config is None else f"--calibration {args.out.with_suffix('.cfg')}"))
+    notes = [f"campaign {c.name} ({spec_path}), sample {args.index}, calibration {name}", f"replay: {replay}"]
     try:
         table = results.read_all(args.dir).to_pydict()
         for j, i in enumerate(table["index"]):
@@ -128,6 +138,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 notes.append(f"{table['calibration'][j]}: {figs}, pass {table['pass'][j]}")
     except FileNotFoundError:
         pass
-    write_atomic(args.out, export.to_toml(sc, notes))
-    print(f"wrote sample {args.index} ({sc.description}) to {args.out}")
+    files = {args.out.name: export.to_toml(sc, notes)}
+    if config is not None:
+        files[cfg_name] = f"# campaign {c.name}: calibration {name}\n" + calibration_file.dumps(config)
+    write_files(args.out.parent, files)  # both or neither
+    print(f"wrote sample {args.index} ({sc.description}) to {args.out}" +
+          (f" and calibration {name} to {args.out.with_suffix('.cfg')}" if config is not None else "") +
+          f"; replay: {replay}")
     return 0

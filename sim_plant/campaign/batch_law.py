@@ -3,8 +3,11 @@
 ``BatchLaw.step`` is ``model_regulator.step`` for N controller instances at once, statement for
 statement on arrays: the input checks and fault flags, the fade to zero while inactive or
 faulted, the bumpless re-initialisation on the next valid step, the slew window while
-recovering, the actuator clamp, and the recursion of the law itself.  The coefficients are the
-firmware's own (``model_regulator.configure``); nothing is re-derived here.
+recovering, the actuator clamp, and the recursion of the law itself: the coefficient set
+interpolated over the speed breakpoints as ``step()`` does it (``_Schedule``), the nominal
+actuator p_n and the nominal 2nd-order yaw-rate filter of issue 15's model, the command
+history of the modelled delay.  The coefficients are the firmware's own
+(``model_regulator.configure``); nothing is re-derived here.
 
 The branches of the scalar code become masks: every row computes the active path, and
 ``np.where`` keeps, for a row that is inactive or faulted this step, the state the scalar code
@@ -26,10 +29,8 @@ class BatchLaw:
         self.c = c = mr.configure(config)
         self.m = c.model_delay
         self.table = _Schedule(c)
-        # The nominal actuator and yaw-rate filter of the model (issue 15); neutral without them.
-        self.act = (getattr(c, "act_a", 0.0), getattr(c, "act_b", 1.0))
-        self.flt = tuple(getattr(c, f"flt_{k}", d) for k, d in (("b0", 1.0), ("b1", 0.0), ("b2", 0.0), ("a1", 0.0),
-                                                               ("a2", 0.0)))
+        self.act = (c.act_a, c.act_b)  # the nominal actuator of the model
+        self.flt = (c.flt_b0, c.flt_b1, c.flt_b2, c.flt_a1, c.flt_a2)  # the nominal yaw-rate filter
         self.z = np.zeros(n)
         self.u_prev = np.zeros(n)
         self.u_hist = np.zeros((max(self.m, 1), n))
@@ -154,9 +155,6 @@ class _Schedule:
     ``model_regulator.step``'s interpolation: linear between breakpoints, held outside."""
 
     def __init__(self, c: mr.Coefficients) -> None:
-        if not hasattr(c, "sched_v"):  # a constant law of the firmware before issue 15's schedule
-            self.const = (c.a, c.g_w0, c.g_w1, c.g_r0, c.g_r1, c.q0)
-            return
         self.const = None
         self.n = c.n_sched
         self.v = np.asarray(c.sched_v)

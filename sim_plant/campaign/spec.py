@@ -30,10 +30,11 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from firmware_py import calibration_file
 from firmware_py import model_regulator as mr
 from sim_plant.campaign.engine import METRICS
 from sim_plant.campaign.params import PARAMETERS, Parameter
@@ -146,30 +147,20 @@ def calibration(name: str, base: Path = Path("."), where: str = "campaign") -> m
     if name == "shipped":
         return mr.ControllerConfig()
     if name == "paper":
-        if hasattr(mr, "plain_law"):
-            return mr.plain_law(mr.ControllerConfig(), mr.PAPER_K, mr.PAPER_TAU, mr.DEFAULT_TAU_N)
-        return replace(mr.ControllerConfig(), k=mr.PAPER_K, tau=mr.PAPER_TAU)
+        return mr.plain_law(mr.ControllerConfig(), mr.PAPER_K, mr.PAPER_TAU, mr.DEFAULT_TAU_N)
     if name == "previous":
-        return getattr(mr, "PREVIOUS_CONFIG", mr.ControllerConfig())
+        return mr.PREVIOUS_CONFIG
     path = Path(name) if Path(name).is_absolute() else base / name
     if path.suffix != ".cfg" or not path.is_file():
         raise SpecError(f"{where}: calibration {name!r} is none of {', '.join(NAMED_CALIBRATIONS)} nor a .cfg file")
     try:
-        cfg = _read_cfg(path)
+        cfg = calibration_file.load(path)
         mr.configure(cfg)
     except (KeyError, ValueError, OSError) as exc:
         raise SpecError(f"{where}: calibration {name!r}: {str(exc).splitlines()[0]}") from None
     if abs(cfg.ts - TS) > 1e-15:
         raise SpecError(f"{where}: calibration {name!r} runs at ts {cfg.ts:g} s; campaigns run at {TS:g} s")
     return cfg
-
-
-def _read_cfg(path: Path) -> mr.ControllerConfig:
-    try:
-        from firmware_py.calibration_file import load as read
-    except ImportError:  # before issue 15's calibration files
-        from sim_plant.offline.vectors import read_config as read
-    return read(path)
 
 
 def _distribution(value: Any, key: str, p: Parameter, where: str) -> Distribution:
