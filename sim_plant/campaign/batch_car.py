@@ -37,8 +37,14 @@ BASE = VehicleParams()  # the car's data besides mass (inertia, axle positions, 
 
 def magic_formula(alpha: np.ndarray, b: np.ndarray, peak: np.ndarray) -> np.ndarray:
     """``tyres.magic_formula`` with the car's shape and curvature, element-wise."""
+    return peak * shape_sine(alpha, b)
+
+
+def shape_sine(alpha: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sin(C atan(B alpha - E (B alpha - atan(B alpha)))): the magic formula over its peak D.
+    Two wheels of one B (split mu: the same tyre on two roads) share it."""
     ba = b * alpha
-    return peak * np.sin(PACEJKA_SHAPE * np.arctan(ba - PACEJKA_CURVATURE * (ba - np.arctan(ba))))
+    return np.sin(PACEJKA_SHAPE * np.arctan(ba - PACEJKA_CURVATURE * (ba - np.arctan(ba))))
 
 
 class BatchCar:
@@ -83,6 +89,11 @@ class BatchCar:
         if wheels is None:
             f_front = magic_formula(alpha_f, self.b_f, self.peak_f)
             f_rear = magic_formula(alpha_r, self.b_r, self.peak_r)
+        elif len(wheels) == 2:  # each axle's wheels share B: ((B, D_left, D_right), ...)
+            (b_f, pfl, pfr), (b_r, prl, prr) = wheels
+            s_f, s_r = shape_sine(alpha_f, b_f), shape_sine(alpha_r, b_r)
+            f_front = pfl * s_f + pfr * s_f
+            f_rear = prl * s_r + prr * s_r
         else:
             (bfl, pfl), (bfr, pfr), (brl, prl), (brr, prr) = wheels
             f_front = magic_formula(alpha_f, bfl, pfl) + magic_formula(alpha_f, bfr, pfr)
@@ -98,7 +109,8 @@ class BatchCar:
     def advance(self, delta: np.ndarray, m_z: np.ndarray, f_y: np.ndarray | None, a_x: np.ndarray | None,
                 wheels, mu_max: np.ndarray) -> None:
         """``NonlinearPlant.advance``: one step, inputs held.  ``f_y`` None: no side force;
-        ``a_x`` None: the speed stays; ``wheels`` None: intact axles, else the four wheels' (B, D)."""
+        ``a_x`` None: the speed stays; ``wheels`` None: intact axles, else the four wheels' (B, D),
+        or per axle (B, D_left, D_right) when its two wheels share B."""
         if a_x is None and wheels is None:  # speed and grip constant: so is the sub-step count
             if self._fixed_substeps is None:
                 self._fixed_substeps = self.substeps(mu_max)

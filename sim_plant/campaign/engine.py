@@ -13,9 +13,10 @@ with one step of loop delay) without the bus, in its order:
 5. the actuator's position follows the command received the step before, and the car advances
    with the driver's angle plus that position.
 
-The rows are split into two groups that run apart: the yaw-moment step and the side wind (all
-wheels intact, speed constant) and split-mu braking and the blow-out (wheels evaluated one by
-one, speed integrated), so that neither pays for the other's arithmetic.
+The rows are split into groups that run apart, so that none pays for another's arithmetic: the
+yaw-moment step and the side wind (all wheels intact, speed constant); split-mu braking (speed
+integrated, each axle's two wheels on their own mu with one shared tyre curve); the blow-out
+(speed integrated, every wheel evaluated on its own).
 
 ``simulate`` returns, per row, the figures the criteria judge (``METRICS``).
 """
@@ -70,7 +71,7 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
     kind = samples["disturbance"]
     grip = (kind == SPLIT) | (kind == BLOWOUT)
     out: dict[str, np.ndarray] = {}
-    for rows in (np.flatnonzero(~grip), np.flatnonzero(grip)):
+    for rows in (np.flatnonzero(~grip), np.flatnonzero(kind == SPLIT), np.flatnonzero(kind == BLOWOUT)):
         if rows.size == 0:
             continue
         part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record)
@@ -142,7 +143,7 @@ class _Group:
                 m_z = block["m_z"][j]
                 f_y = block["f_y"][j] if block["f_y"] is not None else None
                 if self.grip:
-                    wheels = [(b[j], d[j]) for b, d in block["wheels"]]
+                    wheels = [tuple(x if np.ndim(x) == 1 else x[j] for x in w) for w in block["wheels"]]
                     car.advance(driver + applied, m_z, f_y, block["a_x"][j], wheels, block["mu_max"][j])
                 else:
                     car.advance(driver + applied, m_z, f_y, None, None, car.mu)

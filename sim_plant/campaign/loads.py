@@ -70,6 +70,9 @@ class GripLoads:
         self.wheel_load = np.where(wheel <= 1, 0.5 * f_zf, 0.5 * f_zr)  # TyreBlowout.wheel_load
         self.side = np.where((wheel == 0) | (wheel == 2), 1.0, -1.0)
         self.car = car
+        #: Only split-mu rows: each axle's wheels keep one B (only their mu differs), so they share
+        #: the formula's sine (``BatchCar``).
+        self.shared = not bool(self.blow.any())
 
     def block(self, t: np.ndarray) -> dict[str, object]:
         sp, bl = _SPLIT, _BLOW
@@ -90,6 +93,12 @@ class GripLoads:
         peak = 1.0 - k * bl.peak_loss
         mu_left = self.mu
         mu_right = np.where(split_on, self.mu_right, self.mu)
+        if self.shared:  # B stiffness / peak with both fractions 1 is B itself
+            car = self.car
+            wheels = [(car.b_f, 0.5 * 1.0 * mu_left * car.f_zf, 0.5 * 1.0 * mu_right * car.f_zf),
+                      (car.b_r, 0.5 * 1.0 * mu_left * car.f_zr, 0.5 * 1.0 * mu_right * car.f_zr)]
+            return {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
+                    "wheels": wheels, "mu_max": np.maximum(self.mu, mu_right)}
         wheels = []
         for w in range(4):
             hit = self.blown[w] & blow_on
