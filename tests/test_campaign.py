@@ -163,3 +163,28 @@ def test_shipped_campaign_files_parse(name: str) -> None:
     for i in range(2):  # a sample is a valid scenario file's content
         sc = params.scenario_for(s.row(i), c.duration)
         assert scn.parse({"duration": sc.duration, "v": sc.v, "mu": sc.mu, "mass": sc.mass}, "x").v == sc.v
+
+
+def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    text = TINY.format(sampling="random").replace("samples = 12", "samples = 40").replace("chunk = 5", "chunk = 4")
+    campaign = _write(tmp_path, text)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "mrsteer_cli", "campaign", "run", str(campaign), "--out", str(out), "--workers", "0"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not results.chunk_path(out, 1).exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    done = results.done_chunks(out)
+    assert proc.returncode == 130 and "run the same command again to resume" in err, err
+    assert 2 <= len(done) < 10 and not list((out / "chunks").glob("*.tmp"))
+    again = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"ran {10 - len(done)} of 10 chunks ({len(done)} already done)" in again.stdout
+    whole = tmp_path / "whole"
+    runner.run(spec.parse(text, "t.toml"), tmp_path, whole, workers=0)
+    assert results.read_all(out).equals(results.read_all(whole))

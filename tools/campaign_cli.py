@@ -81,7 +81,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     out = args.out or Path("out") / f"campaign-{c.name}"
     say(f"campaign {c.name}: {c.samples} samples x {len(c.calibrations)} calibrations "
         f"({', '.join(c.calibrations)}), {c.duration:g} s each, {c.chunks} chunks -> {out}/")
-    res = runner.run(c, args.campaign.parent, out, args.scheduler, args.workers, args.resume, Progress())
+    try:
+        res = runner.run(c, args.campaign.parent, out, args.scheduler, args.workers, args.resume, Progress())
+    except KeyboardInterrupt:
+        from sim_plant.campaign.results import done_chunks
+
+        print(f"\nmrsteer campaign: interrupted with {len(done_chunks(out))} of {c.chunks} chunks written to {out}/; "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
     runs = res.samples * len(c.calibrations)
     print(f"ran {res.ran} of {res.chunks} chunks ({res.chunks - res.ran} already done) in {res.seconds:.1f} s"
           + (f" on {res.workers} workers" if res.ran else "") + f"; {runs} runs in {out}/")
