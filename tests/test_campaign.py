@@ -177,7 +177,7 @@ def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
     deadline = time.monotonic() + 120
     while not results.chunk_path(out, 1).exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGTERM)  # as a batch system stops a job (Ctrl-C is handled the same)
     _, err = proc.communicate(timeout=120)
     done = results.done_chunks(out)
     assert proc.returncode == 130 and "run the same command again to resume" in err, err

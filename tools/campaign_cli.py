@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -81,6 +82,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     out = args.out or Path("out") / f"campaign-{c.name}"
     say(f"campaign {c.name}: {c.samples} samples x {len(c.calibrations)} calibrations "
         f"({', '.join(c.calibrations)}), {c.duration:g} s each, {c.chunks} chunks -> {out}/")
+    def interrupted(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    # Ctrl-C or a SIGTERM (a batch system's stop) leaves the chunks written so far; even where the
+    # shell started us with SIGINT ignored.
+    signal.signal(signal.SIGINT, interrupted)
+    signal.signal(signal.SIGTERM, interrupted)
     try:
         res = runner.run(c, args.campaign.parent, out, args.scheduler, args.workers, args.resume, Progress())
     except KeyboardInterrupt:
