@@ -111,15 +111,17 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
             procs.append(broker)
             _wait_for(work / "bus.err", "serving", broker)
             ncpu = os.cpu_count() or 1
+            probe = _LatencyProbe(env_channel)
+            # The plant first, sending before the controller's timed window opens: a process
+            # start (about a second here, longer on a loaded machine) must not eat the window.
+            plant = _spawn(launch.plant(bus, launch.PlantSettings(rate_hz, "realtime", "paper-fig9",
+                                                                 duration=seconds + 60.0)).command(), work / "plant.err")
+            procs.append(plant)
+            _wait_for(work / "plant.err", "realtime", plant)
             ctl = _spawn(launch.controller(bus, launch.ControllerSettings(
                 rate_hz, duration=seconds, rt_priority=50, cpu=ncpu - 1 if pin and ncpu > 1 else None,
                 stats_out=work / "ctl.json")).command(), work / "ctl.err")
             procs.append(ctl)
-            _wait_for(work / "ctl.err", "running at", ctl)
-            probe = _LatencyProbe(env_channel)
-            plant = _spawn(launch.plant(bus, launch.PlantSettings(rate_hz, "realtime", "paper-fig9",
-                                                                 duration=seconds + 2.0)).command(), work / "plant.err")
-            procs.append(plant)
             if ctl.wait(seconds + 120) != 0:
                 raise RuntimeError(f"controller failed: {(work / 'ctl.err').read_text()[-500:]}")
             lat = probe.stop()

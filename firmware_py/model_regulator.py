@@ -221,7 +221,10 @@ def configure(cfg: ControllerConfig) -> Coefficients:
 
 
 def law_at(c: Coefficients, speed: float) -> LawPoint:
-    """The coefficient set step() uses at ``speed``, with step()'s own arithmetic (for analysis)."""
+    """The coefficient set step() uses at ``speed``, with step()'s own arithmetic (for analysis).
+
+    The breakpoint search repeats step()'s lines on purpose: step() calls nothing, and
+    tests/test_scheduled_law.py holds the two equal."""
     j, j1, f = 0, 0, 0.0
     n = c.n_sched
     if n > 1 and speed > c.sched_v[0]:

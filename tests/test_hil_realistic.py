@@ -116,3 +116,12 @@ def test_a_linear_plant_with_a_physical_disturbance_is_one_usage_error() -> None
     assert "linear plant takes only yaw-moment loads" in proc.stderr
     proc = mrsteer("hil", "run", "--sensors", "nowhere.toml")
     assert proc.returncode == 2 and "nowhere.toml: no such file" in proc.stderr
+
+
+def test_the_shipped_calibration_does_not_limit_cycle_on_the_realistic_car(tmp_path: Path) -> None:
+    """The calibration shipped before issue 15 limit-cycled between the +-3 deg limits here from
+    the sensor noise alone (command RMS about 2 deg); the shipped one holds the gust calmly."""
+    s = _run(tmp_path, "--scenario", "side-wind", "--duration", "1.5")
+    assert (s["plant"], s["actuator"]) == ("nonlinear", "order 1, 20 ms")
+    assert s["time_at_limit_s"] == 0.0 and s["aux_rms_deg"] < 0.5
+    assert s["peak_yaw_rate_true_rad_s"] < 0.02
