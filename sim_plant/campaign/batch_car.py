@@ -10,7 +10,7 @@ scalar model up to the last bits of numpy's and libm's transcendental functions
   magic-formula tyres of ``tyres``, RK4 in ``substeps()`` equal sub-steps, the speed a state
   that braking lowers down to ``STOP_SPEED``;
 * ``BatchPositionActuator``: ``actuator_dynamics.PositionActuator`` of order 1 (no dead time):
-  range, exact ZOH lag, rate limit, end stop;
+  range, exact ZOH lag, rate limit, end stop, and the position's mean over the step;
 * ``BatchSensors``: ``sensors.Sensors``: the yaw rate's noise (each sample's own seeded stream,
   drawn as the scalar draws it), bias, 2nd-order Butterworth and DBC quantisation; the
   steering angle and the speed quantised (their noise is 0 in a campaign).
@@ -162,7 +162,10 @@ class BatchPositionActuator:
 
         e = expm(aug * ts)
         self.phi, self.gamma = e[:, 0, 0].copy(), e[:, 0, 1].copy()
+        # PositionActuator's mean over a step of an unclipped first-order move: T/ts (1 - e^(-ts/T))
+        self.mean_c = time_constant / ts * (1.0 - np.exp(-ts / time_constant))
         self.position = np.zeros(time_constant.size)
+        self.mean = np.zeros(time_constant.size)
 
     def step(self, command: np.ndarray) -> np.ndarray:
         lim = self.limit
@@ -170,8 +173,13 @@ class BatchPositionActuator:
         x = self.position
         nxt = self.phi * x + self.gamma * u
         move = nxt - x
-        nxt = np.where(np.abs(move) > self.max_move, x + np.copysign(self.max_move, move), nxt)
-        nxt = np.where(np.abs(nxt) > lim, np.copysign(lim, nxt), nxt)
+        exact = np.abs(move) <= self.max_move
+        nxt = np.where(exact, nxt, x + np.copysign(self.max_move, move))
+        stopped = np.abs(nxt) > lim
+        nxt = np.where(stopped, np.copysign(lim, nxt), nxt)
+        # The position's mean over the step (what the car gets): exact for an unclipped move,
+        # else the trapezoid, as PositionActuator.mean
+        self.mean = np.where(exact & ~stopped, u + (x - u) * self.mean_c, 0.5 * (x + nxt))
         self.position = nxt
         return nxt
 

@@ -11,7 +11,7 @@ with one step of loop delay) without the bus, in its order:
 3. the sensors measure the driver's angle, the speed and the yaw rate (``BatchSensors``);
 4. the law computes the command (``BatchLaw``), which the actuator receives one step later;
 5. the actuator's position follows the command received the step before, and the car advances
-   with the driver's angle plus that position.
+   with the driver's angle plus the position's mean over the step.
 
 The rows are split into groups that run apart, so that none pays for another's arithmetic: the
 yaw-moment step and the side wind (all wheels intact, speed constant); split-mu braking (speed
@@ -137,7 +137,8 @@ class _Group:
                 at_limit += status == mr.STATUS_SATURATED
                 faults += status == mr.STATUS_FAULT
                 pending = u
-                applied = self.actuator.step(handled)
+                self.actuator.step(handled)
+                applied = self.actuator.mean  # the car gets the position's mean over the step
                 if self.record:
                     traces["r"][k], traces["beta"][k], traces["command"][k] = r, car.beta, u
                 m_z = block["m_z"][j]

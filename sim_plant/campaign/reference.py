@@ -62,9 +62,9 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         pipeline.append(u)
         handling.command_received()  # lockstep: the answer arrived
         handling.tick()
-        applied = position.step(handling.applied)
+        position.step(handling.applied)
         r_hist[k], beta_hist[k], u_hist[k] = x[1], x[0], u
         status[k] = ctrl.state.status if ctrl is not None else mr.STATUS_INACTIVE
-        car.advance(driver + applied, m_z)
+        car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
     return ReferenceRun(r_hist, beta_hist, u_hist, status, car.v)
