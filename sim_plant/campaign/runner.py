@@ -105,7 +105,7 @@ def _run_dask(c: Campaign, configs: dict, todo: list[int], chunk_samples, finish
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=40)
+                               dashboard_address=None, silence_logs=50)
         client = Client(cluster)
     else:
         client = Client(scheduler)
