@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 from sim_plant.car import scenario as scn
-from sim_plant.car.disturbances import KINDS, parameter_names
+from sim_plant.car.disturbances import parameter_names
 
 
 def _num(x: float) -> str:
@@ -47,5 +47,3 @@ def to_toml(sc: scn.Scenario, comments: list[str] | None = None) -> str:
         lines.append("")
     return "\n".join(lines)
 
-
-assert set(KINDS) <= set(scn.LOAD_KINDS)  # every disturbance kind has a scenario key
