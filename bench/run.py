@@ -11,17 +11,17 @@ from typing import Any, Callable, Sequence
 from firmware_py.controller import node as rt
 from firmware_py.platform.cli import Parser
 
-NAMES = ("step", "receive", "sweep", "loop", "soak")
+NAMES = ("step", "receive", "sweep", "campaign", "loop", "soak")
 
 
 def build_parser(prog: str = "mrsteer bench") -> Parser:
     p = Parser(prog=prog, description="Benchmarks with same-run baselines: firmware step() against numpy, the "
                "receive path against cantools alone, the offline sweep against scipy.signal point by point, "
-               "and the controller loop's timing, latency and memory on the fallback bus with the plant running. "
+               "a validation campaign against the scalar firmware loop, and the controller loop's timing, latency and memory on the fallback bus with the plant running. "
                "Figures, not pass/fail: timing on shared machines is noisy.")
     p.add_argument("--quick", action="store_true",
                    help="short runs (loop 5 s, soak 30 s, 1,000 sweep points) instead of the full ones "
-                   "(loop 30 s at each rate, soak 10 min, 10,000 points)")
+                   "(loop 30 s at each rate, soak 10 min, 10,000 points); campaign 4,096 scenarios instead of 100,000")
     p.add_argument("--only", choices=NAMES, action="append", metavar="NAME",
                    help=f"run only these ({', '.join(NAMES)}); repeatable")
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
@@ -63,6 +63,14 @@ def format_table(res: dict[str, Any]) -> str:
         s = res["soak"]
         lines.append(_row(f"controller RSS, growth in {s['seconds']:g} s", f"{s['rss_kb'] / 1024:.1f} MiB",
                           "", f"+{s['rss_growth_kb']} KiB", "growth <= 1 MB over 10 min"))
+    if "campaign" in res:
+        s = res["campaign"]
+        lines.append(_row(f"campaign {s['samples']} x {s['duration_s']:g} s, {s['workers']} workers",
+                          f"{s['ours_s']:.1f} s", f"{s['baseline_s']:.0f} s", f"{s['speedup']:.0f}x",
+                          "100,000 x 5 s in <= 120 s, >= 100x the scalar loop"))
+        sc = s["scaling"]
+        lines.append(_row(f"campaign {sc['samples']}: 2 workers vs 1", f"{sc['two_workers_s']:.1f} s",
+                          f"{sc['one_worker_s']:.1f} s", f"{sc['speedup']:.2f}x", ">= 1.7x (LocalCluster)"))
     if "loop" in res or "soak" in res:
         run = (res.get("loop") or [res.get("soak")])[0]
         rtp = run["rt_priority"] or f"denied ({run['rt_priority_denied']})"
@@ -85,6 +93,11 @@ def run(names: Sequence[str], quick: bool, say: Callable[[str], None]) -> dict[s
     if "sweep" in names:
         say("offline sweep ...")
         out["sweep"] = offline.offline_sweep(quick)
+    if "campaign" in names:
+        say("validation campaign (batch engine on a LocalCluster) ...")
+        from mrsteer_bench import campaign
+
+        out["campaign"] = campaign.campaign_bench(quick)
     if "loop" in names:
         secs = 5.0 if quick else 30.0
         out["loop"] = []

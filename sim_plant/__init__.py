@@ -6,6 +6,8 @@
   sweeps, the paper's figures, golden vectors.
 * ``nodes``: bus processes other than the controller: the plant, the bus logger, the fault bridge.
 * ``harness``: running nodes together: process supervision, HIL runs, the fault matrix.
+* ``campaign``: validation campaigns: thousands of sampled scenarios on the realistic car with
+  the firmware's law, vectorised over the batch, chunked on Dask, results as Parquet.
 
 ``python -m sim_plant`` runs the plant node.
 """

@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 from firmware_py import model_regulator as mr
 from firmware_py.controller.options import calibration_from_args, describe_gains, hand_gains
 from firmware_py.platform.cli import EXIT_USAGE, Parser
-from mrsteer_cli import design_cli, hil_cli, replay_cli
+from mrsteer_cli import campaign_cli, design_cli, hil_cli, replay_cli
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number, say
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
@@ -73,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=_cmd_vectors)
     hil_cli.add_parsers(sub)
     replay_cli.add_parsers(sub)
+    campaign_cli.add_parsers(sub)
     return parser
 
 
@@ -269,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (UsageError, ValueError) as exc:
+    except (UsageError, ValueError, FileNotFoundError) as exc:
         print(f"mrsteer: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # an output path that cannot be created or written

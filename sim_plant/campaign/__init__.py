@@ -1,0 +1,13 @@
+"""Validation campaigns: thousands of randomised scenarios on the realistic car, in batches.
+
+* ``params``: the sampled parameters, a ``SampleSet``, the scenario one sample is;
+* ``spec``: the campaign file (TOML): distributions, sample count, calibrations, criteria;
+* ``sampling``: Latin hypercube or random designs, every sample a function of its index;
+* ``batch_car``, ``loads``: the realistic car, actuator, sensors and disturbances vectorised;
+* ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
+* ``reference``: the same closed loop from the product's scalar classes (the engine's oracle);
+* ``results``: a chunk's table, the criteria, Parquet files; ``runner``: chunks on Dask, resume;
+* ``report``: pass rates, maps, histograms, worst cases; ``export``: a sample as a scenario file.
+
+``docs/campaigns.md`` describes the campaign file and the commands.
+"""

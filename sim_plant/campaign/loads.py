@@ -1,0 +1,109 @@
+"""The disturbances' loads and the scenario's yaw-moment step for a batch, a block of steps at a
+time: ``disturbances.SplitMuBraking``, ``SideWindGust`` and ``TyreBlowout`` ``.at(t)`` and the
+scenario's ``yaw_moment`` event, evaluated as arrays of shape (steps, rows).
+
+The loads depend on time and on the sample only, never on the car's state, so they are computed
+ahead in blocks (``BLOCK`` steps) with one numpy operation per block instead of per step.  Each
+formula repeats its scalar model's arithmetic; a row of another kind gets exact zeros, which
+leave the sums of ``plants.Car`` unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim_plant.car import disturbances as dist
+from sim_plant.car.tyres import G, static_axle_loads
+from sim_plant.campaign.params import KINDS, SampleSet
+
+BLOCK = 64
+#: Events fire when their time is within this of the step's (``ScenarioState.advance_to``).
+EVENT_SLACK = 1e-12
+YAW, SPLIT, WIND, BLOWOUT = (KINDS.index(k) for k in ("yaw_moment", "split_mu_braking", "side_wind", "blowout"))
+_SPLIT, _WIND, _BLOW = dist.SplitMuBraking(), dist.SideWindGust(), dist.TyreBlowout()
+
+
+def ramp(t: np.ndarray, start: np.ndarray, duration: float) -> np.ndarray:
+    """``disturbances._ramp``: 0 up to ``start``, 1 after ``start + duration``, 1 - cos between."""
+    if duration <= 0.0:
+        return np.where(t <= start, 0.0, 1.0)
+    mid = 0.5 * (1.0 - np.cos(np.pi * (t - start) / duration))
+    return np.where(t <= start, 0.0, np.where(t >= start + duration, 1.0, mid))
+
+
+class IntactLoads:
+    """Rows of the yaw-moment step and the side-wind gust: all wheels keep their grip, v its value."""
+
+    def __init__(self, s: SampleSet) -> None:
+        kind = s["disturbance"]
+        self.onset = s["onset"]
+        self.m_step = np.where(kind == YAW, s["yaw_moment"], 0.0)
+        self.is_yaw = kind == YAW
+        self.wind = np.where(kind == WIND, s["wind_force"], 0.0)
+        self.any_wind = bool((kind == WIND).any())
+
+    def block(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """m_z (scene's step plus the loads'), f_y (or None) at times t (column)."""
+        g = _WIND
+        fired = self.onset <= t + EVENT_SLACK
+        m_scene = np.where(fired & self.is_yaw, self.m_step, 0.0)
+        if not self.any_wind:
+            return {"m_z": m_scene + 0.0, "f_y": None}
+        rise = ramp(t, self.onset, g.rise_time)
+        fall = ramp(t, self.onset + g.rise_time + g.hold_time, g.fall_time)
+        f = self.wind * (rise - fall)
+        return {"m_z": m_scene + (0.0 + g.cp_ahead * f), "f_y": 0.0 + f}
+
+
+class GripLoads:
+    """Rows of split-mu braking and the tyre blow-out: wheels' grip, a deceleration, a yaw moment."""
+
+    def __init__(self, s: SampleSet, car) -> None:
+        kind = s["disturbance"]
+        self.split, self.blow = kind == SPLIT, kind == BLOWOUT
+        self.onset, self.mu, self.mass = s["onset"], s["mu"], s["mass"]
+        self.mu_right = np.where(self.split, s["mu_split"], self.mu)
+        self.decel = np.where(self.split, s["deceleration"], 0.0)
+        wheel = np.where(self.blow, s["blowout_wheel"], -1)
+        self.blown = [wheel == w for w in range(4)]  # fl, fr, rl, rr
+        f_zf, f_zr = static_axle_loads(self.mass, _BLOW.l_f, _BLOW.l_r)
+        self.wheel_load = np.where(wheel <= 1, 0.5 * f_zf, 0.5 * f_zr)  # TyreBlowout.wheel_load
+        self.side = np.where((wheel == 0) | (wheel == 2), 1.0, -1.0)
+        self.car = car
+        #: Only split-mu rows: each axle's wheels keep one B (only their mu differs), so they share
+        #: the formula's sine (``BatchCar``).
+        self.shared = not bool(self.blow.any())
+
+    def block(self, t: np.ndarray) -> dict[str, object]:
+        sp, bl = _SPLIT, _BLOW
+        on = t >= self.onset  # SplitMuBraking.at: nothing before t_start
+        demand = 0.5 * self.mass * self.decel * ramp(t, self.onset, sp.ramp)
+        side_load = 0.5 * self.mass * G
+        f_l = np.minimum(demand, self.mu * side_load)
+        f_r = np.minimum(demand, self.mu_right * side_load)
+        split_on = on & self.split
+        m_split = np.where(split_on, (f_l - f_r) * sp.track_width / 2.0, 0.0)
+        a_split = np.where(split_on, (f_l + f_r) / self.mass, 0.0)
+        k = np.where(self.blow, ramp(t, self.onset, bl.deflation_time), 0.0)
+        drag = k * bl.rolling_resistance * self.wheel_load
+        blow_on = k != 0.0
+        m_blow = np.where(blow_on, self.side * drag * bl.track_width / 2.0, 0.0)
+        a_blow = np.where(blow_on, drag / self.mass, 0.0)
+        stiffness = 1.0 - k * bl.stiffness_loss
+        peak = 1.0 - k * bl.peak_loss
+        mu_left = self.mu
+        mu_right = np.where(split_on, self.mu_right, self.mu)
+        if self.shared:  # B stiffness / peak with both fractions 1 is B itself
+            car = self.car
+            wheels = [(car.b_f, 0.5 * 1.0 * mu_left * car.f_zf, 0.5 * 1.0 * mu_right * car.f_zf),
+                      (car.b_r, 0.5 * 1.0 * mu_left * car.f_zr, 0.5 * 1.0 * mu_right * car.f_zr)]
+            return {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
+                    "wheels": wheels, "mu_max": np.maximum(self.mu, mu_right)}
+        wheels = []
+        for w in range(4):
+            hit = self.blown[w] & blow_on
+            st = np.where(hit, stiffness, 1.0)
+            pk = np.where(hit, peak, 1.0)
+            wheels.append(self.car.wheel(w <= 1, st, pk, mu_left if w % 2 == 0 else mu_right))
+        return {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
+                "wheels": wheels, "mu_max": np.maximum(self.mu, mu_right)}

@@ -1,0 +1,190 @@
+"""Campaign files, sampling, the runner's Parquet chunks and resume, report and export."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from firmware_py import model_regulator as mr
+from sim_plant.campaign import engine, params, reference, results, runner, sampling, spec
+from sim_plant.car import scenario as scn
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = """
+name = "tiny"
+samples = 12
+seed = 4
+sampling = "{sampling}"
+duration = 0.6
+chunk = 5
+calibrations = ["shipped", "none"]
+[parameters]
+v = {{ uniform = [8.0, 30.0] }}
+mu = {{ uniform = [0.3, 1.0] }}
+disturbance = {{ choice = ["yaw_moment", "split_mu_braking", "side_wind", "blowout"] }}
+onset = {{ uniform = [0.1, 0.3] }}
+yaw_moment = {{ uniform = [-5000.0, 5000.0] }}
+[criteria]
+peak_yaw_rate = 0.05
+fault_steps = 0
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("bad, key", [
+    ("samples = 0", "'samples'"),
+    ('sampling = "sobol"', "'sampling'"),
+    ("duration = -1", "'duration'"),
+    ('calibrations = ["best"]', "calibration 'best'"),
+    ("wheels = 4", "unknown key 'wheels'"),
+    ("[parameters]\nv = { uniform = [1.0, 30.0] }", "'v' must lie in"),
+    ("[parameters]\nv = { uniform = [30.0, 10.0] }", "'v': uniform needs"),
+    ("[parameters]\nv = { gauss = [3, 1] }", "'v' must be a number"),
+    ('[parameters]\ndisturbance = "tornado"', "'disturbance' must be one of"),
+    ("duration = 1.0\n[parameters]\nonset = { uniform = [0.5, 2.0] }", "'onset' reaches"),
+    ("[criteria]\npeak_yaw_rate = -1", "'peak_yaw_rate' must be a number >= 0"),
+    ("[criteria]\nlateral = 1", "unknown key 'lateral'"),
+])
+def test_bad_campaign_files_are_one_line_naming_the_key(bad: str, key: str) -> None:
+    text = bad if "samples" in bad else f"samples = 10\n{bad}"
+    with pytest.raises(spec.SpecError) as err:
+        spec.parse(text, "f.toml")
+    msg = str(err.value)
+    assert key in msg and msg.startswith("f.toml") and "\n" not in msg
+
+
+@pytest.mark.parametrize("method", ["lhs", "random"])
+def test_every_sample_is_a_function_of_its_index(method: str) -> None:
+    c = spec.parse(TINY.format(sampling=method), "t.toml")
+    whole = sampling.samples(c, np.arange(c.samples))
+    alone = sampling.samples(c, np.array([7, 3]))
+    for k in whole:
+        assert np.array_equal(whole[k][[7, 3]], alone[k])
+    assert len(set(whole["noise_seed"].tolist())) == c.samples
+    if method == "lhs":  # one sample in each of the 12 strata of every drawn dimension
+        strata = np.floor((whole["v"] - 8.0) / 22.0 * 12).astype(int)
+        assert sorted(strata.tolist()) == list(range(12))
+    assert whole["v"].min() >= 8.0 and whole["v"].max() <= 30.0
+
+
+def test_run_resumes_only_the_missing_chunks(tmp_path: Path) -> None:
+    c = spec.parse(TINY.format(sampling="lhs"), "t.toml")
+    out = tmp_path / "out"
+    first = runner.run(c, tmp_path, out, workers=0)
+    assert (first.chunks, first.ran) == (3, 3)
+    table = results.read_all(out)
+    assert table.num_rows == 2 * c.samples
+    before = {k: pq.read_table(results.chunk_path(out, k)) for k in range(3)}
+    results.chunk_path(out, 1).unlink()  # an interrupted run: chunk 1 never finished
+    again = runner.run(c, tmp_path, out, workers=0)
+    assert again.ran == 1
+    assert pq.read_table(results.chunk_path(out, 1)).equals(before[1])
+    with pytest.raises(spec.SpecError, match="another campaign"):
+        runner.run(spec.parse(TINY.format(sampling="random"), "t.toml"), tmp_path, out, workers=0)
+    with pytest.raises(spec.SpecError, match="no campaign to resume"):
+        runner.run(c, tmp_path, tmp_path / "empty", workers=0, resume=True)
+    # The criteria judged as written: pass = every figure within its bound.
+    cols = table.to_pydict()
+    for y, f, ok in zip(cols["peak_yaw_rate"], cols["fault_steps"], cols["pass"]):
+        assert ok == (y <= 0.05 and f <= 0)
+
+
+def test_export_plays_the_same_scenario_as_the_campaign_ran(tmp_path: Path) -> None:
+    c = spec.parse(TINY.format(sampling="lhs"), "t.toml")
+    out = tmp_path / "out"
+    runner.run(c, tmp_path, out, workers=0)
+    cols = results.read_all(out).to_pydict()
+    shipped = [j for j, cal in enumerate(cols["calibration"]) if cal == "shipped"]
+    worst = cols["index"][max(shipped, key=lambda j: cols["peak_yaw_rate"][j])]
+    file = tmp_path / "s.toml"
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "campaign", "export", str(out), str(worst), "--out",
+                           str(file)], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    sc = scn.load(str(file))
+    from firmware_py import calibration_file
+
+    assert calibration_file.load(file.with_suffix(".cfg")) == mr.ControllerConfig()  # the campaign's first
+    assert sc == params.scenario_for(sampling.samples(c, np.array([worst])).row(0), c.duration)
+    ref = reference.run(sc, mr.ControllerConfig())
+    row = next(j for j, (i, cal) in enumerate(zip(cols["index"], cols["calibration"])) if i == worst and cal == "shipped")
+    assert np.max(np.abs(ref.r)) == pytest.approx(cols["peak_yaw_rate"][row], abs=1e-12)
+
+
+def test_report_writes_figures_and_html(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    from sim_plant.campaign import report
+
+    c = spec.parse(TINY.format(sampling="lhs"), "t.toml")
+    out = tmp_path / "out"
+    runner.run(c, tmp_path, out, workers=0)
+    s = report.build(out)
+    cols = results.read_all(out).to_pydict()
+    shipped = [p for p, cal in zip(cols["pass"], cols["calibration"]) if cal == "shipped"]
+    assert s["calibrations"]["shipped"]["pass_rate"] == pytest.approx(np.mean(shipped))
+    worst = s["calibrations"]["none"]["worst"][0]
+    none_peaks = [y for y, cal in zip(cols["peak_yaw_rate"], cols["calibration"]) if cal == "none"]
+    assert worst["peak_yaw_rate"] == max(none_peaks)
+    for f in s["files"]:
+        assert Path(f).stat().st_size > 1000
+    assert "Worst" in (out / "report" / "index.html").read_text()
+
+
+def test_cli_errors_are_one_line(tmp_path: Path) -> None:
+    bad = _write(tmp_path, "samples = 5\n[parameters]\nmu = { uniform = [0.0, 1.0] }\n")
+    for args in (["campaign", "run", str(bad), "--out", str(tmp_path / "o")],
+                 ["campaign", "run", str(tmp_path / "missing.toml")],
+                 ["campaign", "report", str(tmp_path)],
+                 ["campaign", "export", str(tmp_path), "3", "--out", str(tmp_path / "x.toml")]):
+        proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", *args], capture_output=True, text=True,
+                              cwd=ROOT, timeout=120)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_metrics_are_the_engine_figures() -> None:
+    assert set(spec.CRITERIA) <= set(engine.METRICS)
+
+
+@pytest.mark.parametrize("name", ["example.toml", "shipped-vs-paper.toml"])
+def test_shipped_campaign_files_parse(name: str) -> None:
+    c = spec.load(ROOT / "campaigns" / name)
+    assert c.samples > 0 and c.criteria and len(c.sampled) >= 10
+    s = sampling.samples(c, np.array([0, c.samples - 1]))
+    for i in range(2):  # a sample is a valid scenario file's content
+        sc = params.scenario_for(s.row(i), c.duration)
+        assert scn.parse({"duration": sc.duration, "v": sc.v, "mu": sc.mu, "mass": sc.mass}, "x").v == sc.v
+
+
+def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    text = TINY.format(sampling="random").replace("samples = 12", "samples = 40").replace("chunk = 5", "chunk = 4")
+    campaign = _write(tmp_path, text)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "mrsteer_cli", "campaign", "run", str(campaign), "--out", str(out), "--workers", "0"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not results.chunk_path(out, 1).exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)  # as a batch system stops a job (Ctrl-C is handled the same)
+    _, err = proc.communicate(timeout=120)
+    done = results.done_chunks(out)
+    assert proc.returncode == 130 and "run the same command again to resume" in err, err
+    assert 2 <= len(done) < 10 and not list((out / "chunks").glob("*.tmp"))
+    again = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"ran {10 - len(done)} of 10 chunks ({len(done)} already done)" in again.stdout
+    whole = tmp_path / "whole"
+    runner.run(spec.parse(text, "t.toml"), tmp_path, whole, workers=0)
+    assert results.read_all(out).equals(results.read_all(whole))

@@ -1,0 +1,98 @@
+"""The batch engine against the scalar firmware in closed loop with the scalar realistic car.
+
+The oracle, ``sim_plant.campaign.reference.run``, is built from the product's own scalar
+classes (``ScenarioState``, ``Car``, ``PositionActuator``, ``Sensors``, ``ModelRegulator``),
+playing the scenario ``params.scenario_for`` makes of a sample.  The samples come from a
+seeded random campaign over wide ranges, so they are not chosen by hand; a few named ones add a
+spin (yaw rate beyond the firmware's 3 rad/s range: the fault path and the re-initialisation)
+and a rate-limited actuator.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_py import model_regulator as mr
+from sim_plant.campaign import engine, reference, sampling, spec
+from sim_plant.campaign.params import KINDS, SampleSet, scenario_for
+
+ROOT = Path(__file__).resolve().parents[1]
+DURATION = 1.5
+TOL = 1e-12
+
+WIDE = """
+samples = 1000
+seed = {seed}
+sampling = "random"
+duration = 1.5
+calibrations = ["shipped"]
+[parameters]
+v = {{ uniform = [5.0, 45.0] }}
+mu = {{ uniform = [0.15, 1.2] }}
+mass = {{ uniform = [1000.0, 2200.0] }}
+disturbance = {{ choice = ["yaw_moment", "split_mu_braking", "side_wind", "blowout"] }}
+onset = {{ uniform = [0.0, 0.8] }}
+yaw_moment = {{ uniform = [-9000.0, 9000.0] }}
+mu_split = {{ uniform = [0.05, 1.0] }}
+deceleration = {{ uniform = [0.0, 10.0] }}
+wind_force = {{ uniform = [-6000.0, 6000.0] }}
+blowout_wheel = {{ choice = ["fl", "fr", "rl", "rr"] }}
+actuator_tau = {{ uniform = [0.005, 0.06] }}
+actuator_rate = {{ uniform = [20.0, 400.0] }}
+noise_density = {{ loguniform = [0.001, 0.2] }}
+bias = {{ uniform = [-2.0, 2.0] }}
+reaction_time = {{ uniform = [0.5, 2.0] }}
+driver_time_constant = {{ uniform = [0.1, 2.0] }}
+"""
+
+
+def _compare(s: SampleSet, config: mr.ControllerConfig | None) -> dict[str, np.ndarray]:
+    res = engine.simulate(s, config, DURATION, record=True)
+    for i in range(len(s)):
+        ref = reference.run(scenario_for(s.row(i), DURATION), config)
+        for name, trace in (("r", ref.r), ("beta", ref.beta), ("command", ref.command)):
+            err = np.max(np.abs(trace - res[name][:, i]))
+            assert err <= TOL, f"sample {s.row(i)}: {name} differs by {err:.3g}"
+        assert res["peak_yaw_rate"][i] == pytest.approx(np.max(np.abs(ref.r)), abs=TOL)
+        assert res["fault_steps"][i] == np.count_nonzero(ref.status == mr.STATUS_FAULT)
+        assert res["time_at_limit"][i] == pytest.approx(np.count_nonzero(ref.status == mr.STATUS_SATURATED) * 0.002)
+        assert res["final_speed"][i] == pytest.approx(ref.final_speed, abs=TOL)
+    return res
+
+
+@pytest.mark.parametrize("seed", [11, 2027])
+def test_batch_equals_scalar_firmware_on_random_samples(seed: int) -> None:
+    c = spec.parse(WIDE.format(seed=seed), "wide.toml")
+    rows = np.random.default_rng(seed).choice(c.samples, 10, replace=False)
+    s = sampling.samples(c, rows)
+    assert set(s["disturbance"].astype(int)) == set(range(len(KINDS))) or len(s) < 8
+    _compare(s, mr.ControllerConfig())
+
+
+def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
+    c = spec.parse(WIDE.format(seed=5), "wide.toml")
+    s = sampling.samples(c, np.arange(4))
+    s["disturbance"][:] = KINDS.index("yaw_moment")
+    s["yaw_moment"][:2] = 15000.0  # a spin on a slippery road: |r| beyond 3 rad/s is a fault
+    s["mu"][:2] = 0.3
+    s["onset"][:] = 0.1
+    res = _compare(s, mr.ControllerConfig())
+    assert res["fault_steps"][:2].min() > 0, "the spin must reach the fault path"
+    _compare(s, None)
+
+
+@pytest.mark.parametrize("name", ["previous", "paper", "../tests/vectors/previous_500hz.cfg"])
+def test_batch_equals_scalar_with_the_other_calibrations(name: str) -> None:
+    """The constant laws (no schedule; the paper's without nominal actuator and filter)."""
+    c = spec.parse(WIDE.format(seed=23), "wide.toml")
+    config = spec.calibration(name, ROOT / "campaigns")
+    assert not config.scheduled
+    _compare(sampling.samples(c, np.arange(5)), config)
+
+
+def test_the_shipped_law_is_scheduled_with_its_nominal_actuator_and_filter() -> None:
+    c = mr.configure(mr.ControllerConfig())  # what the equality tests above exercise
+    assert c.n_sched > 1 and c.act_a > 0.0 and c.flt_a1 != 0.0 and c.model_delay == 1
