@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mrs_calib.h"
 #include "mrs_controller.h"
 
 #define LINE_MAX_LEN 4096
@@ -21,94 +22,17 @@ static int fail(const char *what, const char *arg)
     return 2;
 }
 
-static void trim(char *s)
+/* The coefficient lines of the .cfg, to compare with mrs_configure(). */
+static void keep_coeff(void *ctx, const char *key, double value)
 {
-    size_t n = strlen(s);
-    while (n > 0u && (s[n - 1u] == '\n' || s[n - 1u] == '\r' || s[n - 1u] == ' ')) {
-        s[--n] = '\0';
-    }
-}
-
-/* Reads the calibration lines; also keeps the coefficient lines to compare with mrs_configure(). */
-static int read_config(const char *path, mrs_config_t *g, double coeff_ref[7])
-{
-    char line[LINE_MAX_LEN];
-    FILE *f = fopen(path, "r");
-    if (f == NULL) {
-        return -1;
-    }
-    mrs_default_config(g);
-    while (fgets(line, sizeof line, f) != NULL) {
-        char *eq = strchr(line, '=');
-        char *key = line, *val;
-        double x;
-        if (line[0] == '#' || eq == NULL) {
-            continue;
-        }
-        *eq = '\0';
-        val = eq + 1;
-        trim(key);
-        while (*val == ' ') {
-            ++val;
-        }
-        trim(val);
-        x = strtod(val, NULL);
-        if (strcmp(key, "q_form") == 0) {
-            g->q_form = (strcmp(val, "standard") == 0) ? MRS_Q_STANDARD : MRS_Q_LIMITED;
-        } else if (strcmp(key, "method") == 0) {
-            g->method = (strcmp(val, "zoh") == 0) ? MRS_ZOH : MRS_TUSTIN;
-        } else if (strcmp(key, "k") == 0) {
-            g->k = x;
-        } else if (strcmp(key, "tau") == 0) {
-            g->tau = x;
-        } else if (strcmp(key, "tau_n") == 0) {
-            g->tau_n = x;
-        } else if (strcmp(key, "ts") == 0) {
-            g->ts = x;
-        } else if (strcmp(key, "aux_limit") == 0) {
-            g->aux_limit = x;
-        } else if (strcmp(key, "rate_limit") == 0) {
-            g->rate_limit = x;
-        } else if (strcmp(key, "model_delay_steps") == 0) {
-            g->model_delay_steps = (int)x;
-        } else if (strcmp(key, "fade_rate") == 0) {
-            g->fade_rate = x;
-        } else if (strcmp(key, "speed_active_min") == 0) {
-            g->speed_active_min = x;
-        } else if (strcmp(key, "speed_max") == 0) {
-            g->speed_max = x;
-        } else if (strcmp(key, "driver_angle_max") == 0) {
-            g->driver_angle_max = x;
-        } else if (strcmp(key, "yaw_rate_max") == 0) {
-            g->yaw_rate_max = x;
-        } else if (strcmp(key, "nominal_l_f") == 0) {
-            g->nominal_l_f = x;
-        } else if (strcmp(key, "nominal_l_r") == 0) {
-            g->nominal_l_r = x;
-        } else if (strcmp(key, "nominal_mass") == 0) {
-            g->nominal_mass = x;
-        } else if (strcmp(key, "nominal_c_f") == 0) {
-            g->nominal_c_f = x;
-        } else if (strcmp(key, "nominal_c_r") == 0) {
-            g->nominal_c_r = x;
-        } else if (strcmp(key, "c.a") == 0) {
-            coeff_ref[0] = x;
-        } else if (strcmp(key, "c.g_w0") == 0) {
-            coeff_ref[1] = x;
-        } else if (strcmp(key, "c.g_w1") == 0) {
-            coeff_ref[2] = x;
-        } else if (strcmp(key, "c.g_r0") == 0) {
-            coeff_ref[3] = x;
-        } else if (strcmp(key, "c.g_r1") == 0) {
-            coeff_ref[4] = x;
-        } else if (strcmp(key, "c.k_us") == 0) {
-            coeff_ref[5] = x;
-        } else if (strcmp(key, "c.inv_one_minus_g_w0") == 0) {
-            coeff_ref[6] = x;
+    static const char *const names[7] = {"a", "g_w0", "g_w1", "g_r0", "g_r1", "k_us", "inv_one_minus_g_w0"};
+    double *ref = ctx;
+    int i;
+    for (i = 0; i < 7; ++i) {
+        if (strcmp(key, names[i]) == 0) {
+            ref[i] = value;
         }
     }
-    fclose(f);
-    return 0;
 }
 
 static void track(double got, double ref, double *err, double *mag)
@@ -132,14 +56,15 @@ int main(int argc, char **argv)
     double u_err = 0.0, u_mag = 0.0, z_err = 0.0, z_mag = 0.0, h_err = 0.0, h_mag = 0.0;
     long steps = 0, status_mismatch = 0, flags_mismatch = 0, idx_mismatch = 0, init_mismatch = 0;
     char line[LINE_MAX_LEN];
+    char why[512];
     FILE *f;
     int i;
 
     if (argc != 3) {
         return fail("usage", "run_vectors CONFIG.cfg VECTORS.csv");
     }
-    if (read_config(argv[1], &g, coeff_ref) != 0) {
-        return fail("cannot read", argv[1]);
+    if (mrs_calib_read(argv[1], &g, keep_coeff, coeff_ref, why, sizeof why) != 0) {
+        return fail("calibration", why);
     }
     if (mrs_configure(&g, &c) != 0) {
         return fail("invalid calibration in", argv[1]);

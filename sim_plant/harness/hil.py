@@ -61,6 +61,9 @@ class HilConfig:
     seed: int | None = None
     out: Path = Path("out/hil")
     secoc_key: bytes | None = None  # authenticate the commands and the sensor frames (mrsteer_dbc.secoc)
+    # The controller process: None for the Python one, else an external program that takes the
+    # controller's flags (``launch.controller_program``: the C node, or --controller-cmd).
+    controller_program: tuple[str, ...] | None = None
 
 
 def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun:
@@ -101,7 +104,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             procs.append(launch.start("controller", launch.controller(bus, launch.ControllerSettings(
                 cfg.rate_hz, launch.Gains(cfg.k, cfg.tau, cfg.tau_n, cfg.model_delay),
                 trigger="sensors" if cfg.mode == "lockstep" else "clock", q_form=cfg.controller,
-                stats_out=work / "controller.json", secoc=cfg.secoc_key is not None)), work, env))
+                stats_out=work / "controller.json", secoc=cfg.secoc_key is not None,
+                program=cfg.controller_program)), work, env))
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
             cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,

@@ -64,7 +64,8 @@ class _RowRun:
         return self.start(name, launch.controller(
             launch.BusArgs(self.setup.interface, self.controller_side),
             launch.ControllerSettings(self.setup.rate_hz, self.setup.gains(), rate_limit=RATE_LIMIT,
-                                      stats_out=self.work / "controller.json", secoc=self.row.secoc)))
+                                      stats_out=self.work / "controller.json", secoc=self.row.secoc,
+                                      program=self.setup.controller_program)))
 
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
