@@ -186,11 +186,9 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
     return 0;
 }
 
-/* Pack, sign when keyed and synced, seal (E2E CRC last) and send one frame of message msg. */
-static int send_frame(mrs_node_t *n, int msg, double *phys)
+int mrs_node_build_frame(mrs_node_t *n, int msg, double *phys, uint8_t data[8])
 {
     const mrs_msg_t *m = &mrs_messages[msg];
-    uint8_t data[8];
     uint64_t fv = 0u;
     int signed_frame = 0;
     if (m->e2e) {
@@ -200,22 +198,31 @@ static int send_frame(mrs_node_t *n, int msg, double *phys)
     if (n->keyed && m->mac >= 0) {
         signed_frame = mrs_signer_next(&n->signer, m, phys, &fv);
     }
-    if (m->pack(data, sizeof data, phys) != (int)m->length) {
-        snprintf(n->bus->error, sizeof n->bus->error, "cannot pack %s", m->name);
+    if (m->pack(data, 8u, phys) != (int)m->length) {
         return -1;
     }
     if (signed_frame) {
         /* CRC and MAC are zero in data now, as the MAC wants them. */
         phys[m->mac] = (double)mrs_frame_mac(n->cmac, m->frame_id, data, m->length, fv, m->mac_bits);
-        if (m->pack(data, sizeof data, phys) != (int)m->length) {
-            snprintf(n->bus->error, sizeof n->bus->error, "cannot pack %s", m->name);
+        if (m->pack(data, 8u, phys) != (int)m->length) {
             return -1;
         }
     }
     if (m->e2e) {
         data[m->crc_byte] = mrs_e2e_crc(m->data_id, data, m->length, m->crc_byte);
     }
-    if (n->bus->send(n->bus, m->frame_id, data, m->length) != 0) {
+    return (int)m->length;
+}
+
+static int send_frame(mrs_node_t *n, int msg, double *phys)
+{
+    uint8_t data[8];
+    const int len = mrs_node_build_frame(n, msg, phys, data);
+    if (len < 0) {
+        snprintf(n->bus->error, sizeof n->bus->error, "cannot pack %s", mrs_messages[msg].name);
+        return -1;
+    }
+    if (n->bus->send(n->bus, mrs_messages[msg].frame_id, data, (uint8_t)len) != 0) {
         return -1;
     }
     ++n->stats.tx_frames;

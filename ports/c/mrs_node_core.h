@@ -85,6 +85,11 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f);
 /* Freshness, step, command (and status at its cycle): 0, or -1 when the bus failed. */
 int mrs_node_control(mrs_node_t *n);
 
+/* The next frame of message msg (MRS_MSG_CMD or MRS_MSG_STATUS) from its physical values: alive
+ * counter, SecOC fields and MAC when keyed and synced, E2E CRC last (TxLink.payload). Its length,
+ * or -1. */
+int mrs_node_build_frame(mrs_node_t *n, int msg, double *phys, uint8_t data[8]);
+
 /* The final zero command marked INACTIVE, as on an orderly shutdown. */
 int mrs_node_finish(mrs_node_t *n);
 
