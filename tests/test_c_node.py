@@ -178,3 +178,14 @@ def test_a_vector_calibration_runs_and_its_rate_is_the_default(c_node, tmp_path:
     out = _run(tmp_path / "c", "paper-fig9", c_node + ("--calibration", str(VECTORS / "limited_zoh_200hz_m1.cfg")),
                rate_hz=200.0)
     assert out.summary["loop"]["controller"]["cycles"] == pytest.approx(LOCKSTEP_S * 200, abs=3)
+
+
+def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path) -> None:
+    from sim_plant.harness.faults import ROWS, Setup, format_table, run_matrix
+
+    results = run_matrix(ROWS, keep=tmp_path, setup=Setup(controller_program=c_node))
+    table = format_table(results)
+    assert all(r.passed for r in results), table
+    assert len(results) == len(ROWS) >= 20
+    stats = json.loads((tmp_path / "01" / "controller.json").read_text())
+    assert stats["implementation"] == "c" and stats["rx_rejected"] == 0  # it was the C node, and the baseline is clean
