@@ -189,3 +189,49 @@ def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path
     assert len(results) == len(ROWS) >= 20
     stats = json.loads((tmp_path / "01" / "controller.json").read_text())
     assert stats["implementation"] == "c" and stats["rx_rejected"] == 0  # it was the C node, and the baseline is clean
+
+
+def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) -> None:
+    """Fuzzing the C receive chain against ``ControllerNode.receive``: good frames of every
+    input, each mutated (bit flips, truncation, other counters, out-of-range values) and random
+    payloads, in one sequence; the two nodes must accept exactly the same frames."""
+    import random
+
+    import can
+
+    from firmware_py.controller import node as rt
+
+    contract = mrsteer_dbc.load()
+    rng = random.Random(16)
+    sensors = [("MRS_DriverSteer", "DriverSteer_Angle", 0.7), ("MRS_YawRate", "YawRate_YawRate", 3.0),
+               ("MRS_VehicleSpeed", "VehicleSpeed_Speed", 70.0)]
+    alive = dict.fromkeys([s[0] for s in sensors], 0)
+    frames: list[tuple[int, bytes]] = []
+    for _ in range(3000):
+        name, sig, hi = rng.choice(sensors)
+        value = rng.uniform(-hi if hi < 10 else 0.0, hi)
+        data = bytearray(contract.encode(name, {sig: value}, alive[name]))
+        alive[name] = (alive[name] + rng.choice([1, 1, 1, 2, 4])) % 15
+        kind = rng.randrange(6)
+        if kind == 1:
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        elif kind == 2:
+            data = data[:rng.randrange(len(data))]
+        elif kind == 3:
+            data = bytearray(rng.randbytes(len(data)))
+        elif kind == 4:  # out of range with a valid CRC
+            data = bytearray(contract.encode(name, {sig: 1.05 * hi}, alive[name], strict=False))
+        frames.append((contract.frame_id(name), bytes(data)))
+    got = _secoc_check(["plain"] + [f"rx {fid:X} {data.hex() or '-'}" for fid, data in frames])
+    bus = can.Bus(interface="virtual", channel="c-node-fuzz")
+    try:
+        py = rt.ControllerNode(bus, rt.RuntimeConfig())
+        expected = []
+        for fid, data in frames:
+            before = py.stats.rx_rejected
+            py.receive(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+            expected.append(str(int(py.stats.rx_rejected == before)))
+    finally:
+        bus.shutdown()
+    assert got[1:] == expected
+    assert 0.1 < expected.count("1") / len(expected) < 0.9  # both verdicts well represented

@@ -1,6 +1,7 @@
-/* Drives the C node's SecOC paths from the golden vectors (tests/test_c_node.py feeds it
- * tests/vectors/secoc_*.csv). One command per line on stdin, one answer per line on stdout:
+/* Drives the C node's receive chain and SecOC paths (tests/test_c_node.py feeds it the golden
+ * vectors tests/vectors/secoc_*.csv, and random and mutated frames). One command per line on stdin, one answer per line on stdout:
  *   key HEX32                                   the node is set up keyed with this key: "ok"
+ *   plain                                       the node is set up without SecOC: "ok"
  *   rx HEX                                      a received frame (sync or sensor) through the
  *                                               node's whole receive chain: "1" accepted, "0" refused
  *   cmd EPOCH FV_COUNTER ALIVE STATE ANGLE MEAS the command frame the node builds with its signer
@@ -58,6 +59,12 @@ int main(void)
             cfg.secoc_key = key;
             if (mrs_node_init(&node, NULL, &cfg, err, sizeof err) != 0) {
                 fprintf(stderr, "secoc_check: %s\n", err);
+                return 2;
+            }
+            puts("ok");
+        } else if (strcmp(word, "plain") == 0) {
+            cfg.secoc_key = NULL;
+            if (mrs_node_init(&node, NULL, &cfg, err, sizeof err) != 0) {
                 return 2;
             }
             puts("ok");
