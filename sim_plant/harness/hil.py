@@ -113,7 +113,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
             secoc=cfg.secoc_key is not None)), work, env)
         procs.append(plant)
-        say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}")
+        impl = "" if cfg.controller_program is None else f" ({' '.join(cfg.controller_program)})"
+        say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}{impl}")
 
         limit = time.monotonic() + max(120.0, 40.0 * sc.duration)
         while plant.popen.poll() is None:
