@@ -17,17 +17,20 @@ from mrsteer_bench.timer import per_call_us
 
 class NumpyRegulator:
     """The firmware's law written the way array code would write it (the baseline): state,
-    coefficients and limits in numpy arrays, range checks and clamp with numpy functions.
-    Same arithmetic as ``model_regulator.step`` on the active path with M >= 1."""
+    coefficient tables and limits in numpy arrays, the schedule with ``np.interp``, range checks
+    and clamp with numpy functions.  The same law as ``model_regulator.step`` on the active
+    path with M >= 1 (to rounding: np.interp's arithmetic is its own)."""
 
     def __init__(self, c: mr.Coefficients) -> None:
         if c.model_delay < 1:
             raise ValueError("the baseline implements the modelled-delay law (M >= 1)")
-        self.g = np.array([c.g_w0, c.g_w1, c.g_r0, c.g_r1, c.a])
+        self.v = np.array(c.sched_v)
+        self.tables = np.array([c.sched_g_w0, c.sched_g_w1, c.sched_g_r0, c.sched_g_r1, c.sched_a])
+        self.model = np.array([c.act_a, c.act_b, c.flt_b0, c.flt_b1, c.flt_b2, c.flt_a1, c.flt_a2])
         self.limits = np.array([c.driver_angle_max, c.yaw_rate_max, c.speed_max])
         self.u_lim = np.array([-c.u_max, c.u_max])
         self.sched = np.array([c.wheelbase, c.k_us])
-        self.z = np.zeros(1)
+        self.x = np.zeros(4)  # z, p_n, s1, s2
         self.hist = np.zeros(c.model_delay)
         self.idx = 0
         self.m = c.model_delay
@@ -38,13 +41,19 @@ class NumpyRegulator:
         if not (np.all(np.abs(x) <= self.limits) and speed >= self.v_min):
             return 0.0
         rho = (self.sched[0] / speed + self.sched[1] * speed) * yaw_rate
-        w = delta_driver + self.hist[self.idx]
-        g = self.g
-        y = g[0] * w - g[2] * rho + self.z[0]
+        g = np.array([np.interp(speed, self.v, t) for t in self.tables])
+        an, bn, b0, b1, b2, a1, a2 = self.model
+        st = self.x
+        st[1] = an * st[1] + bn * self.hist[self.idx]
+        xin = delta_driver + st[1]
+        w = b0 * xin + st[2]
+        st[2] = b1 * xin - a1 * w + st[3]
+        st[3] = b2 * xin - a2 * w
+        y = g[0] * w - g[2] * rho + st[0]
         u = float(np.clip(y, self.u_lim[0], self.u_lim[1]))
         self.hist[self.idx] = u
         self.idx = (self.idx + 1) % self.m
-        self.z[0] = g[1] * w - g[3] * rho + g[4] * y
+        st[0] = g[1] * w - g[3] * rho + g[4] * y
         return u
 
 

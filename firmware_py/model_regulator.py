@@ -2,10 +2,10 @@
 
 Structure, in the style of generated embedded code:
 
-* ``ControllerConfig``  -- calibration (what an ECU would hold in flash);
+* ``ControllerConfig``  -- calibration (``firmware_py.calibration``: what an ECU holds in flash);
 * ``configure(cfg)``    -- computes every coefficient once (``Coefficients``), like
   ``model_initialize``; this is the only place with divisions by configuration values,
-  ``exp`` or validation of the calibration;
+  ``exp``, ``tan`` or validation of the calibration;
 * ``State``             -- the preallocated mutable state (a C struct);
 * ``step(c, s, ...)``   -- one control period: scalar float arithmetic on ``c`` and ``s``
   only: no allocation, no numpy, no I/O, no clock reads, no library calls.
@@ -14,23 +14,30 @@ The control law (derivation in docs/controller.md). With Q(s) = q0 / (tau_Q s + 
 desired model G_n(s) = K_n(v) / (tau_n s + 1) of eq. (18), eq. (6) gives the auxiliary
 steering angle
 
-    delta_mr = Q [delta_d + u_a] - q0 (tau_n s + 1) / (tau_Q s + 1) [rho],   rho = r / K_n(v)
+    delta_mr = Q [F_n A_n (delta_d + u_a)] - q0 (tau_n s + 1) / (tau_Q s + 1) [rho],   rho = r / K_n(v)
 
-where u_a is the auxiliary command actually applied (after saturation and rate limit) and
-delta_d the driver's front-wheel angle.  Limited integrator, eq. (22): q0 = K / (1 + K),
-tau_Q = tau / (1 + K); standard, eq. (17): q0 = 1, tau_Q = tau / (1 + K).  Feeding the
-*applied* command back through Q is what makes this form windup-free: Q is a stable
-filter of bounded signals, so the state stays bounded while the output is clamped, and the
-output leaves saturation as soon as the unclamped law does.
+where u_a is the auxiliary command actually applied (after saturation and rate limit),
+delta_d the driver's front-wheel angle, A_n the nominal actuator (M samples of delay, then a
+first-order lag, ``model_actuator_tau``) and F_n the nominal yaw-rate filter (2nd-order
+Butterworth, ``model_filter_hz``): the nominal model is F_n A_n G_n, and with Q = Q0 F_n A_n
+(eq. 12) Q/G_n stays the lead-lag above.  Limited integrator, eq. (22): q0 = K / (1 + K),
+tau_Q = tau / (1 + K); standard, eq. (17): q0 = 1, tau_Q = tau / (1 + K).  K, tau and tau_n
+may be scheduled over speed: step() interpolates the coefficient sets.  Feeding the *applied*
+command back is what makes this form windup-free: A_n, F_n and Q are stable filters of
+bounded signals, so the state stays bounded while the output is clamped, and the output
+leaves saturation as soon as the unclamped law does.
 
-Both filters share the pole of Q, so the discrete law is one first-order recursion
-(direct form II transposed, one state z):
+Both filters of Q share its pole, so the law is one first-order recursion (direct form II
+transposed, one state z) on w, the nominal model's output:
 
-    y[k]   = g_w0 w[k] - g_r0 rho[k] + z[k]         w[k] = delta_d[k] + u_a[k]
+    p[k]   = a_n p[k-1] + b_n u_a[k-M]                  (A_n; p = u_a[k-M] without a lag)
+    w[k]   = F_n(delta_d[k] + p[k])                     (DF2T biquad; w = its input without one)
+    y[k]   = g_w0 w[k] - g_r0 rho[k] + z[k]
     z[k+1] = g_w1 w[k] - g_r1 rho[k] + a y[k]
     u_a[k] = clamp(y[k], lo[k], hi[k])
 
-With Tustin g_w0 != 0, so y[k] depends on u_a[k]; the loop is solved exactly (see step()).
+With M = 0 (the paper's structure) w = delta_d + u_a[k]; with Tustin g_w0 != 0 the loop is
+then algebraic and solved exactly (see step()).
 """
 
 from __future__ import annotations
@@ -49,69 +56,51 @@ FAULT_DRIVER_ANGLE = 0x01
 FAULT_YAW_RATE = 0x02
 FAULT_SPEED = 0x04
 
-Q_LIMITED = "limited"
-Q_STANDARD = "standard"
-METHOD_TUSTIN = "tustin"
-METHOD_ZOH = "zoh"
+# The calibration lives in its own module; it is re-exported here because a port reads
+# both together (ports/c/mrs_controller.h holds the config, coefficient and state structs).
+from firmware_py.calibration import (  # noqa: E402  (re-exports)
+    AUX_LIMIT, DEFAULT_TAU_N, MAX_MODEL_DELAY, MAX_SCHEDULE, METHOD_TUSTIN, METHOD_ZOH, NOMINAL_C_F,
+    NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS, PAPER_CONFIG, PAPER_K, PAPER_TAU, PREVIOUS_CONFIG,
+    Q_LIMITED, Q_STANDARD, ControllerConfig, constant_gains, describe_gains, plain_law, validate,
+)
 
-# Nominal vehicle of section 3 (mu_n = 1): the controller's own model of the car, from which
-# K_n(v) of eq. (15) is scheduled.  A port calibrates these for its vehicle.
-NOMINAL_L_F = 1.25
-NOMINAL_L_R = 1.32
-NOMINAL_MASS = 1296.0
-NOMINAL_C_F = 84000.0
-NOMINAL_C_R = 96000.0
-
-#: tau_n of eq. (18), chosen to reproduce the paper's numbers (docs/paper-reproduction.md).
-DEFAULT_TAU_N = 0.02
-#: Longest command delay the nominal model can hold (size of the state's ring buffer).
-MAX_MODEL_DELAY = 8
-#: The paper's continuous-time tuning of eq. (22), section 4.
-PAPER_K = 10.0
-PAPER_TAU = 0.006
-#: The auxiliary actuator's range, +- rad of front-wheel angle (paper, sec. 4.1: +-3 deg).
-AUX_LIMIT = math.radians(3.0)
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """Calibration of the model regulator. Angles in rad (front wheel), times in s."""
-
-    # Shipped calibration: `mrsteer design tune --ts 0.002 --delay-steps 1` (K 43.57, tau
-    # 21.25 ms), rounded; GM >= 6 dB and PM >= 45 deg over the envelope (docs/design.md).
-    q_form: str = Q_LIMITED
-    k: float = 43.0  # eq. (22) limited-integrator gain K
-    tau: float = 0.0212  # eq. (22) time constant tau, s
-    tau_n: float = DEFAULT_TAU_N  # eq. (18) desired-model time constant, s
-    ts: float = 0.002  # fixed step, s: 500 Hz keeps a 500 kbit/s bus under 40 % worst-case load
-    method: str = METHOD_TUSTIN
-    aux_limit: float = AUX_LIMIT  # actuator range, +- rad of wheel angle
-    rate_limit: float = 0.0  # max |d u/dt| in rad/s; 0 disables
-    model_delay_steps: int = 1  # whole samples from command to effect, modelled in w (0: none)
-    fade_rate: float = math.radians(6.0)  # rad/s toward 0 on fault/inactive, and on recovery
-    speed_active_min: float = 3.0  # m/s; below this the controller is inactive
-    speed_max: float = 70.0  # m/s; above this the speed input is invalid
-    driver_angle_max: float = 0.7  # rad of front-wheel angle
-    yaw_rate_max: float = 3.0  # rad/s
-    nominal_l_f: float = NOMINAL_L_F
-    nominal_l_r: float = NOMINAL_L_R
-    nominal_mass: float = NOMINAL_MASS
-    nominal_c_f: float = NOMINAL_C_F
-    nominal_c_r: float = NOMINAL_C_R
+__all__ = [
+    "AUX_LIMIT", "DEFAULT_TAU_N", "MAX_MODEL_DELAY", "MAX_SCHEDULE", "METHOD_TUSTIN", "METHOD_ZOH", "NOMINAL_C_F",
+    "NOMINAL_C_R", "NOMINAL_L_F", "NOMINAL_L_R", "NOMINAL_MASS", "PAPER_CONFIG", "PAPER_K", "PAPER_TAU",
+    "PREVIOUS_CONFIG", "Q_LIMITED", "Q_STANDARD", "ControllerConfig", "constant_gains", "describe_gains", "plain_law",
+    "validate",
+    "STATUS_INACTIVE", "STATUS_ACTIVE", "STATUS_SATURATED", "STATUS_FAULT", "FAULT_DRIVER_ANGLE",
+    "FAULT_YAW_RATE", "FAULT_SPEED", "Coefficients", "LawPoint", "State", "q_filter", "configure", "law_at",
+    "reset", "step", "ModelRegulator",
+]
 
 
 @dataclass(frozen=True, slots=True)
 class Coefficients:
-    """Everything step() needs, computed once by configure()."""
+    """Everything step() needs, computed once by configure().
 
-    a: float  # pole of Q in z
-    g_w0: float  # w = delta_d + u_a path (q0 * Q numerator)
-    g_w1: float
-    g_r0: float  # rho path (q0 * lead-lag numerator)
-    g_r1: float
-    q0: float  # d.c. gain of Q
-    inv_one_minus_g_w0: float  # 1 / (1 - g_w0), algebraic loop of the Tustin form
+    The law's coefficient set (a, g_w*, g_r*, q0) is a table over the speed breakpoints
+    ``sched_v`` (one entry for a constant law); step() interpolates it linearly and holds it
+    outside the breakpoints.  In C these are arrays of ``MRS_MAX_SCHEDULE``."""
+
+    n_sched: int
+    sched_v: tuple[float, ...]  # breakpoints, m/s
+    sched_inv_dv: tuple[float, ...]  # 1 / (v[i+1] - v[i])
+    sched_a: tuple[float, ...]  # pole of Q in z
+    sched_g_w0: tuple[float, ...]  # w path (q0 * Q numerator)
+    sched_g_w1: tuple[float, ...]
+    sched_g_r0: tuple[float, ...]  # rho path (q0 * lead-lag numerator)
+    sched_g_r1: tuple[float, ...]
+    sched_q0: tuple[float, ...]  # d.c. gain of Q
+    inv_one_minus_g_w0: float  # 1 / (1 - g_w0), algebraic loop of the M = 0 form (constant law only)
     model_delay: int  # M: w uses the command issued M steps ago (0: this step's)
+    act_a: float  # nominal actuator p = act_a p + act_b u[k-M]: exp(-Ts/tau_an), 1 - act_a (0, 1: none)
+    act_b: float
+    flt_b0: float  # nominal yaw-rate filter, DF2T biquad (1, 0, 0, 0, 0: none)
+    flt_b1: float
+    flt_b2: float
+    flt_a1: float
+    flt_a2: float
     wheelbase: float  # 1/K_n(v) = wheelbase / v + k_us * v   (eq. 15 inverted)
     k_us: float
     u_max: float
@@ -124,60 +113,100 @@ class Coefficients:
     ts: float
 
 
+@dataclass(frozen=True, slots=True)
+class LawPoint:
+    """The law's coefficient set at one speed, as step() interpolates it."""
+
+    a: float
+    g_w0: float
+    g_w1: float
+    g_r0: float
+    g_r1: float
+    q0: float
+
+
 class State:
     """Preallocated controller state. ``needs_init`` forces a bumpless re-start."""
 
-    __slots__ = ("z", "u_prev", "u_hist", "hist_idx", "needs_init", "recovering", "status", "fault_flags")
+    __slots__ = ("z", "u_prev", "u_hist", "hist_idx", "p_n", "f_s1", "f_s2", "needs_init", "recovering",
+                 "status", "fault_flags")
 
     def __init__(self) -> None:
         self.z = 0.0
         self.u_prev = 0.0
-        self.u_hist = [0.0] * MAX_MODEL_DELAY  # ring buffer of the last M commands (C: float[8])
+        self.u_hist = [0.0] * MAX_MODEL_DELAY  # ring buffer of the last M commands (C: double[8])
         self.hist_idx = 0
+        self.p_n = 0.0  # nominal actuator position
+        self.f_s1 = 0.0  # nominal filter states
+        self.f_s2 = 0.0
         self.needs_init = True
         self.recovering = False
         self.status = STATUS_INACTIVE
         self.fault_flags = 0
 
 
-def q_filter(cfg: ControllerConfig) -> tuple[float, float]:
+def q_filter(q_form: str, k: float, tau: float) -> tuple[float, float]:
     """(q0, tau_Q) of Q(s) = q0 / (tau_Q s + 1): eq. (22) for limited, eq. (17) for standard."""
-    tau_q = cfg.tau / (1.0 + cfg.k)
-    q0 = cfg.k / (1.0 + cfg.k) if cfg.q_form == Q_LIMITED else 1.0
+    tau_q = tau / (1.0 + k)
+    q0 = k / (1.0 + k) if q_form == Q_LIMITED else 1.0
     return q0, tau_q
 
 
-def configure(cfg: ControllerConfig) -> Coefficients:
-    """Validate the calibration and compute the coefficients (the model_initialize step)."""
-    _validate(cfg)
-    q0, tau_q = q_filter(cfg)
+def _law_coefficients(cfg: ControllerConfig, k: float, tau: float, tau_n: float) -> LawPoint:
+    q0, tau_q = q_filter(cfg.q_form, k, tau)
     ts = cfg.ts
     if cfg.method == METHOD_TUSTIN:
         den = 2.0 * tau_q + ts
         a = (2.0 * tau_q - ts) / den
         bw0 = bw1 = ts / den
-        br0 = (2.0 * cfg.tau_n + ts) / den
-        br1 = (ts - 2.0 * cfg.tau_n) / den
+        br0 = (2.0 * tau_n + ts) / den
+        br1 = (ts - 2.0 * tau_n) / den
     else:  # ZOH: Q -> (1-a)/(z-a); (tau_n s+1)/(tau_Q s+1) = c + (1-c) Q/q0 -> c + (1-c)(1-a)/(z-a)
         a = math.exp(-ts / tau_q)
-        c = cfg.tau_n / tau_q
+        c = tau_n / tau_q
         bw0, bw1 = 0.0, 1.0 - a
         br0, br1 = c, 1.0 - a - c
-    g_w0 = q0 * bw0
+    return LawPoint(a, q0 * bw0, q0 * bw1, q0 * br0, q0 * br1, q0)
+
+
+def butterworth2(f_c: float, ts: float) -> tuple[float, float, float, float, float]:
+    """(b0, b1, b2, a1, a2) of the 2nd-order Butterworth low-pass at f_c, Tustin with the
+    cut-off pre-warped (what scipy.signal.butter(2, f_c, fs=1/ts) gives)."""
+    w = math.tan(math.pi * f_c * ts)
+    n = 1.0 / (1.0 + math.sqrt(2.0) * w + w * w)
+    b0 = w * w * n
+    return b0, 2.0 * b0, b0, 2.0 * (w * w - 1.0) * n, (1.0 - math.sqrt(2.0) * w + w * w) * n
+
+
+def configure(cfg: ControllerConfig) -> Coefficients:
+    """Validate the calibration and compute the coefficients (the model_initialize step)."""
+    validate(cfg)
+    points = [_law_coefficients(cfg, k, tau, tau_n) for k, tau, tau_n in cfg.gain_points()]
+    speeds = cfg.schedule_speed if cfg.scheduled else (0.0,)
+    g_w0 = points[0].g_w0
+    act_a = math.exp(-cfg.ts / cfg.model_actuator_tau) if cfg.model_actuator_tau > 0.0 else 0.0
+    flt = butterworth2(cfg.model_filter_hz, cfg.ts) if cfg.model_filter_hz > 0.0 else (1.0, 0.0, 0.0, 0.0, 0.0)
     l_f, l_r, m = cfg.nominal_l_f, cfg.nominal_l_r, cfg.nominal_mass
     c_f, c_r = cfg.nominal_c_f, cfg.nominal_c_r
     wheelbase = l_f + l_r
     # 1/K_n(v) = a0/b0 of eq. (14) at mu = 1: L/v + (c_r l_r - c_f l_f) m v / (c_f c_r L).
     k_us = (c_r * l_r - c_f * l_f) * m / (c_f * c_r * wheelbase)
+    ts = cfg.ts
     return Coefficients(
-        a=a,
-        g_w0=g_w0,
-        g_w1=q0 * bw1,
-        g_r0=q0 * br0,
-        g_r1=q0 * br1,
-        q0=q0,
+        n_sched=len(points),
+        sched_v=tuple(speeds),
+        sched_inv_dv=tuple(1.0 / (b - a) for a, b in zip(speeds, speeds[1:])),
+        sched_a=tuple(p.a for p in points),
+        sched_g_w0=tuple(p.g_w0 for p in points),
+        sched_g_w1=tuple(p.g_w1 for p in points),
+        sched_g_r0=tuple(p.g_r0 for p in points),
+        sched_g_r1=tuple(p.g_r1 for p in points),
+        sched_q0=tuple(p.q0 for p in points),
         inv_one_minus_g_w0=1.0 / (1.0 - g_w0),
         model_delay=cfg.model_delay_steps,
+        act_a=act_a,
+        act_b=1.0 - act_a,
+        flt_b0=flt[0], flt_b1=flt[1], flt_b2=flt[2], flt_a1=flt[3], flt_a2=flt[4],
         wheelbase=wheelbase,
         k_us=k_us,
         u_max=cfg.aux_limit,
@@ -191,27 +220,21 @@ def configure(cfg: ControllerConfig) -> Coefficients:
     )
 
 
-def _validate(cfg: ControllerConfig) -> None:
-    if cfg.q_form not in (Q_LIMITED, Q_STANDARD):
-        raise ValueError(f"q_form must be '{Q_LIMITED}' or '{Q_STANDARD}', got {cfg.q_form!r}")
-    if cfg.method not in (METHOD_TUSTIN, METHOD_ZOH):
-        raise ValueError(f"method must be '{METHOD_TUSTIN}' or '{METHOD_ZOH}', got {cfg.method!r}")
-    for name, value in vars(cfg).items():
-        if isinstance(value, float | int) and not math.isfinite(value):
-            raise ValueError(f"{name} must be finite, got {value!r}")
-    positive = ("k", "tau", "tau_n", "ts", "aux_limit", "fade_rate", "speed_active_min",
-                "speed_max", "driver_angle_max", "yaw_rate_max", "nominal_l_f", "nominal_l_r",
-                "nominal_mass", "nominal_c_f", "nominal_c_r")
-    for name in positive:
-        if getattr(cfg, name) <= 0.0:
-            raise ValueError(f"{name} must be positive, got {getattr(cfg, name)}")
-    if not (isinstance(cfg.model_delay_steps, int) and 0 <= cfg.model_delay_steps <= MAX_MODEL_DELAY):
-        raise ValueError(f"model_delay_steps must be a whole number in 0..{MAX_MODEL_DELAY}, "
-                         f"got {cfg.model_delay_steps!r}")
-    if cfg.rate_limit < 0.0:
-        raise ValueError(f"rate_limit must be >= 0 (0 disables), got {cfg.rate_limit}")
-    if cfg.speed_active_min >= cfg.speed_max:
-        raise ValueError("speed_active_min must be below speed_max")
+def law_at(c: Coefficients, speed: float) -> LawPoint:
+    """The coefficient set step() uses at ``speed``, with step()'s own arithmetic (for analysis)."""
+    j, j1, f = 0, 0, 0.0
+    n = c.n_sched
+    if n > 1 and speed > c.sched_v[0]:
+        if speed >= c.sched_v[n - 1]:
+            j = j1 = n - 1
+        else:
+            for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
+                if speed >= c.sched_v[i]:
+                    j = i
+            j1 = j + 1
+            f = (speed - c.sched_v[j]) * c.sched_inv_dv[j]
+    return LawPoint(*(t[j] + f * (t[j1] - t[j]) for t in (c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0,
+                                                          c.sched_g_r1, c.sched_q0)))
 
 
 def reset(s: State) -> None:
@@ -221,13 +244,16 @@ def reset(s: State) -> None:
     for i in range(MAX_MODEL_DELAY):
         s.u_hist[i] = 0.0
     s.hist_idx = 0
+    s.p_n = 0.0
+    s.f_s1 = 0.0
+    s.f_s2 = 0.0
     s.needs_init = True
     s.recovering = False
     s.status = STATUS_INACTIVE
     s.fault_flags = 0
 
 
-# One function on purpose (about 90 lines): it is the body that ports/c/mrs_controller.c's
+# One function on purpose (about 120 lines): it is the body that ports/c/mrs_controller.c's
 # mrs_step() transcribes statement for statement, and a port's mrs_step makes no calls.
 def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed: float) -> float:
     """One control period. Returns the auxiliary front-wheel angle command in rad.
@@ -263,14 +289,39 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     inv_kn = c.wheelbase / speed + c.k_us * speed
     rho = inv_kn * yaw_rate  # yaw rate expressed as the wheel angle the nominal car needs for it
 
+    # The coefficient set at this speed: linear between breakpoints, held outside them.
+    j = 0
+    j1 = 0
+    f = 0.0
+    n = c.n_sched
+    if n > 1 and speed > c.sched_v[0]:
+        if speed >= c.sched_v[n - 1]:
+            j = n - 1
+            j1 = n - 1
+        else:
+            for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
+                if speed >= c.sched_v[i]:
+                    j = i
+            j1 = j + 1
+            f = (speed - c.sched_v[j]) * c.sched_inv_dv[j]
+    a = c.sched_a[j] + f * (c.sched_a[j1] - c.sched_a[j])
+    g_w0 = c.sched_g_w0[j] + f * (c.sched_g_w0[j1] - c.sched_g_w0[j])
+    g_w1 = c.sched_g_w1[j] + f * (c.sched_g_w1[j1] - c.sched_g_w1[j])
+    g_r0 = c.sched_g_r0[j] + f * (c.sched_g_r0[j1] - c.sched_g_r0[j])
+    g_r1 = c.sched_g_r1[j] + f * (c.sched_g_r1[j1] - c.sched_g_r1[j])
+
     if s.needs_init:
-        # Start the filter at its steady state for the present inputs with the command held,
-        # so a restart does not excite the large high-frequency gain on rho.
+        # Start every filter at its steady state for the present inputs with the command
+        # held, so a restart does not excite the large high-frequency gain on rho.
+        q0 = c.sched_q0[j] + f * (c.sched_q0[j1] - c.sched_q0[j])
         w0 = delta_driver + s.u_prev
-        s.z = c.q0 * (w0 - rho) - (c.g_w0 * w0 - c.g_r0 * rho)
+        s.z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho)
         for i in range(c.model_delay):
             s.u_hist[i] = s.u_prev
         s.hist_idx = 0
+        s.p_n = s.u_prev
+        s.f_s1 = (1.0 - c.flt_b0) * w0
+        s.f_s2 = (c.flt_b2 - c.flt_a2) * w0
         s.needs_init = False
         s.recovering = True
 
@@ -288,22 +339,28 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
         hi = c.u_max
 
     if c.model_delay == 0:
-        # y = p + g_w0 * u_a with u_a = clamp(y, lo, hi): since 0 <= g_w0 < 1 the unique
-        # solution is u_a = clamp(p / (1 - g_w0), lo, hi).
-        p = c.g_w0 * delta_driver - c.g_r0 * rho + s.z
+        # Constant law only (configure() checks it). y = p + g_w0 * u_a with
+        # u_a = clamp(y, lo, hi): since 0 <= g_w0 < 1 the unique solution is
+        # u_a = clamp(p / (1 - g_w0), lo, hi).
+        p = g_w0 * delta_driver - g_r0 * rho + s.z
         u = p * c.inv_one_minus_g_w0
         if u < lo:
             u = lo
         elif u > hi:
             u = hi
-        y = p + c.g_w0 * u
+        y = p + g_w0 * u
         w = delta_driver + u
     else:
-        # The yaw rate measured now answers the command issued M steps ago: compare it
-        # with that one, not with the command being computed (no algebraic loop either).
+        # The yaw rate measured now answers the command issued M steps ago, through the
+        # actuator and the sensor filter: compare it with the nominal model's answer to
+        # that command (past commands only, so no algebraic loop).
         i = s.hist_idx
-        w = delta_driver + s.u_hist[i]
-        y = c.g_w0 * w - c.g_r0 * rho + s.z
+        s.p_n = c.act_a * s.p_n + c.act_b * s.u_hist[i]
+        x = delta_driver + s.p_n
+        w = c.flt_b0 * x + s.f_s1
+        s.f_s1 = c.flt_b1 * x - c.flt_a1 * w + s.f_s2
+        s.f_s2 = c.flt_b2 * x - c.flt_a2 * w
+        y = g_w0 * w - g_r0 * rho + s.z
         u = y
         if u < lo:
             u = lo
@@ -315,7 +372,7 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
             i = 0
         s.hist_idx = i
 
-    s.z = c.g_w1 * w - c.g_r1 * rho + c.a * y
+    s.z = g_w1 * w - g_r1 * rho + a * y
     if s.recovering and lo_slew < u < hi_slew:
         s.recovering = False  # the slew no longer binds: caught up with the control law
     s.u_prev = u

@@ -21,7 +21,7 @@ from sim_plant.car.vehicle import VehicleParams
 
 @pytest.mark.parametrize("model_delay,delay,ts", [(0, 0, 0.001), (0, 1, 0.001), (1, 1, 0.002), (2, 3, 0.005)])
 def test_sweep_is_the_firmware_point_by_point(model_delay: int, delay: int, ts: float) -> None:
-    cfg = replace(mr.ControllerConfig(), k=8.0, tau=0.03, ts=ts, model_delay_steps=model_delay)
+    cfg = replace(mr.PREVIOUS_CONFIG, k=8.0, tau=0.03, ts=ts, model_delay_steps=model_delay)
     v, mu, mass = np.array([6.0, 22.0, 48.0]), np.array([1.0, 0.25, 0.6]), np.array([1296.0, 1650.0, 1800.0])
     res = sweep(v, mu, mass, cfg, 4000.0, 0.8, delay)
     assert res.saturated.any() and not res.saturated.all()  # both regimes are exercised

@@ -37,12 +37,14 @@ def c_node() -> tuple[str, ...]:
 
 def _run(tmp: Path, name: str, program: tuple[str, ...] | None, **kw: object) -> hil.HilRun:
     """A lockstep run; again (twice at most) if the plant stalled for a watchdog cycle of the
-    controller's (``lockstep_traffic``): that is the machine's load, not either controller."""
+    controller's (``lockstep_traffic``), or gave up waiting for a command (its lockstep timeout,
+    1 s): that is the machine's load, not either controller."""
     for _ in range(3):
         cfg = hil.HilConfig(scenario=name, mode="lockstep", duration=LOCKSTEP_S, out=tmp, controller_program=program,
                             **kw)  # type: ignore[arg-type]
         run = hil.run(cfg)
-        if not lockstep_traffic(tmp / "traffic.log")["stalls"]:
+        if not lockstep_traffic(tmp / "traffic.log")["stalls"] and not run.summary["loop"]["plant"].get(
+                "lockstep_timeouts"):
             break
     return run
 
@@ -163,11 +165,25 @@ def test_a_bad_calibration_file_is_one_line_naming_the_line(c_node, tmp_path: Pa
     assert needle in proc.stderr
 
 
-def test_a_vector_calibration_runs_and_its_rate_is_the_default(c_node, tmp_path: Path) -> None:
-    """--calibration with a golden-vector .cfg (200 Hz): the node runs at the file's rate."""
-    out = _run(tmp_path / "c", "paper-fig9", c_node + ("--calibration", str(VECTORS / "limited_zoh_200hz_m1.cfg")),
-               rate_hz=200.0)
-    assert out.summary["loop"]["controller"]["cycles"] == pytest.approx(LOCKSTEP_S * 200, abs=3)
+def test_lockstep_with_another_calibration_and_hand_gains_equals_python(c_node, tmp_path: Path) -> None:
+    """A golden-vector calibration (ZOH, 200 Hz, M = 1) reaches both controllers as the file the
+    runner writes (``--calibration``); and the C node's own --k/--tau mean the Python plain law."""
+    from dataclasses import replace
+
+    from firmware_py import calibration_file
+    from firmware_py.calibration import plain_law
+
+    zoh = calibration_file.load(VECTORS / "limited_zoh_200hz_m1.cfg")
+    runs = [_run(tmp_path / d, "paper-fig9", prog, calibration=zoh, rate_hz=200.0)
+            for d, prog in (("py", None), ("c", c_node))]
+    traffic = [lockstep_traffic(tmp_path / d / "traffic.log") for d in ("py", "c")]
+    assert traffic[0] == traffic[1] and len(traffic[1]["commands"]) >= LOCKSTEP_S * 200 - 2
+    assert runs[0].summary["peak_aux_steer_deg"] == runs[1].summary["peak_aux_steer_deg"] > 0.1
+    hand = replace(plain_law(zoh, 3.0, 0.05, 0.02), model_delay_steps=0)
+    _run(tmp_path / "py-hand", "paper-fig9", None, calibration=hand, rate_hz=200.0)
+    _run(tmp_path / "c-hand", "paper-fig9", c_node + ("--k", "3", "--tau", "0.05"), calibration=zoh, rate_hz=200.0)
+    hand_traffic = [lockstep_traffic(tmp_path / d / "traffic.log") for d in ("py-hand", "c-hand")]
+    assert hand_traffic[0] == hand_traffic[1] and hand_traffic[1]["commands"] != traffic[1]["commands"]
 
 
 def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path) -> None:

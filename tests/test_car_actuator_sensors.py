@@ -31,6 +31,25 @@ def test_first_order_step_is_exact_at_the_samples(tau):
     assert y == pytest.approx(2 * DEG * (1 - np.exp(-t / tau)), abs=1e-12 * DEG, rel=1e-12)
 
 
+@pytest.mark.parametrize("tau", [0.01, 0.02])
+def test_mean_over_each_step_is_the_integral_of_the_exponential(tau):
+    """What the car gets over a step: (1/ts) * integral of 2 deg (1 - e^{-t/tau}) over the step,
+    integrated independently here with the trapezoid rule on a fine grid."""
+    act = PositionActuator(ActuatorModelConfig(time_constant_s=tau), TS)
+    for k in range(60):
+        act.step(2 * DEG)
+        t = np.linspace(k * TS, (k + 1) * TS, 2001)
+        y = 2 * DEG * (1 - np.exp(-t / tau))
+        assert act.mean == pytest.approx(float(np.sum((y[1:] + y[:-1]) / 2) / 2000), rel=1e-6)
+
+
+def test_mean_of_a_rate_limited_ramp_is_its_midpoint():
+    act = PositionActuator(ActuatorModelConfig(rate_limit_deg_s=40.0), TS)
+    start = act.position
+    end = act.step(3 * DEG)
+    assert end == pytest.approx(40.0 * DEG * TS) and act.mean == pytest.approx(0.5 * (start + end))
+
+
 def test_second_order_step_matches_the_underdamped_response():
     f_n, zeta = 8.0, 0.3
     y = respond(PositionActuator(ActuatorModelConfig(order=2, natural_frequency_hz=f_n, damping=zeta), TS),

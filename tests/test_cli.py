@@ -103,8 +103,9 @@ def test_disturbance_json_contract(capsys: pytest.CaptureFixture[str]) -> None:
     # Limited integrator on dry road: d.c. loop gain K, so delta_mr settles at
     # K/(1+K) times the steer that cancels M_z: M_z (c_f + c_r) / (c_f c_r L) (section 3 data).
     full = 4000 * 180000 / (84000 * 96000 * 2.57)
-    k = mr.ControllerConfig().k
-    assert r["k"] == k
+    cfg = mr.ControllerConfig()  # the shipped schedule: 20 m/s is one of its breakpoints
+    k = cfg.schedule_k[cfg.schedule_speed.index(20.0)]
+    assert r["schedule"]["k"] == list(cfg.schedule_k)
     assert r["final_aux_steer_deg"] == pytest.approx(-(k / (1 + k)) * full * 57.29577951308232, rel=1e-3)
 
 
@@ -206,7 +207,8 @@ def test_sim_with_actuator_and_sensors_reports_applied_and_commanded_angle(capsy
     (["sim", "disturbance", "--mz", "100", "--v", "20", "--mu", "1", "--ts", "0.002", "--actuator", "nofile.toml"],
      "--actuator"),
     (["sim", "steer", "--v", "20", "--mu", "1", "--ts", "0.002", "--sensors", "default", "--seed", "-1"], "--seed"),
-    (["sim", "disturbance", "--mz", "100", "--v", "20", "--mu", "1", "--actuator", "default"], "--ts > 0"),
+    (["sim", "disturbance", "--mz", "100", "--v", "20", "--mu", "1", "--ts", "0", "--actuator", "default"],
+     "--ts > 0"),
 ])
 def test_bad_model_arguments_give_one_line_and_exit_2(args: list[str], needle: str) -> None:
     proc = _run(*args)

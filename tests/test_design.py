@@ -46,14 +46,14 @@ def _delayed_loop(p: VehicleParams, c: mr.Coefficients, n: int, extra: float, z:
     x = np.linalg.solve(z * np.eye(2) - phi, g_late + g_early / z)
     plant = (ss.C[0, :2] @ x) * z ** (-(n + int(whole)))
     inverse_kn = c.wheelbase / p.v + c.k_us * p.v  # 1/K_n(v), eq. (15)
-    return M.law_response(c, z) * plant * inverse_kn
+    return M.law_response(c, z, p.v) * plant * inverse_kn
 
 
 @pytest.mark.parametrize("model_delay", [0, 1, 2])
 @pytest.mark.parametrize("delay", [0, 1, 3])
 def test_loop_transfer_function_and_state_matrix_agree(model_delay: int, delay: int) -> None:
     # Every closed-loop pole of the state matrix is a zero of 1 + L(z): two independent forms.
-    cfg = replace(mr.ControllerConfig(), k=5.0, tau=0.05, ts=0.005, model_delay_steps=model_delay)
+    cfg = replace(mr.PREVIOUS_CONFIG, k=5.0, tau=0.05, ts=0.005, model_delay_steps=model_delay)
     p = VehicleParams(v=20.0, mu=0.6)
     loop = M.LoopResponse(p, mr.configure(cfg), delay)
     for z in discrete_loop_poles(p, mr.configure(cfg), delay):
@@ -63,9 +63,9 @@ def test_loop_transfer_function_and_state_matrix_agree(model_delay: int, delay: 
 
 @pytest.mark.parametrize("cfg,delay", [
     (M.paper_config(0.0005), 1),
-    (replace(mr.ControllerConfig(), k=4.0, tau=0.1, tau_n=0.05, ts=0.005), 1),
-    (replace(mr.ControllerConfig(), k=20.0, tau=0.02, ts=0.002, model_delay_steps=1), 1),
-    (replace(mr.ControllerConfig(), k=3.0, tau=0.05, ts=0.01), 2),
+    (replace(mr.PREVIOUS_CONFIG, k=4.0, tau=0.1, tau_n=0.05, ts=0.005), 1),
+    (replace(mr.PREVIOUS_CONFIG, k=20.0, tau=0.02, ts=0.002, model_delay_steps=1), 1),
+    (replace(mr.PREVIOUS_CONFIG, k=3.0, tau=0.05, ts=0.01), 2),
 ])
 def test_margins_are_where_the_perturbed_loop_reaches_the_stability_limit(cfg: mr.ControllerConfig,
                                                                             delay: int) -> None:
@@ -126,7 +126,7 @@ def test_tuning_beats_every_feasible_point_of_a_plain_grid_search() -> None:
     for k in (1.0, 2.0, 4.0, 8.0, 16.0):
         for tau in (0.01, 0.03, 0.1, 0.3):
             for m in (0, 1):
-                cfg = replace(mr.ControllerConfig(), ts=ts, k=k, tau=tau, tau_n=0.02, model_delay_steps=m)
+                cfg = replace(mr.PREVIOUS_CONFIG, ts=ts, k=k, tau=tau, tau_n=0.02, model_delay_steps=m)
                 em = M.envelope_margins(cfg, delay, env, with_delay_margin=False)
                 w = em.worst()
                 if em.stable and w["gain_margin_db"] >= 6.0 and w["phase_margin_deg"] >= 45.0:
@@ -195,8 +195,9 @@ def test_design_cli_rejects_bad_input_with_one_line(argv: list[str], needle: str
 def test_delay_margin_of_the_shipped_design_counts_the_crossover_near_nyquist() -> None:
     """At 5 m/s on dry road the loop gain is 1.27 at Nyquist with 0 deg phase.  One more whole
     sample of delay is unstable there, so the margin is below one sample: 0.90, not the 1.48
-    that phase margin over crossover frequency gives.  At (5, 0.8, 1800) it is 0.99."""
-    cfg = mr.ControllerConfig()
+    that phase margin over crossover frequency gives.  At (5, 0.8, 1800) it is 0.99.  (The
+    calibration shipped before issue 15, on the ideal loop.)"""
+    cfg = mr.PREVIOUS_CONFIG
     for point, expected in (((5.0, 1.0, 1296.0), 0.897), ((5.0, 0.8, 1800.0), 0.993)):
         p = VehicleParams(v=point[0], mu=point[1], mass=point[2])
         m = M.point_margins(p, cfg, 1)
@@ -206,7 +207,7 @@ def test_delay_margin_of_the_shipped_design_counts_the_crossover_near_nyquist() 
 
 
 def test_a_whole_sample_of_extra_delay_is_the_same_loop_as_one_more_delay_step() -> None:
-    c = mr.configure(mr.ControllerConfig())
+    c = mr.configure(mr.ControllerConfig())  # the shipped law: schedule, nominal actuator and filter
     p = VehicleParams(v=12.0, mu=0.5)
     a = np.sort_complex(discrete_loop_poles(p, c, 3))
     b = np.sort_complex(discrete_loop_poles(p, c, 1, extra_delay=2.0))
@@ -223,11 +224,16 @@ def test_design_margins_reference_reports_every_constraint(capsys: pytest.Captur
     worst = ref["constraints"]["worst"]
     assert set(worst) == {"max_pole_radius", "gain_margin_db", "phase_margin_deg", "extra_delay_pole_radius",
                           "tau_range_pole_radius", "noise_rms_deg", "threshold_nm"}
-    # The shipped calibration is unstable on the reference loop (the 30 Hz filter, issue 15).
-    assert not ref["stable"] and not ref["constraints"]["passes"]
-    assert worst["max_pole_radius"]["where"] == {"v": 5.0, "mu": 1.0, "mass": 1296.0}
+    # The shipped calibration meets every constraint on the reference loop ...
+    assert ref["stable"] and ref["constraints"]["passes"], ref["constraints"]["failing"]
     assert len(ref["constraints"]["points"]) == 2 and len(ref["constraints"]["dry_road"]["points"]) == 3
-    assert main(["design", "margins", "--reference", *grid]) == 0
+    # ... and the one shipped before issue 15 is unstable there (the 30 Hz filter).
+    previous = ("--k", "43", "--tau", "0.0212", "--tau-n", "0.02", "--model-delay", "1")
+    assert main(["design", "margins", "--reference", *grid, *previous, "--json"]) == 0
+    old = json.loads(capsys.readouterr().out)
+    assert not old["stable"] and not old["constraints"]["passes"]
+    assert old["constraints"]["worst"]["max_pole_radius"]["where"] == {"v": 5.0, "mu": 1.0, "mass": 1296.0}
+    assert main(["design", "margins", "--reference", *grid, *previous]) == 0
     assert "FAIL" in capsys.readouterr().out
 
 

@@ -23,7 +23,7 @@ LIMIT = math.radians(3.0)
 
 
 def _fresh(**changes: object) -> tuple[mr.Coefficients, mr.State]:
-    return mr.configure(replace(mr.ControllerConfig(), **changes)), mr.State()
+    return mr.configure(replace(mr.PREVIOUS_CONFIG, **changes)), mr.State()
 
 
 # ------------------------------------------------------------------ convergence to the reference
@@ -70,20 +70,21 @@ def test_steering_step_converges_too() -> None:
 @pytest.mark.parametrize("method,scipy_method", [(mr.METHOD_TUSTIN, "bilinear"), (mr.METHOD_ZOH, "zoh")])
 @pytest.mark.parametrize("form", [mr.Q_LIMITED, mr.Q_STANDARD])
 def test_coefficients_are_the_discretised_filters(method: str, scipy_method: str, form: str) -> None:
-    cfg = mr.ControllerConfig(method=method, q_form=form, ts=0.0007, tau_n=0.03)
+    cfg = replace(mr.PREVIOUS_CONFIG, method=method, q_form=form, ts=0.0007, tau_n=0.03)
     c = mr.configure(cfg)
-    q0, tau_q = mr.q_filter(cfg)
-    for num, b0, b1 in (([q0], c.g_w0, c.g_w1), ([q0 * cfg.tau_n, q0], c.g_r0, c.g_r1)):
+    q0, tau_q = mr.q_filter(cfg.q_form, cfg.k, cfg.tau)
+    law = mr.law_at(c, 20.0)
+    for num, b0, b1 in (([q0], law.g_w0, law.g_w1), ([q0 * cfg.tau_n, q0], law.g_r0, law.g_r1)):
         bd, ad, _ = signal.cont2discrete((num, [tau_q, 1.0]), cfg.ts, method=scipy_method)
         bd = np.squeeze(bd)
-        assert ad[1] == pytest.approx(-c.a, rel=1e-12)
+        assert ad[1] == pytest.approx(-law.a, rel=1e-12)
         np.testing.assert_allclose([b0, b1], bd[-2:], rtol=1e-10, atol=1e-15)
 
 
 @pytest.mark.parametrize("ts,delay", [(1e-3, 1), (2e-3, 1), (5e-4, 0), (1e-3, 2)])
 def test_loop_poles_match_an_independent_polynomial_construction(ts: float, delay: int) -> None:
     p = VehicleParams(v=24.0, mu=0.7)
-    cfg = mr.ControllerConfig(ts=ts, method=mr.METHOD_TUSTIN, model_delay_steps=0)
+    cfg = replace(mr.PREVIOUS_CONFIG, ts=ts, method=mr.METHOD_TUSTIN, model_delay_steps=0)
     c = mr.configure(cfg)
     # Plant delta_f -> r discretised by scipy; controller r -> u from the textbook form
     # u = Q/(1-Q) (-(tau_n s + 1) r / K_n), Tustin by scipy, with z^-delay.
@@ -109,7 +110,7 @@ def test_loop_poles_match_an_independent_polynomial_construction(ts: float, dela
 def test_firmware_step_in_closed_loop_is_the_loop_matrix(model_delay: int, delay: int) -> None:
     # step() itself against the linear state matrix the poles and margins come from.
     p = VehicleParams(v=17.0, mu=0.8)
-    cfg = replace(mr.ControllerConfig(), k=6.0, tau=0.04, ts=0.005, model_delay_steps=model_delay)
+    cfg = replace(mr.PREVIOUS_CONFIG, k=6.0, tau=0.04, ts=0.005, model_delay_steps=model_delay)
     exp = experiments.disturbance(p, 200.0, mr.Q_LIMITED, cfg, 0.5)
     tr = experiments.run(exp, ts=cfg.ts, delay_steps=delay)
     assert not tr.saturated
@@ -297,10 +298,11 @@ def _step_ast() -> ast.FunctionDef:
 
 def test_step_is_scalar_arithmetic_only() -> None:
     fn = _step_ast()
-    # The only loop allowed is the bounded fill of the delay buffer at (re)initialisation,
-    # ``for i in range(c.model_delay)`` (a C for-loop over at most MAX_MODEL_DELAY slots).
+    # The only loops allowed are bounded C for-loops: the fill of the delay buffer at
+    # (re)initialisation (at most MAX_MODEL_DELAY slots) and the breakpoint search (at most
+    # MAX_SCHEDULE breakpoints).
     loops = [n for n in ast.walk(fn) if isinstance(n, ast.For)]
-    assert all(ast.unparse(n.iter) == "range(c.model_delay)" for n in loops)
+    assert loops and all(ast.unparse(n.iter) in ("range(c.model_delay)", "range(1, n - 1)") for n in loops)
     allowed = {id(n.iter) for n in loops}
     calls = [ast.unparse(n) for n in ast.walk(fn) if isinstance(n, ast.Call) and id(n) not in allowed]
     assert calls == [], "step() must not call anything (no allocation, I/O, clock or library calls)"
@@ -315,7 +317,7 @@ def test_firmware_imports_no_numpy_or_io() -> None:
     tree = ast.parse(inspect.getsource(mr))
     modules = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     modules |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert modules <= {"__future__", "math", "dataclasses"}
+    assert modules <= {"__future__", "math", "dataclasses", "firmware_py.calibration"}
 
 
 @pytest.mark.parametrize("bad", [dict(q_form="pid"), dict(method="euler"), dict(ts=0.0), dict(k=-1.0),

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import importlib
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from firmware_py.controller.main import build_parser as controller_parser
+from firmware_py import model_regulator as mr
 from sim_plant.harness import launch
 from sim_plant.nodes.fault_bridge import Fault
 from sim_plant.nodes.plant import build_parser as plant_parser
@@ -17,15 +19,16 @@ from sim_plant.nodes.plant import build_parser as plant_parser
 BUS = launch.BusArgs("mrsteer", "chan-1")
 
 
-def test_controller_settings_reach_the_controller_as_given() -> None:
-    s = launch.ControllerSettings(333.3333333333333, launch.Gains(43.1, 0.0212, 0.02, 2), trigger="sensors",
+def test_controller_settings_reach_the_controller_as_given(tmp_path: Path) -> None:
+    cal = replace(mr.plain_law(mr.ControllerConfig(), 43.1, 0.0212, 0.02), model_delay_steps=2)
+    s = launch.ControllerSettings(333.3333333333333, launch.write_calibration(tmp_path, cal), trigger="sensors",
                                   q_form="standard", rate_limit=0.6981317007977318, duration=2.5, rt_priority=50,
                                   cpu=1, stats_out=Path("/tmp/x/controller.json"), secoc=True)
     a = controller_parser().parse_args(list(launch.controller(BUS, s).argv))
     assert (a.interface, a.channel, a.rate_hz, a.trigger, a.controller) == ("mrsteer", "chan-1", 333.3333333333333,
                                                                             "sensors", "standard")
-    assert (a.k, a.tau, a.tau_n, a.model_delay, a.rate_limit, a.duration) == (43.1, 0.0212, 0.02, 2,
-                                                                              0.6981317007977318, 2.5)
+    assert a.calibration == cal  # the file read back is the calibration, bit for bit
+    assert (a.rate_limit, a.duration) == (0.6981317007977318, 2.5)
     assert (a.rt_priority, a.cpu, a.stats_out, a.secoc) == (50, 1, Path("/tmp/x/controller.json"), True)
 
 

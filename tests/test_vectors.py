@@ -41,9 +41,19 @@ def test_coefficient_tables_match_configure() -> None:
         cfg = vectors.read_config(cfg_path)
         c = mr.configure(cfg)
         table = dict(line.split(" = ") for line in cfg_path.read_text().splitlines() if line.startswith("c."))
+        assert set(table) == {f"c.{name}" for name in c.__slots__}
         for key, text in table.items():
             value = getattr(c, key[2:])
-            assert (repr(float(value)) if isinstance(value, float) else str(value)) == text, (cfg_path.name, key)
+            parts = [float(x) for x in text.split(",") if x.strip()] if isinstance(value, tuple) else None
+            if parts is not None:
+                assert tuple(parts) == value, (cfg_path.name, key)
+            else:
+                assert (repr(float(value)) if isinstance(value, float) else str(value)) == text, (cfg_path.name, key)
+
+
+def test_calibration_files_read_back_bit_for_bit() -> None:
+    for name, cfg in vectors.CONFIGS.items():
+        assert vectors.read_config(VECTOR_DIR / f"{name}.cfg") == cfg, name
 
 
 def test_vectors_cover_every_status_and_fault_flag() -> None:

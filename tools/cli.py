@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from firmware_py import model_regulator as mr
-from firmware_py.controller.options import resolve_model_delay
+from firmware_py.controller.options import calibration_from_args, describe_gains, hand_gains
 from firmware_py.platform.cli import EXIT_USAGE, Parser
 from mrsteer_cli import design_cli, hil_cli
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number, say
@@ -46,10 +46,11 @@ def _add_controller(p: argparse.ArgumentParser, choices: Sequence[str] = CONTROL
     p.add_argument("--controller", choices=choices, default=mr.Q_LIMITED,
                    help="none, standard (eq. 17) or limited (eq. 22) model regulator (default limited)")
     add_gains(p)
-    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
-                   help="discretisation of the firmware when --ts > 0 (default tustin)")
-    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True, allow_zero=True), default=0.0, metavar="S",
-                   help="0 (default): continuous reference; T > 0: the firmware at step T with the exact ZOH plant")
+    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=None,
+                   help=f"discretisation of the firmware when --ts > 0 (default: the calibration's, {d.method})")
+    p.add_argument("--ts", type=number("ts", 0.0, 0.1, lo_open=True, allow_zero=True), default=None, metavar="S",
+                   help="T > 0: the firmware at step T with the exact ZOH plant; 0: the continuous reference of "
+                   "the paper's plain law (default: the calibration's step, 0 with --k/--tau/--tau-n)")
     p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="samples between measurement and applied command when --ts > 0 (default 1)")
     p.add_argument("--duration", type=number("duration", 0.0, MAX_DURATION, lo_open=True), default=3.0,
@@ -140,8 +141,11 @@ def _delegate(name: str) -> Callable[[argparse.Namespace], int]:
 
 
 def _config(args: argparse.Namespace) -> mr.ControllerConfig:
-    cfg = replace(mr.ControllerConfig(), k=args.k, tau=args.tau, tau_n=args.tau_n, method=args.method,
-                  model_delay_steps=args.model_delay)
+    """The calibration the options give; also settles ``args.ts`` (see --ts)."""
+    cfg = calibration_from_args(args)
+    cfg = replace(cfg, method=args.method or cfg.method)
+    if args.ts is None:
+        args.ts = 0.0 if hand_gains(args) else cfg.ts
     if args.ts > 0.0:
         cfg = replace(cfg, ts=args.ts)
     mr.configure(cfg)  # reject an impossible calibration before simulating
@@ -153,10 +157,11 @@ def _params(args: argparse.Namespace) -> VehicleParams:
 
 
 def _echo(args: argparse.Namespace) -> dict[str, object]:
-    return {"v": args.v, "mu": args.mu, "mass": args.mass, "controller": args.controller, "k": args.k,
-            "tau": args.tau, "tau_n": args.tau_n, "ts": args.ts, "method": args.method,
+    cfg = _config(args)
+    return {"v": args.v, "mu": args.mu, "mass": args.mass, "controller": args.controller,
+            **{k: v for k, v in describe_gains(cfg).items() if k != "q_form"}, "ts": args.ts, "method": cfg.method,
             "delay_steps": args.delay_steps if args.ts > 0 else 0,
-            "model_delay_steps": args.model_delay if args.ts > 0 else 0, "duration": args.duration}
+            "model_delay_steps": cfg.model_delay_steps if args.ts > 0 else 0, "duration": args.duration}
 
 
 def _emit(args: argparse.Namespace, result: dict[str, object], title: str) -> None:
@@ -258,7 +263,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _delegate(argv[0])(argparse.Namespace(args=argv[1:]))
     parser = build_parser()
     args = parser.parse_args(argv)
-    resolve_model_delay(args)
     try:
         return args.handler(args)
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours

@@ -7,8 +7,7 @@ import math
 import sys
 from typing import Callable
 
-from firmware_py import model_regulator as mr
-from firmware_py.controller.options import model_delay_help
+from firmware_py.controller.options import add_calibration_args
 
 MASS_RANGE = (300.0, 10000.0)  # kg accepted for the vehicle's mass
 
@@ -47,16 +46,9 @@ def count(text: str) -> int:
 
 
 def add_gains(p: argparse.ArgumentParser) -> None:
-    """--k, --tau, --tau-n and --model-delay, defaulting to the shipped calibration."""
-    d = mr.ControllerConfig()
-    p.add_argument("--k", type=number("K", 0.0, 1e6, lo_open=True), default=d.k,
-                   help=f"eq. (22) gain K (default {d.k:g})")
-    p.add_argument("--tau", type=number("tau", 0.0, 10.0, lo_open=True), default=d.tau,
-                   help=f"eq. (22) time constant in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=number("tau_n", 0.0, 10.0, lo_open=True), default=d.tau_n,
-                   help=f"eq. (18) desired-model time constant in s (default {d.tau_n:g})")
-    p.add_argument("--model-delay", type=count, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
+    """--calibration, --k, --tau, --tau-n and --model-delay (firmware_py.controller.options),
+    range-checked; the shipped calibration by default."""
+    add_calibration_args(p, number=lambda name, lo, hi: number(name, lo, hi, lo_open=True), count=count)
 
 
 def _model_spec(kind: str, loader: Callable[[str], object]) -> Callable[[str], object]:

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
+from firmware_py.controller.options import calibration_from_args
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU
@@ -102,8 +103,8 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                         "at every point of an operating envelope, and the worst case.")
     _add_loop(p, "limited (eq. 22) or standard (eq. 17) model regulator")
     add_gains(p)
-    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method,
-                   help=f"discretisation (default {d.method})")
+    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=None,
+                   help=f"discretisation (default: the calibration's, {d.method})")
     _add_envelope(p)
     _add_reference(p)
     p.add_argument("--constraints", action="store_true",
@@ -199,8 +200,8 @@ def _constraints_table(res: dict[str, Any]) -> str:
 def _cmd_margins(args: argparse.Namespace) -> int:
     from sim_plant.offline.margins import envelope_margins
 
-    cfg = replace(mr.ControllerConfig(), q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
-                  ts=args.ts, method=args.method, model_delay_steps=args.model_delay)
+    cfg = calibration_from_args(args)
+    cfg = replace(cfg, q_form=args.controller, ts=args.ts, method=args.method or cfg.method)
     env = _envelope(args)
     models = _models(args)
     margins = envelope_margins(cfg, args.delay_steps, env, progress=_progress("margins"), models=models)

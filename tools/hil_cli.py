@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
+from firmware_py.controller.options import calibration_from_args
 from mrsteer_cli.cli_args import add_gains, count, number, say
 from sim_plant.car.options import add_car_args
 from sim_plant.car.scenario import SPEED_RANGE
@@ -107,7 +108,7 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
         return 1
     cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, duration=args.duration,
                       controller=args.controller,
-                      k=args.k, tau=args.tau, tau_n=args.tau_n, model_delay=args.model_delay,
+                      calibration=calibration_from_args(args),
                       delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
                       sensors=args.sensors, seed=args.seed, controller_program=program)
     try:
@@ -132,8 +133,7 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 def _cmd_hil_evidence(args: argparse.Namespace) -> int:
     from sim_plant.harness import hil, hil_evidence
 
-    cfg = _hil_config(args, controller=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
-                      model_delay=args.model_delay, out=args.out, plant=args.plant, actuator=args.actuator,
+    cfg = _hil_config(args, controller=args.controller, calibration=calibration_from_args(args), out=args.out, plant=args.plant, actuator=args.actuator,
                       sensors=args.sensors, seed=args.seed)
     try:
         rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=say)

@@ -7,12 +7,13 @@ import json
 import math
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
-from firmware_py.controller.options import model_delay_help, resolve_model_delay
+from firmware_py.controller.options import add_calibration_args, calibration_from_args
 from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET
 from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
@@ -27,8 +28,8 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--interface", help="python-can interface (default: python-can config, else SocketCAN vcan0 "
                    "if present, else the mrsteer fallback bus)")
     p.add_argument("--channel", help="channel for the interface (default vcan0 / mrsteer0)")
-    p.add_argument("--rate-hz", type=float, default=DEFAULT_RATE_HZ,
-                   help=f"control rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains were tuned for)")
+    p.add_argument("--rate-hz", type=float, default=None,
+                   help=f"control rate in Hz (default: the calibration's, {DEFAULT_RATE_HZ:g} for the shipped one)")
     p.add_argument("--trigger", choices=TRIGGERS, default="clock",
                    help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
     p.add_argument("--sync-offset-us", type=float, default=DEFAULT_SYNC_OFFSET * 1e6, metavar="US",
@@ -37,16 +38,13 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     p.add_argument("--no-sync", action="store_true", help="clock trigger: free-running grid, no phase lock")
     p.add_argument("--timeout-cycles", type=int, default=10,
                    help="an input missing for more than this many of its own cycle times is a fault (default 10)")
-    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=d.q_form,
-                   help="Q filter: limited (eq. 22, default) or standard (eq. 17)")
-    p.add_argument("--k", type=float, default=d.k, help=f"eq. (22) gain K (default {d.k:g})")
-    p.add_argument("--tau", type=float, default=d.tau, help=f"eq. (22) time constant in s (default {d.tau:g})")
-    p.add_argument("--tau-n", type=float, default=d.tau_n, help=f"eq. (18) time constant in s (default {d.tau_n:g})")
-    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=d.method)
-    p.add_argument("--model-delay", type=int, default=None, metavar="M",
-                   help=model_delay_help(d.model_delay_steps, mr.MAX_MODEL_DELAY))
-    p.add_argument("--rate-limit", type=float, default=0.0, metavar="RAD_S",
-                   help="command rate limit in rad/s (default 0: off)")
+    p.add_argument("--controller", choices=(mr.Q_LIMITED, mr.Q_STANDARD), default=None,
+                   help=f"Q filter: limited (eq. 22) or standard (eq. 17) (default: the calibration's, {d.q_form})")
+    add_calibration_args(p)
+    p.add_argument("--method", choices=(mr.METHOD_TUSTIN, mr.METHOD_ZOH), default=None,
+                   help=f"discretisation of Q (default: the calibration's, {d.method})")
+    p.add_argument("--rate-limit", type=float, default=None, metavar="RAD_S",
+                   help="command rate limit in rad/s (default: the calibration's, 0: off)")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
     p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
                    help="write loop statistics as JSON here on exit")
@@ -62,8 +60,7 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
-    resolve_model_delay(args)
-    if not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
+    if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
         parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
     if args.timeout_cycles < 1:
         parser.error("--timeout-cycles must be at least 1")
@@ -74,9 +71,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
     if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
         parser.error(f"--cpu must be in 0..{(os.cpu_count() or 1) - 1}, got {args.cpu}")
     try:
-        ctrl = mr.ControllerConfig(q_form=args.controller, k=args.k, tau=args.tau, tau_n=args.tau_n,
-                                   method=args.method, rate_limit=args.rate_limit, ts=1.0 / args.rate_hz,
-                                   model_delay_steps=args.model_delay)
+        ctrl = calibration_from_args(args)
+        if args.rate_hz is None:
+            args.rate_hz = 1.0 / ctrl.ts
+        ctrl = replace(ctrl, q_form=args.controller or ctrl.q_form, method=args.method or ctrl.method,
+                       rate_limit=args.rate_limit if args.rate_limit is not None else ctrl.rate_limit,
+                       ts=1.0 / args.rate_hz)
         mr.configure(ctrl)
     except ValueError as exc:
         parser.error(str(exc))

@@ -3,14 +3,29 @@
  * reproduces the golden vectors to the last bit on IEEE-754 hardware without FMA contraction. */
 #include "mrs_controller.h"
 
-#include <math.h> /* exp() in mrs_configure only (ZOH); isfinite and INFINITY are macros */
+#include <math.h> /* exp(), tan(), sqrt() in mrs_configure only; isfinite and INFINITY are macros */
 
 void mrs_default_config(mrs_config_t *cfg)
 {
+    /* The shipped schedule (firmware_py/calibration.py): v, K, tau = tau_Q (1 + K), tau_n. */
+    static const double v[6] = {5.0, 10.0, 20.0, 30.0, 40.0, 50.0};
+    static const double k[6] = {10.4, 27.0, 10.0, 10.0, 6.3, 4.5};
+    static const double tau[6] = {0.05472, 0.252, 0.0616, 0.1496, 0.09344, 0.07755};
+    static const double tau_n[6] = {0.034, 0.089, 0.12, 0.255, 0.275, 0.305};
+    int i;
     cfg->q_form = MRS_Q_LIMITED;
-    cfg->k = 43.0;
-    cfg->tau = 0.0212;
-    cfg->tau_n = 0.02;
+    cfg->k = 0.0; /* unused: scheduled */
+    cfg->tau = 0.0;
+    cfg->tau_n = 0.0;
+    cfg->n_schedule = 6;
+    for (i = 0; i < MRS_MAX_SCHEDULE; ++i) {
+        cfg->schedule_speed[i] = (i < 6) ? v[i] : 0.0;
+        cfg->schedule_k[i] = (i < 6) ? k[i] : 0.0;
+        cfg->schedule_tau[i] = (i < 6) ? tau[i] : 0.0;
+        cfg->schedule_tau_n[i] = (i < 6) ? tau_n[i] : 0.0;
+    }
+    cfg->model_actuator_tau = 0.02;
+    cfg->model_filter_hz = 30.0;
     cfg->ts = 0.002;
     cfg->method = MRS_TUSTIN;
     cfg->aux_limit = 0.05235987755982989; /* 3 deg */
@@ -28,13 +43,10 @@ void mrs_default_config(mrs_config_t *cfg)
     cfg->nominal_c_r = 96000.0;
 }
 
-static int all_finite(const mrs_config_t *g)
+static int all_finite(const double *v, int n)
 {
-    const double v[] = {g->k, g->tau, g->tau_n, g->ts, g->aux_limit, g->rate_limit, g->fade_rate,
-                        g->speed_active_min, g->speed_max, g->driver_angle_max, g->yaw_rate_max,
-                        g->nominal_l_f, g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r};
-    unsigned i;
-    for (i = 0u; i < sizeof v / sizeof v[0]; ++i) {
+    int i;
+    for (i = 0; i < n; ++i) {
         if (!isfinite(v[i])) {
             return 0;
         }
@@ -42,55 +54,136 @@ static int all_finite(const mrs_config_t *g)
     return 1;
 }
 
-int mrs_configure(const mrs_config_t *g, mrs_coeffs_t *c)
+/* The calibration's checks, as firmware_py/calibration.py validate() makes them. */
+static int valid(const mrs_config_t *g)
 {
-    double q0, tau_q, a, bw0, bw1, br0, br1, g_w0, wheelbase, k_us;
-
+    const double v[] = {g->ts, g->aux_limit, g->rate_limit, g->fade_rate, g->model_actuator_tau,
+                        g->model_filter_hz, g->speed_active_min, g->speed_max, g->driver_angle_max,
+                        g->yaw_rate_max, g->nominal_l_f, g->nominal_l_r, g->nominal_mass, g->nominal_c_f,
+                        g->nominal_c_r};
+    const int n = g->n_schedule;
+    int i, extended;
     if ((g->q_form != MRS_Q_LIMITED && g->q_form != MRS_Q_STANDARD) ||
-        (g->method != MRS_TUSTIN && g->method != MRS_ZOH) || !all_finite(g)) {
-        return -1;
+        (g->method != MRS_TUSTIN && g->method != MRS_ZOH) || !all_finite(v, (int)(sizeof v / sizeof v[0])) ||
+        n < 0 || n > MRS_MAX_SCHEDULE) {
+        return 0;
     }
-    if (!(g->k > 0.0 && g->tau > 0.0 && g->tau_n > 0.0 && g->ts > 0.0 && g->aux_limit > 0.0 &&
-          g->fade_rate > 0.0 && g->speed_active_min > 0.0 && g->speed_max > 0.0 && g->driver_angle_max > 0.0 &&
-          g->yaw_rate_max > 0.0 && g->nominal_l_f > 0.0 && g->nominal_l_r > 0.0 && g->nominal_mass > 0.0 &&
-          g->nominal_c_f > 0.0 && g->nominal_c_r > 0.0) ||
-        g->rate_limit < 0.0 || g->model_delay_steps < 0 || g->model_delay_steps > MRS_MAX_MODEL_DELAY ||
+    if (n == 0) {
+        if (!(isfinite(g->k) && isfinite(g->tau) && isfinite(g->tau_n) && g->k > 0.0 && g->tau > 0.0 &&
+              g->tau_n > 0.0)) {
+            return 0;
+        }
+    }
+    for (i = 0; i < n; ++i) {
+        const double p[4] = {g->schedule_speed[i], g->schedule_k[i], g->schedule_tau[i], g->schedule_tau_n[i]};
+        if (!all_finite(p, 4) || !(p[0] > 0.0 && p[1] > 0.0 && p[2] > 0.0 && p[3] > 0.0) ||
+            (i > 0 && !(p[0] > g->schedule_speed[i - 1]))) {
+            return 0;
+        }
+    }
+    extended = (n > 0) || (g->model_actuator_tau > 0.0) || (g->model_filter_hz > 0.0);
+    if (!(g->ts > 0.0 && g->aux_limit > 0.0 && g->fade_rate > 0.0 && g->speed_active_min > 0.0 &&
+          g->speed_max > 0.0 && g->driver_angle_max > 0.0 && g->yaw_rate_max > 0.0 && g->nominal_l_f > 0.0 &&
+          g->nominal_l_r > 0.0 && g->nominal_mass > 0.0 && g->nominal_c_f > 0.0 && g->nominal_c_r > 0.0) ||
+        g->rate_limit < 0.0 || g->model_actuator_tau < 0.0 || g->model_filter_hz < 0.0 ||
+        g->model_filter_hz >= 0.5 / g->ts || g->model_delay_steps < 0 ||
+        g->model_delay_steps > MRS_MAX_MODEL_DELAY || (extended && g->model_delay_steps == 0) ||
         g->speed_active_min >= g->speed_max) {
-        return -1;
+        return 0;
     }
+    return 1;
+}
 
+/* One breakpoint's coefficient set (a, g_w0, g_w1, g_r0, g_r1, q0) from K, tau, tau_n. */
+static void law_coefficients(const mrs_config_t *g, double k, double tau, double tau_n, double out[6])
+{
     /* Q(s) = q0 / (tau_Q s + 1): eq. (22) limited, eq. (17) standard */
-    tau_q = g->tau / (1.0 + g->k);
-    q0 = (g->q_form == MRS_Q_LIMITED) ? g->k / (1.0 + g->k) : 1.0;
+    const double tau_q = tau / (1.0 + k);
+    const double q0 = (g->q_form == MRS_Q_LIMITED) ? k / (1.0 + k) : 1.0;
+    double a, bw0, bw1, br0, br1;
     if (g->method == MRS_TUSTIN) {
         const double den = 2.0 * tau_q + g->ts;
         a = (2.0 * tau_q - g->ts) / den;
         bw0 = g->ts / den;
         bw1 = bw0;
-        br0 = (2.0 * g->tau_n + g->ts) / den;
-        br1 = (g->ts - 2.0 * g->tau_n) / den;
+        br0 = (2.0 * tau_n + g->ts) / den;
+        br1 = (g->ts - 2.0 * tau_n) / den;
     } else {
-        const double cz = g->tau_n / tau_q;
+        const double cz = tau_n / tau_q;
         a = exp(-g->ts / tau_q);
         bw0 = 0.0;
         bw1 = 1.0 - a;
         br0 = cz;
         br1 = 1.0 - a - cz;
     }
-    g_w0 = q0 * bw0;
+    out[0] = a;
+    out[1] = q0 * bw0;
+    out[2] = q0 * bw1;
+    out[3] = q0 * br0;
+    out[4] = q0 * br1;
+    out[5] = q0;
+}
+
+int mrs_configure(const mrs_config_t *g, mrs_coeffs_t *c)
+{
+    double wheelbase, k_us, act_a, g_w0_first = 0.0;
+    double flt[5] = {1.0, 0.0, 0.0, 0.0, 0.0};
+    int i;
+    const int n = (g->n_schedule > 0) ? g->n_schedule : 1;
+
+    if (!valid(g)) {
+        return -1;
+    }
+    for (i = 0; i < MRS_MAX_SCHEDULE; ++i) {
+        double p[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        if (i < n) {
+            if (g->n_schedule > 0) {
+                law_coefficients(g, g->schedule_k[i], g->schedule_tau[i], g->schedule_tau_n[i], p);
+            } else {
+                law_coefficients(g, g->k, g->tau, g->tau_n, p);
+            }
+        }
+        c->sched_v[i] = (mrs_real_t)((g->n_schedule > 0 && i < n) ? g->schedule_speed[i] : 0.0);
+        c->sched_inv_dv[i] = (mrs_real_t)((i + 1 < n) ? 1.0 / (g->schedule_speed[i + 1] - g->schedule_speed[i])
+                                                       : 0.0);
+        c->sched_a[i] = (mrs_real_t)p[0];
+        c->sched_g_w0[i] = (mrs_real_t)p[1];
+        c->sched_g_w1[i] = (mrs_real_t)p[2];
+        c->sched_g_r0[i] = (mrs_real_t)p[3];
+        c->sched_g_r1[i] = (mrs_real_t)p[4];
+        c->sched_q0[i] = (mrs_real_t)p[5];
+        if (i == 0) {
+            g_w0_first = p[1];
+        }
+    }
+    c->n_sched = n;
+    /* Nominal actuator: ZOH of 1/(tau_an s + 1); nominal filter: 2nd-order Butterworth, Tustin
+     * with the cut-off pre-warped (scipy.signal.butter). */
+    act_a = (g->model_actuator_tau > 0.0) ? exp(-g->ts / g->model_actuator_tau) : 0.0;
+    if (g->model_filter_hz > 0.0) {
+        const double w = tan(3.141592653589793 * g->model_filter_hz * g->ts);
+        const double nn = 1.0 / (1.0 + sqrt(2.0) * w + w * w);
+        const double b0 = w * w * nn;
+        flt[0] = b0;
+        flt[1] = 2.0 * b0;
+        flt[2] = b0;
+        flt[3] = 2.0 * (w * w - 1.0) * nn;
+        flt[4] = (1.0 - sqrt(2.0) * w + w * w) * nn;
+    }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
     /* 1/K_n(v) = L/v + k_us v: eq. (15) inverted, nominal car at mu = 1 */
     k_us = (g->nominal_c_r * g->nominal_l_r - g->nominal_c_f * g->nominal_l_f) * g->nominal_mass /
            (g->nominal_c_f * g->nominal_c_r * wheelbase);
 
-    c->a = (mrs_real_t)a;
-    c->g_w0 = (mrs_real_t)g_w0;
-    c->g_w1 = (mrs_real_t)(q0 * bw1);
-    c->g_r0 = (mrs_real_t)(q0 * br0);
-    c->g_r1 = (mrs_real_t)(q0 * br1);
-    c->q0 = (mrs_real_t)q0;
-    c->inv_one_minus_g_w0 = (mrs_real_t)(1.0 / (1.0 - g_w0));
+    c->inv_one_minus_g_w0 = (mrs_real_t)(1.0 / (1.0 - g_w0_first));
     c->model_delay = g->model_delay_steps;
+    c->act_a = (mrs_real_t)act_a;
+    c->act_b = (mrs_real_t)(1.0 - act_a);
+    c->flt_b0 = (mrs_real_t)flt[0];
+    c->flt_b1 = (mrs_real_t)flt[1];
+    c->flt_b2 = (mrs_real_t)flt[2];
+    c->flt_a1 = (mrs_real_t)flt[3];
+    c->flt_a2 = (mrs_real_t)flt[4];
     c->wheelbase = (mrs_real_t)wheelbase;
     c->k_us = (mrs_real_t)k_us;
     c->u_max = (mrs_real_t)g->aux_limit;
@@ -112,6 +205,9 @@ void mrs_init_state(mrs_state_t *s)
         s->u_hist[i] = 0;
     }
     s->hist_idx = 0u;
+    s->p_n = 0;
+    s->f_s1 = 0;
+    s->f_s2 = 0;
     s->needs_init = 1u;
     s->recovering = 0u;
     s->status = MRS_STATUS_INACTIVE;
@@ -122,7 +218,9 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
                     mrs_real_t speed)
 {
     uint8_t flags = 0u;
-    mrs_real_t u, inv_kn, rho, du, lo_slew, hi_slew, lo, hi, w, y;
+    mrs_real_t u, inv_kn, rho, du, lo_slew, hi_slew, lo, hi, w, y, f, a, g_w0, g_w1, g_r0, g_r1;
+    int j, j1;
+    const int n = c->n_sched;
 
     /* Written so that a NaN fails every comparison: non-finite inputs are faults. */
     if (!(-c->driver_angle_max <= delta_driver && delta_driver <= c->driver_angle_max)) {
@@ -155,15 +253,44 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
     inv_kn = c->wheelbase / speed + c->k_us * speed;
     rho = inv_kn * yaw_rate;
 
+    /* The coefficient set at this speed: linear between breakpoints, held outside them. */
+    j = 0;
+    j1 = 0;
+    f = 0;
+    if (n > 1 && speed > c->sched_v[0]) {
+        if (speed >= c->sched_v[n - 1]) {
+            j = n - 1;
+            j1 = n - 1;
+        } else {
+            int i;
+            for (i = 1; i < n - 1; ++i) { /* the last breakpoint at or below the speed */
+                if (speed >= c->sched_v[i]) {
+                    j = i;
+                }
+            }
+            j1 = j + 1;
+            f = (speed - c->sched_v[j]) * c->sched_inv_dv[j];
+        }
+    }
+    a = c->sched_a[j] + f * (c->sched_a[j1] - c->sched_a[j]);
+    g_w0 = c->sched_g_w0[j] + f * (c->sched_g_w0[j1] - c->sched_g_w0[j]);
+    g_w1 = c->sched_g_w1[j] + f * (c->sched_g_w1[j1] - c->sched_g_w1[j]);
+    g_r0 = c->sched_g_r0[j] + f * (c->sched_g_r0[j1] - c->sched_g_r0[j]);
+    g_r1 = c->sched_g_r1[j] + f * (c->sched_g_r1[j1] - c->sched_g_r1[j]);
+
     if (s->needs_init) {
-        /* Filter at its steady state for the present inputs with the command held. */
+        /* Every filter at its steady state for the present inputs with the command held. */
+        const mrs_real_t q0 = c->sched_q0[j] + f * (c->sched_q0[j1] - c->sched_q0[j]);
         const mrs_real_t w0 = delta_driver + s->u_prev;
         int i;
-        s->z = c->q0 * (w0 - rho) - (c->g_w0 * w0 - c->g_r0 * rho);
+        s->z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho);
         for (i = 0; i < c->model_delay; ++i) {
             s->u_hist[i] = s->u_prev;
         }
         s->hist_idx = 0u;
+        s->p_n = s->u_prev;
+        s->f_s1 = (1 - c->flt_b0) * w0;
+        s->f_s2 = (c->flt_b2 - c->flt_a2) * w0;
         s->needs_init = 0u;
         s->recovering = 1u;
     }
@@ -186,20 +313,26 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
 
     if (c->model_delay == 0) {
         /* Tustin's algebraic loop, solved exactly: u = clamp(p / (1 - g_w0), lo, hi). */
-        const mrs_real_t p = c->g_w0 * delta_driver - c->g_r0 * rho + s->z;
+        const mrs_real_t p = g_w0 * delta_driver - g_r0 * rho + s->z;
         u = p * c->inv_one_minus_g_w0;
         if (u < lo) {
             u = lo;
         } else if (u > hi) {
             u = hi;
         }
-        y = p + c->g_w0 * u;
+        y = p + g_w0 * u;
         w = delta_driver + u;
     } else {
-        /* The yaw rate measured now answers the command issued M steps ago. */
+        /* The yaw rate measured now answers the command issued M steps ago, through the
+         * actuator and the sensor filter: the nominal model's answer to that command. */
         uint8_t i = s->hist_idx;
-        w = delta_driver + s->u_hist[i];
-        y = c->g_w0 * w - c->g_r0 * rho + s->z;
+        mrs_real_t x;
+        s->p_n = c->act_a * s->p_n + c->act_b * s->u_hist[i];
+        x = delta_driver + s->p_n;
+        w = c->flt_b0 * x + s->f_s1;
+        s->f_s1 = c->flt_b1 * x - c->flt_a1 * w + s->f_s2;
+        s->f_s2 = c->flt_b2 * x - c->flt_a2 * w;
+        y = g_w0 * w - g_r0 * rho + s->z;
         u = y;
         if (u < lo) {
             u = lo;
@@ -214,7 +347,7 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
         s->hist_idx = i;
     }
 
-    s->z = c->g_w1 * w - c->g_r1 * rho + c->a * y;
+    s->z = g_w1 * w - g_r1 * rho + a * y;
     if (s->recovering && lo_slew < u && u < hi_slew) {
         s->recovering = 0u;
     }

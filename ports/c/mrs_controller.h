@@ -21,6 +21,7 @@ typedef double mrs_real_t;
 #endif
 
 #define MRS_MAX_MODEL_DELAY 8
+#define MRS_MAX_SCHEDULE 8
 
 /* Status as sent on the bus (AuxSteerCmd_State). */
 #define MRS_STATUS_INACTIVE 0u
@@ -36,10 +37,18 @@ typedef double mrs_real_t;
 typedef enum { MRS_Q_LIMITED = 0, MRS_Q_STANDARD = 1 } mrs_q_form_t;
 typedef enum { MRS_TUSTIN = 0, MRS_ZOH = 1 } mrs_method_t;
 
-/* Calibration (ControllerConfig). Angles in rad of front-wheel angle, times in s. */
+/* Calibration (ControllerConfig). Angles in rad of front-wheel angle, times in s.
+ * The gains are a speed schedule (n_schedule > 0 breakpoints) or, with n_schedule == 0, the
+ * constant k, tau, tau_n (ignored when scheduled). model_actuator_tau and model_filter_hz put
+ * the actuator lag and the yaw-rate low-pass into the nominal model (0: none). */
 typedef struct {
     mrs_q_form_t q_form;
-    double k, tau, tau_n, ts;
+    double k, tau, tau_n;
+    int n_schedule;
+    double schedule_speed[MRS_MAX_SCHEDULE], schedule_k[MRS_MAX_SCHEDULE], schedule_tau[MRS_MAX_SCHEDULE],
+        schedule_tau_n[MRS_MAX_SCHEDULE];
+    double model_actuator_tau, model_filter_hz;
+    double ts;
     mrs_method_t method;
     double aux_limit, rate_limit, fade_rate;
     int model_delay_steps;
@@ -47,10 +56,16 @@ typedef struct {
     double nominal_l_f, nominal_l_r, nominal_mass, nominal_c_f, nominal_c_r;
 } mrs_config_t;
 
-/* Everything mrs_step() needs (Coefficients). */
+/* Everything mrs_step() needs (Coefficients): the law's coefficient set per breakpoint, the
+ * nominal actuator (act_*) and filter (flt_*), the limits. */
 typedef struct {
-    mrs_real_t a, g_w0, g_w1, g_r0, g_r1, q0, inv_one_minus_g_w0;
+    int n_sched;
+    mrs_real_t sched_v[MRS_MAX_SCHEDULE], sched_inv_dv[MRS_MAX_SCHEDULE];
+    mrs_real_t sched_a[MRS_MAX_SCHEDULE], sched_g_w0[MRS_MAX_SCHEDULE], sched_g_w1[MRS_MAX_SCHEDULE],
+        sched_g_r0[MRS_MAX_SCHEDULE], sched_g_r1[MRS_MAX_SCHEDULE], sched_q0[MRS_MAX_SCHEDULE];
+    mrs_real_t inv_one_minus_g_w0;
     int model_delay;
+    mrs_real_t act_a, act_b, flt_b0, flt_b1, flt_b2, flt_a1, flt_a2;
     mrs_real_t wheelbase, k_us, u_max, du_max, fade_step;
     mrs_real_t speed_active_min, speed_max, driver_angle_max, yaw_rate_max;
 } mrs_coeffs_t;
@@ -59,6 +74,7 @@ typedef struct {
 typedef struct {
     mrs_real_t z, u_prev;
     mrs_real_t u_hist[MRS_MAX_MODEL_DELAY];
+    mrs_real_t p_n, f_s1, f_s2;
     uint8_t hist_idx, needs_init, recovering, status, fault_flags;
 } mrs_state_t;
 

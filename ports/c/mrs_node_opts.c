@@ -10,7 +10,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "mrs_calib.h"
+#include "mrs_config.h"
 
 #define DEFAULT_SYNC_OFFSET_US 50.0
 
@@ -28,22 +28,24 @@ static const char HELP[] =
     "  -h, --help            show this help message and exit\n"
     "  --interface IFACE     socketcan or mrsteer (default: SocketCAN vcan0 if present, else the fallback bus)\n"
     "  --channel CHANNEL     channel for the interface (default vcan0 / mrsteer0)\n"
-    "  --rate-hz RATE_HZ     control rate in Hz (default: the calibration's, 500 shipped)\n"
+    "  --rate-hz RATE_HZ     control rate in Hz (default: the calibration's, 500 for the shipped one)\n"
     "  --trigger {clock,sensors}\n"
     "                        clock: fixed rate on the monotonic clock (default); sensors: one cycle per\n"
     "                        yaw-rate frame (lockstep)\n"
     "  --sync-offset-us US   clock trigger: start each cycle this long after the yaw-rate frame (default 50)\n"
     "  --no-sync             clock trigger: free-running grid, no phase lock\n"
     "  --timeout-cycles N    an input missing for more than N of its own cycle times is a fault (default 10)\n"
-    "  --calibration FILE    the calibration as key = value lines (the .cfg format of tests/vectors)\n"
+    "  --calibration FILE    calibration file (key = value lines, docs/porting.md; default: the shipped\n"
+    "                        speed-scheduled calibration)\n"
     "  --controller {limited,standard}\n"
     "                        Q filter: limited (eq. 22, default) or standard (eq. 17)\n"
     "  --k K, --tau TAU, --tau-n TAU_N\n"
-    "                        eq. (22) gain and time constant, eq. (18) time constant (default: the calibration's)\n"
+    "                        the paper's plain law with constant eq. (22) gain and time constant and eq. (18)\n"
+    "                        time constant (the ones not given: 10, 0.006, 0.02)\n"
     "  --method {tustin,zoh}\n"
-    "  --model-delay M       command delay modelled in the controller (default: the shipped one with the\n"
-    "                        shipped K, tau and tau_n; 0 when any of them is given)\n"
-    "  --rate-limit RAD_S    command rate limit in rad/s (default 0: off)\n"
+    "  --model-delay M       command delay modelled in the controller (default: the calibration's; 0 when\n"
+    "                        --k, --tau or --tau-n is given)\n"
+    "  --rate-limit RAD_S    command rate limit in rad/s (default: the calibration's, 0: off)\n"
     "  --duration S          stop after S seconds\n"
     "  --stats-out FILE      write loop statistics as JSON here on exit\n"
     "  --secoc               authenticate the commands and the sensor frames with the key in $MRSTEER_SECOC_KEY\n"
@@ -207,19 +209,37 @@ static int choose(const char *flag, const char *v, const char *a, const char *b,
     return 0;
 }
 
-/* The law: the calibration file (or the shipped one), then the flags over it. */
+/* The paper's gains and the default tau_n that --k, --tau and --tau-n complete (PAPER_K,
+ * PAPER_TAU and DEFAULT_TAU_N of firmware_py/calibration.py; tests/test_c_node.py runs both). */
+#define PAPER_K 10.0
+#define PAPER_TAU 0.006
+#define DEFAULT_TAU_N 0.02
+
+/* The law (firmware_py/controller/options.py, calibration_from_args): the calibration file or
+ * the shipped one; --k, --tau, --tau-n switch to the paper's plain law with constant gains (no
+ * actuator or filter in the nominal model, no modelled delay unless --model-delay says so);
+ * then --controller, --method and --rate-limit over it. */
 static int controller_config(raw_args_t *a, mrs_config_t *c)
 {
-    mrs_config_t shipped;
     char err[600];
     int is_b;
-    mrs_default_config(&shipped);
     if (a->calibration != NULL) {
-        if (mrs_calib_read(a->calibration, c, NULL, NULL, err, sizeof err) != 0) {
-            return usage_error("%s", err);
+        if (mrs_config_load(a->calibration, c, err, sizeof err) != 0) {
+            return usage_error("argument --calibration: %s", err);
         }
     } else {
-        *c = shipped;
+        mrs_default_config(c);
+    }
+    if (a->have_k || a->have_tau || a->have_tau_n) {
+        c->n_schedule = 0;
+        c->k = a->have_k ? a->k : PAPER_K;
+        c->tau = a->have_tau ? a->tau : PAPER_TAU;
+        c->tau_n = a->have_tau_n ? a->tau_n : DEFAULT_TAU_N;
+        c->model_actuator_tau = 0.0;
+        c->model_filter_hz = 0.0;
+        c->model_delay_steps = a->model_delay >= 0 ? a->model_delay : 0;
+    } else if (a->model_delay >= 0) {
+        c->model_delay_steps = a->model_delay;
     }
     if (a->q_form != NULL) {
         if (choose("--controller", a->q_form, "limited", "standard", &is_b) != 0) {
@@ -233,16 +253,8 @@ static int controller_config(raw_args_t *a, mrs_config_t *c)
         }
         c->method = is_b ? MRS_ZOH : MRS_TUSTIN;
     }
-    c->k = a->have_k ? a->k : c->k;
-    c->tau = a->have_tau ? a->tau : c->tau;
-    c->tau_n = a->have_tau_n ? a->tau_n : c->tau_n;
-    c->rate_limit = a->have_rate_limit || a->calibration == NULL ? a->rate_limit : c->rate_limit;
-    if (a->model_delay >= 0) {
-        c->model_delay_steps = a->model_delay;
-    } else if (a->calibration == NULL) {
-        /* Gains given by hand mean the plain law they were designed for (options.py). */
-        const int is_shipped = c->k == shipped.k && c->tau == shipped.tau && c->tau_n == shipped.tau_n;
-        c->model_delay_steps = is_shipped ? shipped.model_delay_steps : 0;
+    if (a->have_rate_limit) {
+        c->rate_limit = a->rate_limit;
     }
     return 0;
 }

@@ -120,10 +120,14 @@ class PositionActuator:
         if a is not None:
             phi, gamma = zoh_discretize(a, b, ts)
             self._phi, self._gamma = phi.tolist(), gamma[:, 0].tolist()
+        # Mean of x0 + (u - x0)(1 - e^{-t/T}) over a step: u + (x0 - u) T/ts (1 - e^{-ts/T}).
+        self._mean_c = (config.time_constant_s / ts * (1.0 - math.exp(-ts / config.time_constant_s))
+                        if config.order == 1 else 0.5)
         self.reset()
 
     def reset(self) -> None:
         self._x = [0.0] * max(self.config.order, 1)  # position (and rate for order 2)
+        self.mean = 0.0  # the position's mean over the last step
         self._delay = [0.0] * self.config.dead_time_samples
         self._head = 0
 
@@ -140,7 +144,9 @@ class PositionActuator:
         return out
 
     def step(self, command: float) -> float:
-        """Hold ``command`` (rad) over one step; the applied angle at its end (rad)."""
+        """Hold ``command`` (rad) over one step; the applied angle at its end (rad).  ``mean``
+        is then the angle's mean over the step: what a car stepped over the same interval
+        gets (the end value would be half a sample early)."""
         u = min(self.limit, max(-self.limit, self._delayed(command)))
         x = self._x
         order = self.config.order
@@ -156,9 +162,19 @@ class PositionActuator:
             nxt[0] = x[0] + math.copysign(self.max_move, move)
             if order == 2:
                 nxt[1] = math.copysign(min(abs(nxt[1]), self.max_rate), nxt[1])
+        exact = order == 1 and abs(move) <= self.max_move
         if abs(nxt[0]) > self.limit:
             nxt[0] = math.copysign(self.limit, nxt[0])
+            exact = False
             if order == 2:
                 nxt[1] = 0.0
+        # What a car integrating over the step sees: exact for an unclipped first-order move,
+        # the trapezoid otherwise (the position's path between the two ends is then unknown here).
+        if order == 0:
+            self.mean = nxt[0]
+        elif exact:
+            self.mean = u + (x[0] - u) * self._mean_c
+        else:
+            self.mean = 0.5 * (x[0] + nxt[0])
         self._x = nxt
         return nxt[0]

@@ -16,7 +16,7 @@ import shutil
 import signal
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -50,10 +50,7 @@ class HilConfig:
     mz: float | None = None
     duration: float | None = None  # s; None: the scenario's
     controller: str = mr.Q_LIMITED  # or "none"
-    k: float = _DEFAULT.k
-    tau: float = _DEFAULT.tau
-    tau_n: float = _DEFAULT.tau_n
-    model_delay: int = _DEFAULT.model_delay_steps
+    calibration: mr.ControllerConfig = _DEFAULT  # run at rate_hz (its ts is replaced)
     delay_steps: int = 1
     plant: str | None = None  # the car (``PlantSettings``); None: the scenario's
     actuator: str | None = None
@@ -73,8 +70,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     # The scenario on the chosen car, checked here: a bad choice fails before anything starts.
     sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz, duration=cfg.duration).with_models(
         cfg.plant, cfg.actuator, cfg.sensors, cfg.seed)
-    ctrl = mr.ControllerConfig(q_form=cfg.controller if cfg.controller != "none" else mr.Q_LIMITED, k=cfg.k,
-                               tau=cfg.tau, tau_n=cfg.tau_n, ts=1.0 / cfg.rate_hz, model_delay_steps=cfg.model_delay)
+    ctrl = replace(cfg.calibration, q_form=cfg.controller if cfg.controller != "none" else cfg.calibration.q_form,
+                   ts=1.0 / cfg.rate_hz)
     mr.configure(ctrl)  # reject an impossible calibration before starting anything
     if cfg.out.exists() and not cfg.out.is_dir():
         raise ValueError(f"--out {cfg.out} exists and is not a directory")
@@ -102,7 +99,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
 
         if cfg.controller != "none":
             procs.append(launch.start("controller", launch.controller(bus, launch.ControllerSettings(
-                cfg.rate_hz, launch.Gains(cfg.k, cfg.tau, cfg.tau_n, cfg.model_delay),
+                cfg.rate_hz, launch.write_calibration(work, ctrl),
                 trigger="sensors" if cfg.mode == "lockstep" else "clock", q_form=cfg.controller,
                 stats_out=work / "controller.json", secoc=cfg.secoc_key is not None,
                 program=cfg.controller_program)), work, env))

@@ -150,8 +150,7 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
         "scenario": sc.name,
         "v": sc.v, "mu": sc.mu, "mass": sc.mass,
         "m_z": next((e.value for e in sc.events if e.kind == "yaw_moment"), 0.0),
-        "controller": cfg.controller, "k": cfg.k, "tau": cfg.tau, "tau_n": cfg.tau_n,
-        "model_delay_steps": cfg.model_delay,
+        "controller": cfg.controller, **{k: v for k, v in mr.describe_gains(ctrl).items() if k != "q_form"},
         "duration": sc.duration,
         # Measurement frame to the command answering it (None without a controller).
         "latency_p50_s": float(np.median(lat)) if latencies else None,

@@ -23,6 +23,8 @@ import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from firmware_py import calibration_file
+from firmware_py.calibration import ControllerConfig
 from sim_plant.harness.processes import Proc, spawn, spawn_preloaded
 from sim_plant.nodes.fault_bridge import Fault
 
@@ -169,14 +171,11 @@ def logger(bus: BusArgs, s: LoggerSettings) -> Launch:
                            *_opt("--stats-out", s.stats_out)))
 
 
-@dataclass(frozen=True)
-class Gains:
-    """A calibration of the model regulator: K, tau, tau_n and the modelled delay in steps."""
-
-    k: float
-    tau: float
-    tau_n: float
-    model_delay: int
+def write_calibration(work: Path, cfg: ControllerConfig, name: str = "controller.cfg") -> Path:
+    """The calibration as the file a controller process reads (``--calibration``)."""
+    path = work / name
+    path.write_text(calibration_file.dumps(cfg))
+    return path
 
 
 @dataclass(frozen=True)
@@ -184,7 +183,7 @@ class ControllerSettings:
     """The controller's flags; ``None`` leaves the node's default."""
 
     rate_hz: float
-    gains: Gains | None = None
+    calibration: Path | None = None  # a .cfg file (``write_calibration``); None: the shipped one
     trigger: str | None = None  # "sensors" (lockstep) or "clock"
     q_form: str | None = None  # --controller
     rate_limit: float | None = None  # rad/s
@@ -197,10 +196,7 @@ class ControllerSettings:
 
 
 def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
-    gains: list[str] = []
-    if s.gains is not None:
-        g = s.gains
-        gains = ["--k", _num(g.k), "--tau", _num(g.tau), "--tau-n", _num(g.tau_n), "--model-delay", str(g.model_delay)]
+    gains = [] if s.calibration is None else ["--calibration", str(s.calibration)]
     return Launch(CONTROLLER, (
         *bus.argv(), "--rate-hz", _num(s.rate_hz), *_opt("--trigger", s.trigger), *_opt("--controller", s.q_form),
         *gains, *_opt("--rate-limit", s.rate_limit), *_opt("--duration", s.duration),

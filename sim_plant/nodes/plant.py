@@ -226,7 +226,8 @@ class PlantNode:
             # m_z: the whole yaw moment on the car, the physical disturbances' included.
             self.stats.trace.append((t, driver, applied, m_z + self.plant.loads.m_z, self.scene.mu, self.scene.v, float(y[0]), float(y[1]),
                                      float(y[2]), self.latest_cmd, measured_yaw, time.time()))
-        self.plant.advance(driver + applied, m_z)
+        # A lagging actuator moves within the step: the car gets the position's mean over it.
+        self.plant.advance(driver + (applied if position is None else position.mean), m_z)
         if not self.plant.linear:
             self.scene.v = self.plant.v  # braking slows the car: the speed frames carry it
         self.stats.steps += 1

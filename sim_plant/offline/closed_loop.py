@@ -112,7 +112,10 @@ def _continuous_matrices(exp: Experiment) -> tuple[np.ndarray, np.ndarray, np.nd
     ss = state_space(exp.params)
     A, B = ss.A, ss.B
     cfg = exp.config
-    q0, tau_q = mr.q_filter(cfg)
+    if cfg.scheduled or cfg.model_actuator_tau > 0.0 or cfg.model_filter_hz > 0.0:
+        raise ValueError("the continuous reference runs the paper's plain law with constant gains (give --k, "
+                         "--tau, --tau-n); give --ts T > 0 to run the firmware's law")
+    q0, tau_q = mr.q_filter(cfg.q_form, cfg.k, cfg.tau)
     c = cfg.tau_n / tau_q
     ikn = inverse_nominal_gain(cfg, exp.params.v)
     const = np.zeros(4)

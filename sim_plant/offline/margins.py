@@ -121,6 +121,7 @@ class LoopResponse:
         self.delay_steps = delay_steps + self.plant.dead_time
         self._ikn = inverse_kn(coeffs, params.v)
         self._c = coeffs
+        self._v = params.v
 
     def plant_path(self, w: np.ndarray | float) -> np.ndarray:
         """(1/K_n(v)) z^-N P(z) at z = e^{jwT}: everything in the loop but the controller's filter."""
@@ -131,18 +132,23 @@ class LoopResponse:
 
     def at_z(self, z: np.ndarray | complex) -> np.ndarray:
         """L(z) anywhere in the z-plane."""
-        return law_response(self._c, z) * self.plant_path_z(z)
+        return law_response(self._c, z, self._v) * self.plant_path_z(z)
 
     def __call__(self, w: np.ndarray | float) -> np.ndarray:
         """L(e^{jwT}) = -C z^-N P on the unit circle, w in rad/s."""
         return self.at_z(np.exp(1j * np.asarray(w, dtype=float) * self.ts))
 
 
-def law_response(c: mr.Coefficients, z: np.ndarray) -> np.ndarray:
-    """The firmware's rho -> -u_a filter with modelled delay M (M = 0: the plain law):
-    (g_r0 z + g_r1) / ((1 - g_w0 z^-M) z - (g_w1 z^-M + a))."""
-    zm = z ** (-c.model_delay)
-    return (c.g_r0 * z + c.g_r1) / ((1.0 - c.g_w0 * zm) * z - (c.g_w1 * zm + c.a))
+def law_response(c: mr.Coefficients, z: np.ndarray, v: float) -> np.ndarray:
+    """The firmware's rho -> -u_a filter at speed v, with the coefficient set ``mr.law_at`` gives:
+    (g_r0 z + g_r1) / ((1 - g_w0 H) z - (g_w1 H + a)), where H(z) is the nominal model's answer
+    to a command: z^-M, then the nominal actuator act_b / (1 - act_a z^-1), then the nominal
+    filter's biquad (H = 1 for the plain law, M = 0)."""
+    p = mr.law_at(c, v)
+    zi = 1.0 / np.asarray(z)
+    h = zi ** c.model_delay * c.act_b / (1.0 - c.act_a * zi)
+    h = h * (c.flt_b0 + zi * (c.flt_b1 + zi * c.flt_b2)) / (1.0 + zi * (c.flt_a1 + zi * c.flt_a2))
+    return (p.g_r0 * z + p.g_r1) / ((1.0 - p.g_w0 * h) * z - (p.g_w1 * h + p.a))
 
 
 def _crossings(f, w: np.ndarray, values: np.ndarray) -> list[float]:
@@ -240,7 +246,7 @@ class EnvelopeMargins:
     def as_dict(self) -> dict[str, Any]:
         c = self.config
         return {
-            "controller": c.q_form, "k": c.k, "tau": c.tau, "tau_n": c.tau_n, "ts": c.ts, "method": c.method,
+            "controller": c.q_form, **mr.describe_gains(c), "ts": c.ts, "method": c.method,
             "model_delay_steps": c.model_delay_steps, "delay_steps": self.delay_steps, "stable": self.stable, "worst": self.worst(),
             "points": [p.as_dict() for p in self.points],
         }

@@ -16,7 +16,7 @@ which only has meaning without the actuator limit.  Figures 9 and 10 use the phy
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 from firmware_py import model_regulator as mr
@@ -29,8 +29,7 @@ PAPER_STANDARD_PEAK_DEG = 2.24
 PAPER_THRESHOLD_NM = 6119.0
 PAPER_M_Z = 4000.0
 #: The paper's design (eq. 22 with K = 10, tau = 6 ms), run as the firmware at 1 kHz when discrete.
-PAPER_CONFIG = replace(mr.ControllerConfig(), k=mr.PAPER_K, tau=mr.PAPER_TAU, tau_n=mr.DEFAULT_TAU_N, ts=0.001,
-                       model_delay_steps=0)
+PAPER_CONFIG = mr.PAPER_CONFIG
 
 SPEEDS = (10.0, 20.0, 40.0)
 FRICTIONS = (1.0, 0.3)

@@ -71,9 +71,15 @@ def sweep(v: np.ndarray, mu: np.ndarray, mass: np.ndarray, config: mr.Controller
     n = int(round(duration / ts)) + 1
     m = c.model_delay
 
+    law = [mr.law_at(c, float(x)) for x in v]  # the coefficient set of each point's speed
+    a, g_w0, g_w1, g_r0, g_r1 = (np.array([getattr(p, f) for p in law]) for f in ("a", "g_w0", "g_w1", "g_r0",
+                                                                                   "g_r1"))
     beta = np.zeros(n_pts)
     r = np.zeros(n_pts)
     z = np.zeros(n_pts)  # the firmware starts at rest at its steady state for zero inputs
+    p_n = np.zeros(n_pts)  # the nominal actuator and filter states, also at rest
+    s1 = np.zeros(n_pts)
+    s2 = np.zeros(n_pts)
     queue = np.zeros((max(delay_steps, 1), n_pts))  # commands in flight, oldest at index head
     hist = np.zeros((max(m, 1), n_pts))  # the firmware's own ring buffer of past commands
     head = hidx = 0
@@ -87,17 +93,20 @@ def sweep(v: np.ndarray, mu: np.ndarray, mass: np.ndarray, config: mr.Controller
         np.maximum(peak_r, np.abs(r), out=peak_r)
         rho = ikn * r
         if m == 0:
-            p = z - c.g_r0 * rho
+            p = z - g_r0 * rho
             u = np.clip(p * c.inv_one_minus_g_w0, -c.u_max, c.u_max)
-            y = p + c.g_w0 * u
+            y = p + g_w0 * u
             w = u
         else:
-            w = hist[hidx].copy()
-            y = c.g_w0 * w - c.g_r0 * rho + z
+            p_n = c.act_a * p_n + c.act_b * hist[hidx]
+            w = c.flt_b0 * p_n + s1
+            s1 = c.flt_b1 * p_n - c.flt_a1 * w + s2
+            s2 = c.flt_b2 * p_n - c.flt_a2 * w
+            y = g_w0 * w - g_r0 * rho + z
             u = np.clip(y, -c.u_max, c.u_max)
             hist[hidx] = u
             hidx = (hidx + 1) % m
-        z = c.g_w1 * w - c.g_r1 * rho + c.a * y
+        z = g_w1 * w - g_r1 * rho + a * y
         saturated |= np.abs(u) >= c.u_max
         np.maximum(peak_u, np.abs(u), out=peak_u)
         if delay_steps == 0:

@@ -84,9 +84,11 @@ class _Screen:
         coeffs = mr.configure(base)
         self.plant = np.array([LoopResponse(p, coeffs, delay_steps, models).plant_path(self.w)
                                for p in envelope.points()])
+        self.speeds = [p.v for p in envelope.points()]
 
     def passes(self, config: mr.ControllerConfig, gm_min_db: float = GM_MIN_DB, pm_min_deg: float = PM_MIN_DEG) -> bool:
-        L = self.plant * law_response(mr.configure(config), self.z)[None, :]
+        coeffs = mr.configure(config)
+        L = self.plant * np.array([law_response(coeffs, self.z, v) for v in self.speeds])
         mag = np.abs(L)
         # Every phase crossover (Im L changes sign where Re L < 0) below -6 dB ...
         flip = np.signbit(L.imag[:, :-1]) != np.signbit(L.imag[:, 1:])
@@ -123,7 +125,7 @@ class TuneResult:
         extra = {} if self.constraints is None else {"constraint_figures": self.constraints.as_dict()}
         return {**extra,
             "ts": c.ts, "rate_hz": 1.0 / c.ts, "delay_steps": self.delay_steps, "controller": c.q_form,
-            "k": c.k, "tau": c.tau, "tau_n": c.tau_n, "model_delay_steps": c.model_delay_steps,
+            **mr.describe_gains(c),
             "objective": {"peak_yaw_rate_rad_s": self.objective_peak_yaw_rate, "m_z_nm": OBJECTIVE_MZ,
                           "v": OBJECTIVE_POINT.v, "mu": OBJECTIVE_POINT.mu},
             "constraints": {"gain_margin_db_min": GM_MIN_DB, "phase_margin_deg_min": PM_MIN_DEG},
@@ -142,14 +144,18 @@ def tune(ts: float, delay_steps: int, envelope: Envelope = Envelope(), q_form: s
     """Best-rejecting (K, tau, tau_n) that keeps the margins over ``envelope``; with an actuator
     or sensor model in the loop, also the constraints of ``constraints`` (issue 15)."""
     say = progress or (lambda *_: None)
-    cfg0 = replace(base or mr.ControllerConfig(), ts=ts, q_form=q_form)
+    # Constant gains on the base's structure (by default the paper's plain law, the structure
+    # this grid search was built for; the shipped law's schedule comes from tune_schedule).
+    start = base or mr.PREVIOUS_CONFIG
+    cfg0 = replace(mr.constant_gains(start, *(start.gain_points()[0])), ts=ts, q_form=q_form)
     mr.configure(cfg0)
     screen = _Screen(cfg0, delay_steps, SCREEN_ENVELOPE, models=models)
     checks = _Checks(delay_steps, models)
 
     # The firmware may model the loop delay (w compares the yaw rate with the command issued
     # N steps ago) or not: both structures are searched.
-    delays = sorted({0, min(delay_steps, mr.MAX_MODEL_DELAY)})
+    plain = cfg0.model_actuator_tau == 0.0 and cfg0.model_filter_hz == 0.0
+    delays = sorted({0, min(delay_steps, mr.MAX_MODEL_DELAY)} if plain else {max(1, min(delay_steps, mr.MAX_MODEL_DELAY))})
     candidates = [replace(cfg0, k=k, tau=t, tau_n=tn, model_delay_steps=m)
                   for m in delays for tn in TAU_N_GRID for k in K_GRID for t in TAU_GRID]
     feasible = []

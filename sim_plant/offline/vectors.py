@@ -30,6 +30,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Callable, Iterator
 
+from firmware_py import calibration_file
 from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 import mrsteer_dbc
@@ -41,14 +42,20 @@ Inputs = tuple[float, float, float]  # driver's front-wheel angle, yaw rate, spe
 
 def _configs() -> dict[str, mr.ControllerConfig]:
     d = mr.ControllerConfig()
-    paper = replace(d, k=mr.PAPER_K, tau=mr.PAPER_TAU, ts=0.001, model_delay_steps=0)
+    paper = mr.PAPER_CONFIG
     return {
         "shipped_500hz": d,
+        "previous_500hz": mr.PREVIOUS_CONFIG,
         "paper_limited_1khz": paper,
         "paper_standard_1khz": replace(paper, q_form=mr.Q_STANDARD),
-        "limited_zoh_200hz_m1": replace(d, k=8.0, tau=0.03, ts=0.005, method=mr.METHOD_ZOH, model_delay_steps=1),
-        "limited_100hz_m2_ratelimit": replace(d, k=4.0, tau=0.02, ts=0.01, model_delay_steps=2,
-                                              rate_limit=math.radians(20.0)),
+        # constant gains with the nominal actuator and filter kept (ZOH of Q, 200 Hz)
+        "limited_zoh_200hz_m1": replace(mr.constant_gains(d, 8.0, 0.03, mr.DEFAULT_TAU_N), ts=0.005,
+                                        method=mr.METHOD_ZOH, model_filter_hz=20.0),
+        # a three-point schedule, two samples modelled, a rate limit, the plain nominal model
+        "limited_100hz_m2_ratelimit": replace(d, schedule_speed=(8.0, 16.0, 25.0), schedule_k=(4.0, 6.0, 3.0),
+                                              schedule_tau=(0.02, 0.05, 0.03), schedule_tau_n=(0.02, 0.05, 0.1),
+                                              model_actuator_tau=0.0, model_filter_hz=0.0, ts=0.01,
+                                              model_delay_steps=2, rate_limit=math.radians(20.0)),
     }
 
 
@@ -105,8 +112,8 @@ SCENARIOS: dict[str, Callable[[mr.ControllerConfig], Iterator[Inputs]]] = {
     "faults_and_recovery": _synthetic_faults,
 }
 
-STATE_COLUMNS = ("z", "u_prev", *(f"u_hist{i}" for i in range(mr.MAX_MODEL_DELAY)), "hist_idx", "needs_init",
-                 "recovering", "status", "fault_flags")
+STATE_COLUMNS = ("z", "u_prev", *(f"u_hist{i}" for i in range(mr.MAX_MODEL_DELAY)), "hist_idx", "p_n", "f_s1",
+                 "f_s2", "needs_init", "recovering", "status", "fault_flags")
 COLUMNS = ("k", "delta_driver", "yaw_rate", "speed", "u", *STATE_COLUMNS)
 
 
@@ -115,8 +122,8 @@ def _num(x: float) -> str:
 
 
 def state_row(s: mr.State) -> list[str]:
-    return [_num(s.z), _num(s.u_prev), *(_num(x) for x in s.u_hist), str(s.hist_idx), str(int(s.needs_init)),
-            str(int(s.recovering)), str(s.status), str(s.fault_flags)]
+    return [_num(s.z), _num(s.u_prev), *(_num(x) for x in s.u_hist), str(s.hist_idx), _num(s.p_n), _num(s.f_s1),
+            _num(s.f_s2), str(int(s.needs_init)), str(int(s.recovering)), str(s.status), str(s.fault_flags)]
 
 
 def _val(x: object) -> str:
@@ -124,12 +131,15 @@ def _val(x: object) -> str:
         return str(int(x))
     if isinstance(x, float):
         return _num(x)
+    if isinstance(x, tuple):
+        return ", ".join(_val(v) for v in x)
     return str(x)
 
 
 def config_lines(cfg: mr.ControllerConfig) -> list[str]:
+    """The calibration file (``calibration_file.dumps``), then every coefficient as ``c.name``."""
     c = mr.configure(cfg)
-    return ["# calibration (ControllerConfig)", *(f"{f.name} = {_val(getattr(cfg, f.name))}" for f in fields(cfg)),
+    return ["# calibration (ControllerConfig)", *calibration_file.dumps(cfg).splitlines(),
             "# coefficients (configure())", *(f"c.{f.name} = {_val(getattr(c, f.name))}" for f in fields(c))]
 
 
@@ -171,15 +181,7 @@ def write_all(out: Path, progress: Callable[[str], None] | None = None) -> list[
 
 def read_config(path: Path) -> mr.ControllerConfig:
     """The calibration back from a .cfg file (the coefficient lines are ignored)."""
-    values: dict[str, object] = {}
-    types = {f.name: f.type for f in fields(mr.ControllerConfig)}
-    for line in path.read_text().splitlines():
-        if not line or line.startswith("#") or line.startswith("c."):
-            continue
-        key, _, text = (p.strip() for p in line.partition("="))
-        kind = types[key]
-        values[key] = text if kind == "str" else int(text) if kind == "int" else float(text)
-    return mr.ControllerConfig(**values)  # type: ignore[arg-type]
+    return calibration_file.load(path)
 
 
 SECOC_KEY = bytes(range(16))

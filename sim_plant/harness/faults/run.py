@@ -63,7 +63,9 @@ class _RowRun:
     def start_controller(self, name: str) -> Proc:
         return self.start(name, launch.controller(
             launch.BusArgs(self.setup.interface, self.controller_side),
-            launch.ControllerSettings(self.setup.rate_hz, self.setup.gains(), rate_limit=RATE_LIMIT,
+            launch.ControllerSettings(self.setup.rate_hz,
+                                      launch.write_calibration(self.work, self.setup.calibration()),
+                                      rate_limit=RATE_LIMIT,
                                       stats_out=self.work / "controller.json", secoc=self.row.secoc,
                                       program=self.setup.controller_program)))
 

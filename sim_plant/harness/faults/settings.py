@@ -5,7 +5,7 @@ copied from the plant and the controller."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
@@ -16,7 +16,6 @@ from mrsteer_dbc import names
 from sim_plant.car import scenario
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig
-from sim_plant.harness.launch import Gains
 
 RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
@@ -42,14 +41,19 @@ COUNTER_WINDOW = mrsteer_dbc.E2EReceiver().max_delta  # the actuator's alive-cou
 # rate saturates a real bus of the vehicle's kind.
 FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
 
-# Calibrations tuned for other control rates (docs/design.md, `mrsteer design tune`): each keeps
-# 6 dB / 45 deg over the envelope at its rate.  K, tau, tau_n, modelled delay.
-_SHIPPED = mr.ControllerConfig()
-CALIBRATIONS: dict[float, tuple[float, float, float, int]] = {
-    1000.0: (50.0, 0.012, 0.02, 1),
-    500.0: (_SHIPPED.k, _SHIPPED.tau, _SHIPPED.tau_n, _SHIPPED.model_delay_steps),
-    200.0: (14.2, 0.0161, 0.02, 1),
-    100.0: (4.52, 0.0075, 0.02, 1),
+
+def _plain(rate_hz: float, k: float, tau: float, tau_n: float) -> mr.ControllerConfig:
+    return replace(mr.plain_law(mr.ControllerConfig(), k, tau, tau_n), ts=1.0 / rate_hz, model_delay_steps=1)
+
+
+# The calibration of each rate the matrix runs at: the shipped one at 500 Hz; for the slower
+# rates a VM needs, the paper's plain law tuned for that rate on the ideal loop (docs/design.md,
+# `mrsteer design tune --ts T`: 6 dB / 45 deg over the envelope, one sample modelled).
+CALIBRATIONS: dict[float, mr.ControllerConfig] = {
+    1000.0: _plain(1000.0, 50.0, 0.012, 0.02),
+    500.0: mr.ControllerConfig(),
+    200.0: _plain(200.0, 14.2, 0.0161, 0.02),
+    100.0: _plain(100.0, 4.52, 0.0075, 0.02),
 }
 
 
@@ -115,6 +119,6 @@ class Setup:
         """The actuator position model every row's plant runs with."""
         return scenario.load(SCENARIO).with_models(self.plant, self.actuator, self.sensors).actuator
 
-    def gains(self) -> Gains:
+    def calibration(self) -> mr.ControllerConfig:
         """The calibration tuned for this rate."""
-        return Gains(*CALIBRATIONS[self.rate_hz])
+        return CALIBRATIONS[self.rate_hz]
