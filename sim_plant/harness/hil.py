@@ -113,7 +113,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         impl = "" if cfg.controller_program is None else f" ({' '.join(cfg.controller_program)})"
         say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}{impl}")
 
-        limit = time.monotonic() + max(120.0, 40.0 * sc.duration)
+        # A hang guard, generous: under QEMU without KVM a lockstep second of Python plant takes ~1-2 min.
+        limit = time.monotonic() + max(300.0, 100.0 * sc.duration)
         while plant.popen.poll() is None:
             for p in procs:
                 if p is not plant and p.popen.poll() is not None:
