@@ -32,4 +32,40 @@ def channel(request: pytest.FixtureRequest) -> str:
     return "t-" + "".join(ch if ch.isalnum() else "-" for ch in request.node.name)[-60:]
 
 
-__all__ = ["polymul", "polyadd", "P"]
+def lockstep_traffic(log: "os.PathLike[str] | str") -> dict[str, list]:
+    """What a lockstep HIL run's controller answered, independent of process timing, from its
+    ``traffic.log``: every frame the plant sent (payload hex, in order) and every command the
+    controller sent from the plant's first frame on, decoded to (state, angle, measurement
+    counter). The commands' alive counters and CRCs are left out, because a sensors-triggered
+    controller may send watchdog commands while the plant is still starting (one per second of
+    wall time), and those shift the counters; the frames before the plant's first are dropped
+    for the same reason. Each command frame must pass its E2E check. ``stalls`` counts the
+    watchdog cycles during the run (a command naming the same measurement as the one before: the
+    plant was descheduled for more than a second, as a loaded machine does now and then)."""
+    from pathlib import Path
+
+    import mrsteer_dbc
+    from mrsteer_dbc import E2EStatus, names
+
+    c = mrsteer_dbc.load()
+    cmd_id = c.frame_id(names.MSG_CMD)
+    plant_ids = {c.frame_id(n) for n in names.SENSORS}
+    out: dict[str, list] = {"plant": [], "commands": [], "stalls": []}
+    started = False
+    for line in Path(log).read_text().splitlines():
+        fid_hex, data_hex = line.split()[2].split("#")
+        fid = int(fid_hex, 16)
+        if fid in plant_ids:
+            started = True
+            out["plant"].append(data_hex)
+        elif fid == cmd_id and started:
+            d = c.decode(fid, bytes.fromhex(data_hex))
+            assert d is not None and d.status is E2EStatus.OK, line
+            cmd = (d.signals[names.SIG_CMD_STATE], d.signals[names.SIG_CMD_ANGLE], d.signals[names.SIG_CMD_MEAS])
+            if out["commands"] and out["commands"][-1][2] == cmd[2]:
+                out["stalls"].append(len(out["commands"]))
+            out["commands"].append(cmd)
+    return out
+
+
+__all__ = ["lockstep_traffic", "polymul", "polyadd", "P"]

@@ -86,3 +86,20 @@ def test_every_node_spec_names_one_node_both_ways(spec: launch.NodeSpec, monkeyp
         getattr(importlib.import_module(module), func)(["--help"])
     assert done.value.code == 0
     assert _options(capsys.readouterr().out) == _options(proc.stdout)
+
+
+def test_an_external_controller_gets_the_controllers_arguments_after_its_command(tmp_path: Path) -> None:
+    program = launch.controller_program("python", "my-ecu --log 'a b.txt'")
+    assert program == ("my-ecu", "--log", "a b.txt")  # split as a shell would
+    s = launch.ControllerSettings(500.0, trigger="sensors", program=program)
+    assert launch.controller(BUS, s).command() == [*program, "--interface", "mrsteer", "--channel", "chan-1",
+                                                   "--rate-hz", "500.0", "--trigger", "sensors"]
+    assert launch.controller_program("python") is None
+    with pytest.raises(launch.LaunchError, match="empty"):
+        launch.controller_program("python", "  ")
+    # An external program is executed even where the Python nodes are forked (preload).
+    p = launch.start("echo", launch.Launch(launch.CONTROLLER, ("hello",), ("/bin/echo",)), tmp_path, {}, stdout=True,
+                     preload=True)
+    assert p.popen.wait(10) == 0 and p.popen.stdout.read() == b"hello\n"
+    p.popen.stdout.close()
+    p.stderr.close()

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import lockstep_traffic
 from firmware_py.platform.bus_open import vcan_available
 from mrsteer_dbc import names
 
@@ -224,3 +225,82 @@ def test_fault_matrix_on_vcan0_and_vcan1(tmp_path: Path, capsys: pytest.CaptureF
     for row_dir in sorted(tmp_path.iterdir()):
         stats = [json.loads((row_dir / f).read_text()) for f in ("bridge.json", "logger-vehicle.json")]
         assert all(st["rx_queue_bytes"] >= DEPTH_BYTES for st in stats), row_dir
+
+
+# ---- the C controller node (ports/c/mrs_node) on real SocketCAN -----------------------------
+
+
+@pytest.fixture(scope="module")
+def c_node() -> tuple[str, ...]:
+    from sim_plant.harness import launch
+
+    if shutil.which("gcc") is None:
+        pytest.fail("gcc is needed to build the C node (.ci/run installs it)")
+    return launch.controller_program("c")  # built on the host before the VM starts (tools/vcan-vm-test)
+
+
+def test_c_node_lockstep_on_vcan0_sends_the_python_controllers_frames(c_node: tuple[str, ...], tmp_path: Path) -> None:
+    args = ["hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200", "--k", "3",
+            "--tau", "0.05", "--duration", "1.5", "--json"]
+    runs = {}
+    for impl in ("python", "c"):
+        for _ in range(2):  # again if the plant stalled a second (lockstep_traffic): the VM's load
+            proc = _mrsteer(*args, "--controller-impl", impl, "--out", str(tmp_path / impl))
+            assert proc.returncode == 0, proc.stderr
+            runs[impl] = json.loads(proc.stdout)
+            if not lockstep_traffic(tmp_path / impl / "traffic.log")["stalls"] and not runs[impl]["loop"]["plant"].get(
+                    "lockstep_timeouts"):
+                break
+    assert runs["c"]["loop"]["controller"]["implementation"] == "c"
+    traffic = {impl: lockstep_traffic(tmp_path / impl / "traffic.log") for impl in runs}
+    assert len(traffic["c"]["commands"]) >= 300
+    assert traffic["c"]["plant"] == traffic["python"]["plant"] and traffic["c"]["commands"] == traffic["python"]["commands"]
+    assert runs["c"]["peak_aux_steer_deg"] == runs["python"]["peak_aux_steer_deg"] > 0.0
+
+
+def test_c_node_filters_in_the_kernel_and_rejects_a_bad_frame(c_node: tuple[str, ...], tmp_path: Path) -> None:
+    import mrsteer_dbc
+
+    c = mrsteer_dbc.load()
+    stats = tmp_path / "c.json"
+    ctl = subprocess.Popen([*c_node, *IFACE, "--rate-hz", "100", "--stats-out", str(stats)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while "running at" not in (line := ctl.stderr.readline()):
+            assert line or ctl.poll() is None, "the C node died at start-up"
+            assert time.monotonic() < deadline
+        good = c.encode(names.MSG_YAW, {"YawRate_YawRate": 0.01}, 0)
+        yaw_id = f"{c.frame_id(names.MSG_YAW):03X}"
+        for frame in (f"{yaw_id}#{bytes([good[0] ^ 0x5A]).hex().upper()}{good[1:].hex().upper()}",  # bad CRC
+                      "7AB#DEADBEEF", f"{yaw_id}#{good.hex().upper()}"):  # unknown ID, then a good frame
+            subprocess.run([_tool("cansend"), "vcan0", frame], check=True, timeout=60)
+        time.sleep(1.0)
+    finally:
+        ctl.send_signal(signal.SIGTERM)
+        code = ctl.wait(60)
+    assert code == 0
+    s = json.loads(stats.read_text())
+    assert s["rx_frames"] == 2 and s["rx_rejected"] == 1 and s["rx_ignored"] == 0  # 7AB never reached it
+
+
+def test_fault_matrix_with_the_c_node_on_vcan0_and_vcan1(c_node: tuple[str, ...], tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    from sim_plant.harness.faults import ROWS, Setup, format_table, run_matrix
+
+    if os.environ.get("MRSTEER_VCAN_MATRIX") == "0" or os.environ.get("MRSTEER_VCAN_C_MATRIX") == "0":
+        pytest.skip("MRSTEER_VCAN_MATRIX=0 or MRSTEER_VCAN_C_MATRIX=0: the C node's fault matrix on vcan left out")
+
+    def say(msg: str) -> None:
+        with capsys.disabled():
+            print(f"fault matrix, C node, on vcan: {msg}", flush=True)
+
+    # The plant, bridge and loggers are still Python (the VM's 70x): the same stretched times,
+    # but the restarted C node starts at once, so the restart rows need no start-up allowance.
+    setup = Setup("socketcan", ("vcan0", "vcan1"), **{**VM_SETUP, "startup_s": 2.0}, controller_program=c_node)
+    results = run_matrix(ROWS, say, keep=tmp_path, setup=setup)
+    table = format_table(results)
+    say("\n" + table)
+    assert all(r.passed for r in results), table
+    assert len(results) == len(ROWS)
+    assert json.loads((tmp_path / "01" / "controller.json").read_text())["implementation"] == "c"

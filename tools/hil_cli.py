@@ -17,6 +17,7 @@ from mrsteer_cli.cli_args import add_gains, count, number, say
 from sim_plant.car.options import add_car_args
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
+from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS
 
@@ -50,6 +51,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
     add_car_args(p)
+    add_controller_impl_args(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(handler=_cmd_hil_run)
     p = hil_sub.add_parser("evidence", help="the realistic scenarios with and without the controller, one table",
@@ -99,11 +101,16 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
     from sim_plant.harness import hil
 
     out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
+    try:
+        program = program_of(args)
+    except LaunchError as exc:
+        print(f"mrsteer hil run: error: {exc}", file=sys.stderr)
+        return 1
     cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, duration=args.duration,
                       controller=args.controller,
                       calibration=calibration_from_args(args),
                       delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
-                      sensors=args.sensors, seed=args.seed)
+                      sensors=args.sensors, seed=args.seed, controller_program=program)
     try:
         result = hil.run(cfg, progress=say)
     except hil.HilError as exc:

@@ -58,6 +58,9 @@ class HilConfig:
     seed: int | None = None
     out: Path = Path("out/hil")
     secoc_key: bytes | None = None  # authenticate the commands and the sensor frames (mrsteer_dbc.secoc)
+    # The controller process: None for the Python one, else an external program that takes the
+    # controller's flags (``launch.controller_program``: the C node, or --controller-cmd).
+    controller_program: tuple[str, ...] | None = None
 
 
 def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun:
@@ -98,7 +101,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             procs.append(launch.start("controller", launch.controller(bus, launch.ControllerSettings(
                 cfg.rate_hz, launch.write_calibration(work, ctrl),
                 trigger="sensors" if cfg.mode == "lockstep" else "clock", q_form=cfg.controller,
-                stats_out=work / "controller.json", secoc=cfg.secoc_key is not None)), work, env))
+                stats_out=work / "controller.json", secoc=cfg.secoc_key is not None,
+                program=cfg.controller_program)), work, env))
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
             cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,
@@ -106,9 +110,11 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
             secoc=cfg.secoc_key is not None)), work, env)
         procs.append(plant)
-        say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}")
+        impl = "" if cfg.controller_program is None else f" ({' '.join(cfg.controller_program)})"
+        say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}{impl}")
 
-        limit = time.monotonic() + max(120.0, 40.0 * sc.duration)
+        # A hang guard, generous: under QEMU without KVM a lockstep second of Python plant takes ~1-2 min.
+        limit = time.monotonic() + max(300.0, 100.0 * sc.duration)
         while plant.popen.poll() is None:
             for p in procs:
                 if p is not plant and p.popen.poll() is not None:

@@ -6,11 +6,19 @@ module a user runs with ``python -m`` and the ``module:function`` a forked child
 settings into a ``Launch``, the node and its arguments, which ``start`` runs either way.  The
 HIL runner, the fault matrix and the loop benchmark all build their command lines here, so a
 node's flags are spelled in one place (besides the node's own parser).
+
+The controller need not be the Python one: ``ControllerSettings.program`` names any process that
+speaks the DBC and takes the controller's flags (``--controller-cmd``); ``controller_program``
+gives the one a ``--controller-impl`` choice means (``c``: ``ports/c/build/mrs_node``, built
+first with ``make -C ports/c node``).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+import shlex
+import subprocess
 import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -41,21 +49,80 @@ BRIDGE = NodeSpec("sim_plant.nodes.fault_bridge", "sim_plant.nodes.fault_bridge:
 
 @dataclass(frozen=True)
 class Launch:
-    """A node and its arguments."""
+    """A node and its arguments; ``program``, when given, is an external executable (and its
+    leading arguments) that runs instead of the Python node, with the same arguments."""
 
     node: NodeSpec
     argv: tuple[str, ...]
+    program: tuple[str, ...] | None = None
 
     def command(self) -> list[str]:
-        """The command line of a fresh interpreter running the node."""
+        """The command line of a fresh process running the node."""
+        if self.program is not None:
+            return [*self.program, *self.argv]
         return [sys.executable, "-m", self.node.module, *self.argv]
+
+
+CONTROLLER_IMPLS = ("python", "c")
+PORT_DIR = Path(__file__).resolve().parents[2] / "ports" / "c"
+C_NODE = PORT_DIR / "build" / "mrs_node"
+
+
+class LaunchError(RuntimeError):
+    """A controller program cannot be had (the C node does not build, a command is empty)."""
+
+
+def build_c_node() -> Path:
+    """``make -C ports/c node`` (quick when up to date): the C node's path."""
+    try:
+        proc = subprocess.run(["make", "-s", "-C", str(PORT_DIR), "node", f"PYTHON={sys.executable}"],
+                              capture_output=True, text=True, timeout=600)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise LaunchError(f"cannot build the C node: {exc}") from None
+    if proc.returncode != 0 or not C_NODE.exists():
+        last = (proc.stderr.strip().splitlines() or ["make failed"])[-1]
+        raise LaunchError(f"cannot build the C node (make -C ports/c node): {last}")
+    return C_NODE
+
+
+def controller_program(impl: str = "python", command: str | None = None) -> tuple[str, ...] | None:
+    """The controller program of ``--controller-impl impl`` / ``--controller-cmd command``: None for
+    the Python controller, the C node (built) for ``c``, the split command line otherwise."""
+    if command is not None:
+        argv = tuple(shlex.split(command))
+        if not argv:
+            raise LaunchError("--controller-cmd is empty")
+        return argv
+    if impl == "c":
+        return (str(build_c_node()),)
+    if impl != "python":
+        raise LaunchError(f"--controller-impl must be one of {', '.join(CONTROLLER_IMPLS)}, got {impl!r}")
+    return None
+
+
+def add_controller_impl_args(p: argparse.ArgumentParser) -> None:
+    """--controller-impl and --controller-cmd, for every command that starts a controller."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--controller-impl", choices=CONTROLLER_IMPLS, default="python",
+                   help="the controller process: python (mrsteer controller, default) or c (ports/c's mrs_node, "
+                   "built with make -C ports/c node first)")
+    g.add_argument("--controller-cmd", metavar="CMD",
+                   help="run this command as the controller instead (split as a shell would, no shell): any "
+                   "process that speaks the DBC, takes the flags of `mrsteer controller` appended to CMD and "
+                   "prints a line containing 'running at' on stderr once its receive filters are set")
+
+
+def program_of(args: argparse.Namespace) -> tuple[str, ...] | None:
+    """The controller program those options ask for (``controller_program``); LaunchError if none."""
+    return controller_program(args.controller_impl, args.controller_cmd)
 
 
 def start(name: str, launch: Launch, work: Path, env: dict[str, str], *, stdout: bool = False,
           preload: bool = False) -> Proc:
     """Run ``launch`` as the supervised process ``name``: a fresh interpreter, or (``preload``)
-    a child forked from this process (``processes.spawn_preloaded``)."""
-    if preload:
+    a child forked from this process (``processes.spawn_preloaded``); an external program is
+    always executed."""
+    if preload and launch.program is None:
         return spawn_preloaded(name, launch.node.entry, list(launch.argv), work, env, stdout=stdout)
     return spawn(name, launch.command(), work, env, stdout=stdout)
 
@@ -125,6 +192,7 @@ class ControllerSettings:
     cpu: int | None = None
     stats_out: Path | None = None
     secoc: bool = False  # the key comes through the environment, never argv
+    program: tuple[str, ...] | None = None  # an external controller (``controller_program``); None: Python
 
 
 def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
@@ -133,7 +201,7 @@ def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
         *bus.argv(), "--rate-hz", _num(s.rate_hz), *_opt("--trigger", s.trigger), *_opt("--controller", s.q_form),
         *gains, *_opt("--rate-limit", s.rate_limit), *_opt("--duration", s.duration),
         *_opt("--rt-priority", s.rt_priority), *_opt("--cpu", s.cpu), *_opt("--stats-out", s.stats_out),
-        *_flag("--secoc", s.secoc)))
+        *_flag("--secoc", s.secoc)), s.program)
 
 
 @dataclass(frozen=True)

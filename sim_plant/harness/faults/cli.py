@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from sim_plant.car.options import add_car_args
@@ -13,6 +13,7 @@ from sim_plant.harness.faults.verdicts import RowResult
 from sim_plant.harness.faults.rows import ROWS, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix
 from sim_plant.harness.faults.settings import CALIBRATIONS, RATE_HZ, Setup
+from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
 from sim_plant.harness.processes import RunError
 
 
@@ -65,6 +66,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
                    help="extra scenario seconds in the restart rows for the new process to start (default 0)")
     add_car_args(r, default="ideal, the paper's linear car (the rows' scenario names none)", with_seed=False)
+    add_controller_impl_args(r)
     b = sub.add_parser("bridge", help="the fault-injecting bridge on its own (see --help)", add_help=False)
     b.add_argument("args", nargs=argparse.REMAINDER)
     args = p.parse_args(argv)
@@ -78,6 +80,11 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
                       args.plant, args.actuator, args.sensors)
     except ValueError as exc:
         p.error(str(exc))
+    try:
+        setup = replace(setup, controller_program=program_of(args))
+    except LaunchError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
     if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
         p.error(f"--keep {args.keep} exists and is not a directory")
     if holds_files(args.keep):

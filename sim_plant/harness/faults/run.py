@@ -66,7 +66,8 @@ class _RowRun:
             launch.ControllerSettings(self.setup.rate_hz,
                                       launch.write_calibration(self.work, self.setup.calibration()),
                                       rate_limit=RATE_LIMIT,
-                                      stats_out=self.work / "controller.json", secoc=self.row.secoc)))
+                                      stats_out=self.work / "controller.json", secoc=self.row.secoc,
+                                      program=self.setup.controller_program)))
 
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.

@@ -73,6 +73,9 @@ class Setup:
     plant: str | None = None
     actuator: str | None = None
     sensors: str | None = None
+    # The controller process (``launch.controller_program``): None for the Python one, else the C
+    # node or any external program that takes the controller's flags.
+    controller_program: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.rate_hz not in CALIBRATIONS:

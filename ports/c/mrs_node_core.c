@@ -1,0 +1,336 @@
+/* One controller on one bus: see mrs_node_core.h. */
+#include "mrs_node_core.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "mrs_contract.h"
+
+/* Why a frame was refused, with the CtrlStatus_Cause bit it stands for (mrsteer_dbc.link.Rejected). */
+typedef enum { RX_OK, RX_LENGTH, RX_CRC, RX_COUNTER_VALUE, RX_RANGE, RX_MAC, RX_REPEATED, RX_SEQUENCE } rx_verdict_t;
+
+static unsigned cause_of(rx_verdict_t v)
+{
+    return v == RX_RANGE ? MRS_CAUSE_RANGE : v == RX_MAC ? MRS_CAUSE_AUTH : MRS_CAUSE_E2E;
+}
+
+/* `cycles` of the message's own cycle time in controller periods, rounded up (the 1e-9 keeps
+ * 3 * 0.1 / 1e-3 = 300.00000000000006 at 300), at least 1: node.py's limit(). */
+static long limit_cycles(const mrs_msg_t *m, double period, int cycles)
+{
+    const double cycle = (m->control_loop || m->cycle_s == 0.0) ? period : m->cycle_s;
+    const double x = ceil((double)cycles * cycle / period - 1e-9);
+    return x < 1.0 ? 1L : (long)x;
+}
+
+size_t mrs_node_filter_ids(int keyed, uint32_t ids[8])
+{
+    size_t n = 0u;
+    ids[n++] = mrs_messages[MRS_MSG_STEER].frame_id;
+    ids[n++] = mrs_messages[MRS_MSG_YAW].frame_id;
+    ids[n++] = mrs_messages[MRS_MSG_SPEED].frame_id;
+    if (keyed) {
+        ids[n++] = mrs_messages[MRS_MSG_SYNC].frame_id;
+    }
+    return n;
+}
+
+int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, char *err, size_t err_len)
+{
+    static const int msgs[3] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED};
+    static const int sigs[3] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED};
+    static const unsigned causes[3] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING, MRS_CAUSE_SPEED_MISSING};
+    const mrs_msg_t *cmd = &mrs_messages[MRS_MSG_CMD];
+    mrs_config_t ctrl = cfg->controller;
+    double status_cycle, every;
+    int i;
+    memset(n, 0, sizeof *n);
+    n->bus = bus;
+    n->period = 1.0 / cfg->rate_hz;
+    n->e2e_fail_max = cfg->e2e_fail_max;
+    /* The firmware's input ranges are the DBC's: one source of truth for what is valid. */
+    ctrl.ts = n->period;
+    ctrl.driver_angle_max = mrs_messages[MRS_MSG_STEER].max[MRS_SIG_STEER_ANGLE];
+    ctrl.yaw_rate_max = mrs_messages[MRS_MSG_YAW].max[MRS_SIG_YAW_RATE];
+    ctrl.speed_max = mrs_messages[MRS_MSG_SPEED].max[MRS_SIG_SPEED];
+    if (cmd->max[MRS_SIG_CMD_ANGLE] < ctrl.aux_limit) {
+        ctrl.aux_limit = cmd->max[MRS_SIG_CMD_ANGLE];
+    }
+    if (mrs_configure(&ctrl, &n->coeffs) != 0) {
+        snprintf(err, err_len, "invalid calibration (mrs_configure refused it: a value non-finite, non-positive "
+                 "or out of range)");
+        return -1;
+    }
+    mrs_init_state(&n->state);
+    for (i = 0; i < 3; ++i) {
+        mrs_input_t *in = &n->in[i];
+        in->msg = msgs[i];
+        in->sig = sigs[i];
+        in->missing_cause = causes[i];
+        in->value = NAN;
+        in->limit = limit_cycles(&mrs_messages[msgs[i]], n->period, cfg->timeout_cycles);
+        in->age = in->limit + 1; /* never received: invalid until the first good frame */
+        mrs_e2e_receiver_init(&in->seq, (uint8_t)cfg->max_counter_delta);
+    }
+    n->sync_limit = limit_cycles(&mrs_messages[MRS_MSG_SYNC], n->period, MRS_SYNC_STALE_CYCLES);
+    n->sync_age = n->sync_limit + 1;
+    n->keyed = cfg->secoc_key != NULL;
+    if (n->keyed) {
+        n->cmac = mrs_cmac_new(cfg->secoc_key);
+        if (n->cmac == NULL) {
+            snprintf(err, err_len, "OpenSSL has no AES-128 CMAC here");
+            return -1;
+        }
+    }
+    status_cycle = mrs_messages[MRS_MSG_STATUS].cycle_s > 0.0 ? mrs_messages[MRS_MSG_STATUS].cycle_s : 0.1;
+    every = nearbyint(status_cycle / n->period); /* Python's round(): ties to even */
+    n->status_every = every < 1.0 ? 1u : (uint64_t)every;
+    n->cmd_alive = MRS_E2E_COUNTER_MODULO - 1u;
+    n->answers = MRS_MEAS_NONE;
+    return 0;
+}
+
+void mrs_node_free(mrs_node_t *n)
+{
+    mrs_cmac_free(n->cmac);
+    n->cmac = NULL;
+}
+
+/* The checks of RxLink.accept after the ID: length, CRC, counter value, range, MAC, sequence. */
+static rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, const mrs_frame_t *f, double *phys)
+{
+    const mrs_msg_t *m = &mrs_messages[msg];
+    if (f->len != m->length) {
+        return RX_LENGTH;
+    }
+    if (m->e2e && f->data[m->crc_byte] != mrs_e2e_crc(m->data_id, f->data, f->len, m->crc_byte)) {
+        return RX_CRC;
+    }
+    if (m->unpack(phys, f->data, f->len) != 0) {
+        return RX_LENGTH;
+    }
+    if (m->e2e && phys[m->counter] >= (double)MRS_E2E_COUNTER_MODULO) {
+        return RX_COUNTER_VALUE;
+    }
+    if (!mrs_in_range(m, phys)) {
+        return RX_RANGE;
+    }
+    /* Authenticate before the counter check: a forged frame must not advance the sequence. */
+    if (n->keyed) {
+        const int ok = msg == MRS_MSG_SYNC ? mrs_signer_accept_sync(&n->signer, n->cmac, m, phys)
+                                           : mrs_sensor_verify(&n->verifier, n->cmac, msg, f->data, phys);
+        if (!ok) {
+            return RX_MAC;
+        }
+    }
+    if (seq != NULL) {
+        const mrs_e2e_status_t st = mrs_e2e_check_counter(seq, (uint8_t)phys[m->counter]);
+        if (st == MRS_E2E_REPEATED) {
+            return RX_REPEATED;
+        }
+        if (st == MRS_E2E_WRONG_SEQUENCE) {
+            return RX_SEQUENCE;
+        }
+    }
+    return RX_OK;
+}
+
+int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
+{
+    double phys[MRS_MAX_SIGNALS];
+    mrs_input_t *in = NULL;
+    rx_verdict_t v;
+    int i, is_sync;
+    for (i = 0; i < 3; ++i) {
+        if (f->id == mrs_messages[n->in[i].msg].frame_id) {
+            in = &n->in[i];
+        }
+    }
+    is_sync = n->keyed && f->id == mrs_messages[MRS_MSG_SYNC].frame_id;
+    if ((in == NULL && !is_sync) || (f->flags & MRS_FRAME_EXTENDED)) {
+        return 0; /* outside the receive filters: never reaches the node, as with python-can */
+    }
+    ++n->stats.rx_frames;
+    if (f->flags & (MRS_FRAME_REMOTE | MRS_FRAME_ERROR)) {
+        ++n->stats.rx_ignored;
+        return 0;
+    }
+    v = check(n, is_sync ? MRS_MSG_SYNC : in->msg, is_sync ? NULL : &in->seq, f, phys);
+    if (is_sync) {
+        if (v != RX_OK) {
+            ++n->stats.syncs_rejected;
+            return 0;
+        }
+        n->sync_age = 0;
+        mrs_sensor_adopt(&n->verifier, n->signer.epoch);
+        return 0;
+    }
+    if (v != RX_OK) {
+        ++n->stats.rx_rejected;
+        if (v == RX_MAC) {
+            ++n->stats.rx_auth_failed;
+        }
+        ++in->rejects;
+        in->bad_cause = cause_of(v);
+        return 0;
+    }
+    in->rejects = 0;
+    in->value = phys[in->sig];
+    in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
+    in->age = 0;
+    if (in->msg == MRS_MSG_YAW) {
+        n->yaw_stamp = f->stamp;
+        return 1;
+    }
+    return 0;
+}
+
+int mrs_node_build_frame(mrs_node_t *n, int msg, double *phys, uint8_t data[8])
+{
+    const mrs_msg_t *m = &mrs_messages[msg];
+    uint64_t fv = 0u;
+    int signed_frame = 0;
+    if (m->e2e) {
+        n->cmd_alive = mrs_e2e_next_counter(n->cmd_alive); /* only the command is E2E among what we send */
+        phys[m->counter] = (double)n->cmd_alive;
+    }
+    if (n->keyed && m->mac >= 0) {
+        signed_frame = mrs_signer_next(&n->signer, m, phys, &fv);
+    }
+    if (m->pack(data, 8u, phys) != (int)m->length) {
+        return -1;
+    }
+    if (signed_frame) {
+        /* CRC and MAC are zero in data now, as the MAC wants them. */
+        phys[m->mac] = (double)mrs_frame_mac(n->cmac, m->frame_id, data, m->length, fv, m->mac_bits);
+        if (m->pack(data, 8u, phys) != (int)m->length) {
+            return -1;
+        }
+    }
+    if (m->e2e) {
+        data[m->crc_byte] = mrs_e2e_crc(m->data_id, data, m->length, m->crc_byte);
+    }
+    return (int)m->length;
+}
+
+static int send_frame(mrs_node_t *n, int msg, double *phys)
+{
+    uint8_t data[8];
+    const int len = mrs_node_build_frame(n, msg, phys, data);
+    if (len < 0) {
+        snprintf(n->bus->error, sizeof n->bus->error, "cannot pack %s", mrs_messages[msg].name);
+        return -1;
+    }
+    if (n->bus->send(n->bus, mrs_messages[msg].frame_id, data, (uint8_t)len) != 0) {
+        return -1;
+    }
+    ++n->stats.tx_frames;
+    return 0;
+}
+
+static int send_command(mrs_node_t *n, double u, unsigned state)
+{
+    double phys[MRS_MAX_SIGNALS] = {0.0};
+    phys[MRS_SIG_CMD_STATE] = (double)state;
+    phys[MRS_SIG_CMD_ANGLE] = u;
+    phys[MRS_SIG_CMD_MEAS] = (double)n->answers;
+    return send_frame(n, MRS_MSG_CMD, phys);
+}
+
+static int send_status(mrs_node_t *n)
+{
+    double phys[MRS_MAX_SIGNALS] = {0.0};
+    phys[MRS_SIG_STATUS_STATE] = (double)n->state.status;
+    phys[MRS_SIG_STATUS_FLAGS] = (double)n->state.fault_flags;
+    phys[MRS_SIG_STATUS_CAUSE] = (double)n->cause;
+    phys[MRS_SIG_STATUS_REJECTED] = (double)(n->stats.rx_rejected % 65536u);
+    phys[MRS_SIG_STATUS_OVERRUNS] = (double)(n->stats.overruns % 65536u);
+    phys[MRS_SIG_STATUS_LATENESS] = n->max_lateness < 0.65535 ? n->max_lateness : 0.65535;
+    n->max_lateness = 0.0;
+    return send_frame(n, MRS_MSG_STATUS, phys);
+}
+
+int mrs_node_control(mrs_node_t *n)
+{
+    unsigned cause = 0u;
+    mrs_real_t values[3];
+    int i, fault;
+    for (i = 0; i < 3; ++i) {
+        mrs_input_t *in = &n->in[i];
+        const int ok = in->age <= in->limit && in->rejects < n->e2e_fail_max;
+        if (!ok) {
+            cause |= in->rejects < n->e2e_fail_max ? in->missing_cause : in->bad_cause;
+        }
+        values[i] = ok ? (mrs_real_t)in->value : (mrs_real_t)NAN;
+        ++in->age;
+    }
+    /* Which measurement this command answers; NONE when no valid yaw rate went into it. */
+    n->answers = isnan(values[1]) ? MRS_MEAS_NONE : n->in[1].last_counter;
+    n->command = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2]);
+    if (n->state.fault_flags && !cause) {
+        cause |= MRS_CAUSE_RANGE;
+    }
+    if (n->state.status == MRS_STATUS_INACTIVE && !cause) {
+        cause |= MRS_CAUSE_LOW_SPEED;
+    }
+    if (n->keyed) {
+        ++n->sync_age;
+        if (n->sync_age > n->sync_limit || !mrs_signer_synced(&n->signer)) {
+            cause |= MRS_CAUSE_AUTH;
+        }
+    }
+    fault = n->state.status == MRS_STATUS_FAULT;
+    if (fault && !n->was_fault) {
+        ++n->stats.faults_entered;
+    }
+    n->was_fault = fault;
+    n->cause = cause;
+    if (send_command(n, n->command, n->state.status) != 0) {
+        return -1;
+    }
+    ++n->stats.cycles;
+    if (n->stats.cycles % n->status_every == 0u) {
+        return send_status(n);
+    }
+    return 0;
+}
+
+int mrs_node_finish(mrs_node_t *n)
+{
+    return send_command(n, 0.0, MRS_STATUS_INACTIVE);
+}
+
+void mrs_lateness_add(mrs_lateness_t *h, double late)
+{
+    const double bin = late > 0.0 ? late / 1e-6 : 0.0;
+    const uint32_t i = bin < (double)MRS_LATENESS_BINS ? (uint32_t)bin : MRS_LATENESS_BINS;
+    ++h->counts[i];
+    ++h->n;
+    if (late > h->max) {
+        h->max = late;
+    }
+}
+
+double mrs_lateness_percentile(const mrs_lateness_t *h, double q)
+{
+    double rank_f;
+    uint64_t rank, seen = 0u;
+    uint32_t i;
+    if (h->n == 0u) {
+        return 0.0;
+    }
+    rank_f = ceil(q * (double)h->n);
+    rank = rank_f < 1.0 ? 1u : (uint64_t)rank_f;
+    if (rank > h->n) {
+        rank = h->n;
+    }
+    for (i = 0u; i <= MRS_LATENESS_BINS; ++i) {
+        seen += h->counts[i];
+        if (seen >= rank) {
+            const double edge = (double)(i + 1u) * 1e-6;
+            return i == MRS_LATENESS_BINS ? h->max : (edge < h->max ? edge : h->max);
+        }
+    }
+    return h->max;
+}

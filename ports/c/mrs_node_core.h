@@ -1,0 +1,99 @@
+/*
+ * One controller on one bus, C99 port of firmware_py/controller/node.py (ControllerNode): the
+ * receive chain of mrsteer_dbc.link.RxLink (length -> CRC -> counter value -> range -> MAC ->
+ * counter sequence), each input's freshness, mrs_step(), and the command and status frames of
+ * mrsteer_dbc.link.TxLink (alive counter, SecOC fields and MAC when keyed, CRC last).
+ * Frames are packed and unpacked only through mrs_contract.c, i.e. the cantools-generated codec.
+ */
+#ifndef MRS_NODE_CORE_H
+#define MRS_NODE_CORE_H
+
+#include <stdint.h>
+
+#include "mrs_bus.h"
+#include "mrs_controller.h"
+#include "mrs_e2e.h"
+#include "mrs_secoc.h"
+
+#define MRS_LATENESS_BINS 50000u /* 1 us bins up to 50 ms; one more for the overflow */
+#define MRS_SYNC_STALE_CYCLES 3 /* MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH */
+
+/* Receive state of one sensor input (firmware_py/controller/inputs.py). */
+typedef struct {
+    int msg; /* MRS_MSG_* */
+    int sig; /* its measurement signal */
+    unsigned missing_cause;
+    double value;
+    long age, limit;
+    int rejects;
+    unsigned last_counter, bad_cause;
+    mrs_e2e_receiver_t seq;
+} mrs_input_t;
+
+typedef struct {
+    uint32_t counts[MRS_LATENESS_BINS + 1u];
+    uint64_t n;
+    double max;
+} mrs_lateness_t;
+
+typedef struct {
+    uint64_t cycles, overruns, missed_cycles, rx_frames, rx_rejected, rx_ignored, syncs_rejected, rx_auth_failed,
+        tx_frames, faults_entered;
+    mrs_lateness_t lateness;
+    long rss_kb_loop_start, rss_kb_loop_end;
+} mrs_stats_t;
+
+typedef struct {
+    double rate_hz;
+    int timeout_cycles; /* per input, in units of that input's DBC cycle time */
+    int e2e_fail_max; /* consecutive rejected frames of one input that fault it at once */
+    int max_counter_delta;
+    const uint8_t *secoc_key; /* NULL: no SecOC */
+    mrs_config_t controller; /* ts, input ranges and aux_limit are set from the rate and the DBC */
+} mrs_node_config_t;
+
+typedef struct {
+    mrs_bus_t *bus;
+    double period;
+    int e2e_fail_max;
+    mrs_coeffs_t coeffs;
+    mrs_state_t state;
+    mrs_input_t in[3]; /* driver angle, yaw rate, speed */
+    int keyed;
+    mrs_cmac_t *cmac;
+    mrs_signer_t signer;
+    mrs_sensor_verifier_t verifier;
+    long sync_age, sync_limit;
+    uint64_t status_every;
+    uint8_t cmd_alive;
+    unsigned cause, answers;
+    double command, max_lateness, yaw_stamp;
+    int was_fault;
+    mrs_stats_t stats;
+} mrs_node_t;
+
+/* 0, or -1 with the reason in err (an impossible calibration, no OpenSSL CMAC). */
+int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, char *err, size_t err_len);
+void mrs_node_free(mrs_node_t *n);
+
+/* The IDs the node receives (its receive filters); returns how many. */
+size_t mrs_node_filter_ids(int keyed, uint32_t ids[8]);
+
+/* Check one frame and store it: 1 if it was an accepted yaw-rate frame, else 0. */
+int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f);
+
+/* Freshness, step, command (and status at its cycle): 0, or -1 when the bus failed. */
+int mrs_node_control(mrs_node_t *n);
+
+/* The next frame of message msg (MRS_MSG_CMD or MRS_MSG_STATUS) from its physical values: alive
+ * counter, SecOC fields and MAC when keyed and synced, E2E CRC last (TxLink.payload). Its length,
+ * or -1. */
+int mrs_node_build_frame(mrs_node_t *n, int msg, double *phys, uint8_t data[8]);
+
+/* The final zero command marked INACTIVE, as on an orderly shutdown. */
+int mrs_node_finish(mrs_node_t *n);
+
+void mrs_lateness_add(mrs_lateness_t *h, double late);
+double mrs_lateness_percentile(const mrs_lateness_t *h, double q);
+
+#endif

@@ -1,0 +1,244 @@
+"""The C controller node (ports/c/mrs_node) against the Python controller: the same commands in
+lockstep on every built-in scenario, the same command-line errors, SecOC against the golden
+vectors, and the fault matrix."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import mrsteer_dbc
+
+from conftest import lockstep_traffic
+from sim_plant.car import scenario as scn
+from sim_plant.harness import hil, launch
+
+ROOT = Path(__file__).resolve().parents[1]
+VECTORS = ROOT / "tests" / "vectors"
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or shutil.which("make") is None,
+                                reason="gcc and make are not installed (.ci/run installs them)")
+
+# Long enough for the disturbance at 0.5 s and a second of the loop's answer to it.
+LOCKSTEP_S = 1.5
+
+
+@pytest.fixture(scope="module")
+def c_node() -> tuple[str, ...]:
+    return launch.controller_program("c")
+
+
+def _run(tmp: Path, name: str, program: tuple[str, ...] | None, **kw: object) -> hil.HilRun:
+    """A lockstep run; again (twice at most) if the plant stalled for a watchdog cycle of the
+    controller's (``lockstep_traffic``), or gave up waiting for a command (its lockstep timeout,
+    1 s): that is the machine's load, not either controller."""
+    for _ in range(3):
+        cfg = hil.HilConfig(scenario=name, mode="lockstep", duration=LOCKSTEP_S, out=tmp, controller_program=program,
+                            **kw)  # type: ignore[arg-type]
+        run = hil.run(cfg)
+        if not lockstep_traffic(tmp / "traffic.log")["stalls"] and not run.summary["loop"]["plant"].get(
+                "lockstep_timeouts"):
+            break
+    return run
+
+
+@pytest.mark.parametrize("name", sorted(scn.BUILTINS))
+def test_lockstep_c_node_sends_the_python_controllers_frames_bit_for_bit(c_node, tmp_path: Path, name: str) -> None:
+    py = _run(tmp_path / "py", name, None)
+    c = _run(tmp_path / "c", name, c_node)
+    assert c.summary["loop"]["controller"]["implementation"] == "c"
+    py_t, c_t = (lockstep_traffic(tmp_path / d / "traffic.log") for d in ("py", "c"))
+    assert len(c_t["commands"]) > LOCKSTEP_S * 400  # the run commanded every step
+    assert c_t == py_t  # every sensor frame byte for byte, every command's state, angle and measurement
+    if name != "paper-fig8":  # fig. 8 steers; the others disturb: the command must have moved
+        assert max(abs(float(r["aux_cmd_rad"])) for r in csv.DictReader((tmp_path / "c" / "steps.csv").open())) > 1e-4
+    for key in ("peak_aux_steer_deg", "final_aux_steer_deg", "peak_yaw_rate_rad_s", "final_yaw_rate_rad_s"):
+        assert c.summary[key] == py.summary[key], key
+    for key in ("rx_frames", "rx_rejected"):  # cycles and faults: the watchdog cycles before the plant's start
+        assert c.summary["loop"]["controller"][key] == py.summary["loop"]["controller"][key], key
+
+
+def test_lockstep_c_node_with_secoc_equals_python(c_node, tmp_path: Path) -> None:
+    key = bytes(range(16))
+    py = _run(tmp_path / "py", "paper-fig9", None, secoc_key=key)
+    c = _run(tmp_path / "c", "paper-fig9", c_node, secoc_key=key)
+    assert c.summary["frames"]["auth_failed_plant"] == 0 and c.summary["frames"]["rejected_controller"] == 0
+    # The epochs come from the plant's clock, so the MACs differ between the runs; what the
+    # commands say does not.
+    commands = [lockstep_traffic(tmp_path / d / "traffic.log")["commands"] for d in ("py", "c")]
+    assert commands[0] == commands[1] and len(commands[1]) > 500
+    assert py.summary["peak_aux_steer_deg"] == c.summary["peak_aux_steer_deg"]
+
+
+def _secoc_check(lines: list[str]) -> list[str]:
+    exe = ROOT / "ports" / "c" / "build" / "secoc_check"
+    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.split()
+
+
+def _setup_key() -> str:
+    setup = dict(ln.split(" = ") for ln in (VECTORS / "secoc_setup.txt").read_text().splitlines())
+    return setup["key"]
+
+
+def test_c_node_signs_every_golden_command_frame(c_node) -> None:
+    rows = list(csv.DictReader((VECTORS / "secoc_frames.csv").open()))
+    cmds = [r for r in rows if r["kind"] == "cmd"]
+    got = _secoc_check([f"key {_setup_key()}"] + [
+        f"cmd {r['epoch']} {r['fv_counter']} {r['alive_counter']} {r['state']} {r['angle_rad']} {r['meas_counter']}"
+        for r in cmds])
+    assert got[0] == "ok"
+    assert got[1:] == [r["frame_hex"] for r in cmds]  # every byte, MAC and CRC included
+    assert len(cmds) >= 50
+
+
+def test_c_node_verifies_the_golden_sensor_frames_as_the_python_controller_does(c_node) -> None:
+    """Every sent sync and sensor frame of the vectors through the whole receive chain of both
+    nodes (the C one's and ``ControllerNode.receive``), then each again as a replay."""
+    import can
+
+    from firmware_py.controller import node as rt
+
+    contract = mrsteer_dbc.load()
+    key = _setup_key()
+    sent = [r for r in csv.DictReader((VECTORS / "secoc_sensor_frames.csv").open()) if r["sent"] == "1"]
+    frames = [(contract.frame_id(r["message"]), r["frame_hex"]) for r in sent]
+    frames += [(fid, data) for fid, data in frames if fid != contract.frame_id("MRS_SecOCSync")]  # replays
+    got = _secoc_check([f"key {key}"] + [f"rx {fid:X} {data}" for fid, data in frames])
+    bus = can.Bus(interface="virtual", channel="c-node-secoc-vectors")
+    try:
+        py = rt.ControllerNode(bus, rt.RuntimeConfig(secoc_key=bytes.fromhex(key)))
+        expected = []
+        for fid, data in frames:
+            before = py.stats.rx_rejected + py.stats.syncs_rejected
+            py.receive(can.Message(arbitration_id=fid, data=bytes.fromhex(data), is_extended_id=False))
+            expected.append(str(int(py.stats.rx_rejected + py.stats.syncs_rejected == before)))
+    finally:
+        bus.shutdown()
+    assert got[1:] == expected
+    n = len(sent)
+    assert expected[:n].count("1") >= n - 8 and set(expected[n:]) == {"0"}  # taken once, never twice
+
+
+@pytest.mark.parametrize("args,code", [
+    (["--interface", "mrsteer", "--channel", "bad/name"], 1),  # a channel that cannot exist
+    (["--secoc-key", "/nonexistent/key.hex"], 2),
+    (["--rate-hz", "fast"], 2),
+    (["--no-such-flag"], 2),
+    (["--k", "-3"], 2),
+])
+def test_command_line_errors_are_one_line_and_the_python_exit_status(c_node, tmp_path: Path, args: list[str],
+                                                                      code: int) -> None:
+    env = {**os.environ, "MRSTEER_BUS_DIR": str(tmp_path)}
+    c = subprocess.run([*c_node, *args, "--duration", "0.1"], capture_output=True, text=True, timeout=30, env=env)
+    py = subprocess.run([sys.executable, "-m", "firmware_py", *args, "--duration", "0.1"], capture_output=True,
+                        text=True, timeout=60, env=env)
+    assert py.returncode == code, py.stderr  # the reference behaves as the table says
+    assert c.returncode == code
+    assert len(c.stderr.splitlines()) == 1 and c.stderr.startswith("mrs_node: error: "), c.stderr
+
+
+def test_without_a_broker_the_c_node_says_so(c_node, tmp_path: Path) -> None:
+    """The Python client starts a broker itself; the C node does not (docs/porting.md)."""
+    proc = subprocess.run([*c_node, "--interface", "mrsteer", "--channel", "nobody-listens"], capture_output=True,
+                          text=True, timeout=30, env={**os.environ, "MRSTEER_BUS_DIR": str(tmp_path)})
+    assert proc.returncode == 1 and len(proc.stderr.splitlines()) == 1
+    assert "no fallback-bus broker" in proc.stderr and "mrsteer bus --channel nobody-listens" in proc.stderr
+
+
+@pytest.mark.parametrize("text,needle", [("k = forty\n", "k: not a valid value"), ("gain = 3\n", "unknown key 'gain'"),
+                                         ("k 3\n", "expected 'key = value'"),
+                                         ("q_form = fancy\n", "q_form: not a valid value")])
+def test_a_bad_calibration_file_is_one_line_naming_the_line(c_node, tmp_path: Path, text: str, needle: str) -> None:
+    cfg = tmp_path / "bad.cfg"
+    cfg.write_text("# a calibration\n" + text)
+    proc = subprocess.run([*c_node, "--calibration", str(cfg)], capture_output=True, text=True, timeout=30)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [proc.stderr.strip()] and f"{cfg}:2: " in proc.stderr
+    assert needle in proc.stderr
+
+
+def test_lockstep_with_another_calibration_and_hand_gains_equals_python(c_node, tmp_path: Path) -> None:
+    """A golden-vector calibration (ZOH, 200 Hz, M = 1) reaches both controllers as the file the
+    runner writes (``--calibration``); and the C node's own --k/--tau mean the Python plain law."""
+    from dataclasses import replace
+
+    from firmware_py import calibration_file
+    from firmware_py.calibration import plain_law
+
+    zoh = calibration_file.load(VECTORS / "limited_zoh_200hz_m1.cfg")
+    runs = [_run(tmp_path / d, "paper-fig9", prog, calibration=zoh, rate_hz=200.0)
+            for d, prog in (("py", None), ("c", c_node))]
+    traffic = [lockstep_traffic(tmp_path / d / "traffic.log") for d in ("py", "c")]
+    assert traffic[0] == traffic[1] and len(traffic[1]["commands"]) >= LOCKSTEP_S * 200 - 2
+    assert runs[0].summary["peak_aux_steer_deg"] == runs[1].summary["peak_aux_steer_deg"] > 0.1
+    hand = replace(plain_law(zoh, 3.0, 0.05, 0.02), model_delay_steps=0)
+    _run(tmp_path / "py-hand", "paper-fig9", None, calibration=hand, rate_hz=200.0)
+    _run(tmp_path / "c-hand", "paper-fig9", c_node + ("--k", "3", "--tau", "0.05"), calibration=zoh, rate_hz=200.0)
+    hand_traffic = [lockstep_traffic(tmp_path / d / "traffic.log") for d in ("py-hand", "c-hand")]
+    assert hand_traffic[0] == hand_traffic[1] and hand_traffic[1]["commands"] != traffic[1]["commands"]
+
+
+def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path) -> None:
+    from sim_plant.harness.faults import ROWS, Setup, format_table, run_matrix
+
+    results = run_matrix(ROWS, keep=tmp_path, setup=Setup(controller_program=c_node))
+    table = format_table(results)
+    assert all(r.passed for r in results), table
+    assert len(results) == len(ROWS) >= 20
+    stats = json.loads((tmp_path / "01" / "controller.json").read_text())
+    assert stats["implementation"] == "c" and stats["rx_rejected"] == 0  # it was the C node, and the baseline is clean
+
+
+def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) -> None:
+    """Fuzzing the C receive chain against ``ControllerNode.receive``: good frames of every
+    input, each mutated (bit flips, truncation, other counters, out-of-range values) and random
+    payloads, in one sequence; the two nodes must accept exactly the same frames."""
+    import random
+
+    import can
+
+    from firmware_py.controller import node as rt
+
+    contract = mrsteer_dbc.load()
+    rng = random.Random(16)
+    sensors = [("MRS_DriverSteer", "DriverSteer_Angle", 0.7), ("MRS_YawRate", "YawRate_YawRate", 3.0),
+               ("MRS_VehicleSpeed", "VehicleSpeed_Speed", 70.0)]
+    alive = dict.fromkeys([s[0] for s in sensors], 0)
+    frames: list[tuple[int, bytes]] = []
+    for _ in range(3000):
+        name, sig, hi = rng.choice(sensors)
+        value = rng.uniform(-hi if hi < 10 else 0.0, hi)
+        data = bytearray(contract.encode(name, {sig: value}, alive[name]))
+        alive[name] = (alive[name] + rng.choice([1, 1, 1, 2, 4])) % 15
+        kind = rng.randrange(6)
+        if kind == 1:
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        elif kind == 2:
+            data = data[:rng.randrange(len(data))]
+        elif kind == 3:
+            data = bytearray(rng.randbytes(len(data)))
+        elif kind == 4:  # out of range with a valid CRC
+            data = bytearray(contract.encode(name, {sig: 1.05 * hi}, alive[name], strict=False))
+        frames.append((contract.frame_id(name), bytes(data)))
+    got = _secoc_check(["plain"] + [f"rx {fid:X} {data.hex() or '-'}" for fid, data in frames])
+    bus = can.Bus(interface="virtual", channel="c-node-fuzz")
+    try:
+        py = rt.ControllerNode(bus, rt.RuntimeConfig())
+        expected = []
+        for fid, data in frames:
+            before = py.stats.rx_rejected
+            py.receive(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+            expected.append(str(int(py.stats.rx_rejected == before)))
+    finally:
+        bus.shutdown()
+    assert got[1:] == expected
+    assert 0.1 < expected.count("1") / len(expected) < 0.9  # both verdicts well represented
