@@ -19,7 +19,7 @@ Per breakpoint i (Gauss-Seidel: in order, the others held at their current value
 * search: a compass search in (log K, log tau_Q, log tau_n), a trial accepted when it is better
   in (total violation, peak) order, so that an infeasible start first moves to feasibility.  The
   constraints are checked during the search at an active set (the tightest points of the local
-  grid), then on the whole local grid; failing points join the set and the search repeats.
+  grid, per constraint), then on the whole local grid; failing points join the set and the search repeats.
 
 Finally the whole schedule is verified on the full envelope (``envelope_margins`` and
 ``constraints.evaluate``); points that fail join the active sets of the breakpoints that
@@ -59,13 +59,13 @@ class Grids:
     frictions: tuple[float, ...] = tuple(float(x) for x in np.linspace(0.1, 1.0, 10))
     masses: tuple[float, ...] = (1296.0, 1548.0, 1800.0)
     steps: tuple[float, ...] = (0.08, 0.04, 0.02, 0.01)  # compass step sizes in log space
-    active: int = 8  # tightest local points kept in the active set
+    active: int = 2  # tightest local points of each constraint kept in the active set
     max_trials: int = 80  # per breakpoint and round
     rounds: int = 3  # local (and global) re-refinements after failures
 
 
 FULL = Grids()
-QUICK = Grids(speed_step=5.0, frictions=(0.1, 1.0), masses=(1296.0, 1800.0), steps=(0.08,), active=3,
+QUICK = Grids(speed_step=5.0, frictions=(0.1, 1.0), masses=(1296.0, 1800.0), steps=(0.08,), active=1,
               max_trials=4, rounds=1)
 
 
@@ -178,10 +178,23 @@ def _compass(cfg: mr.ControllerConfig, prob: _Problem, models: LoopModels, grids
     return with_gains(cfg, x), best
 
 
-def _local_failures(cfg: mr.ControllerConfig, points: list[VehicleParams], models: LoopModels
-                    ) -> list[tuple[float, VehicleParams]]:
-    """(min slack, point) at every point, all five actuator factors included."""
-    return [(min(point_slack(cfg, p, models, C.TAU_FACTORS).values()), p) for p in points]
+def _local_slacks(cfg: mr.ControllerConfig, points: list[VehicleParams], models: LoopModels
+                  ) -> list[tuple[dict[str, float], VehicleParams]]:
+    """(slacks, point) at every point, all five actuator factors included."""
+    return [(point_slack(cfg, p, models, C.TAU_FACTORS), p) for p in points]
+
+
+def _tightest(slacks: list[tuple[dict[str, float], VehicleParams]], per_key: int) -> list[VehicleParams]:
+    """The ``per_key`` points with the least slack of each constraint (the radii's slack is always
+    small where the car's own slow mode is, so a single ranking would pick only those)."""
+    out: list[VehicleParams] = []
+    keys = {k for s, _ in slacks for k in s}
+    for key in sorted(keys):
+        ranked = sorted((s[key], i) for i, (s, _) in enumerate(slacks) if key in s)
+        for _, i in ranked[:per_key]:
+            if slacks[i][1] not in out:
+                out.append(slacks[i][1])
+    return out
 
 
 def refine_breakpoint(cfg: mr.ControllerConfig, i: int, envelope: Envelope, models: LoopModels, grids: Grids,
@@ -194,19 +207,22 @@ def refine_breakpoint(cfg: mr.ControllerConfig, i: int, envelope: Envelope, mode
              for mu in grids.frictions for m in grids.masses] + list(extra)
     a, b = influence(speeds, i)
     dry = [base.at(v=v, mu=1.0) for v in C.SPEEDS if a < v < b]
-    tight = sorted(_local_failures(cfg, local, models), key=lambda sp: sp[0])
-    active = [p for _, p in tight[:grids.active]] + list(extra)
+    active = _tightest(_local_slacks(cfg, local, models), grids.active) + list(extra)
     prob = _Problem(i, base.at(v=speeds[i], mu=1.0), local, active, dry)
     start = cfg
     for _ in range(grids.rounds + 1):
         cand, merit = _compass(start, prob, models, grids, say)
-        failing = [p for s, p in _local_failures(cand, local, models) if s < 0.0 and p not in prob.active]
+        failing = [(s, p) for s, p in _local_slacks(cand, local, models)
+                   if min(s.values()) < 0.0 and p not in prob.active]
         if not failing:
             if merit[0] > 0.0:
                 say(f"breakpoint {speeds[i]:g} m/s: no feasible point found near the start (violation {merit[0]:.3g})")
             return cand
-        say(f"breakpoint {speeds[i]:g} m/s: {len(failing)} local points fail; added to the active set")
-        prob.active += failing
+        # The worst failing points of each constraint join the active set (all of them could be
+        # hundreds, and every trial pays for each).
+        worst = _tightest(failing, grids.active)
+        say(f"breakpoint {speeds[i]:g} m/s: {len(failing)} local points fail; {len(worst)} join the active set")
+        prob.active += worst
     return start
 
 
