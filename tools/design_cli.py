@@ -1,4 +1,4 @@
-"""``mrsteer design margins|tune|busload``: offline design checks (issue 5)."""
+"""``mrsteer design margins|tune|compare|busload``: offline design checks (issues 5 and 15)."""
 
 from __future__ import annotations
 
@@ -123,8 +123,31 @@ def add_parsers(sub: Any, parser_class: type) -> None:
     _add_loop(p, "model regulator form")
     _add_envelope(p)
     _add_reference(p)
+    p.add_argument("--schedule", action="store_true",
+                   help="tune the shipped law's speed schedule instead (K, tau_Q, tau_n per breakpoint, nominal "
+                   "actuator and filter, M 1) on the reference loop unless --actuator/--sensors say otherwise, "
+                   "for the lowest peak yaw rate at each breakpoint with every constraint of issue 15 met")
+    p.add_argument("--start", type=_calibration_file, default=None, metavar="FILE.cfg",
+                   help="with --schedule: the schedule to start from (default: the shipped one)")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE.cfg",
+                   help="with --schedule: write the tuned calibration there (firmware_py.calibration_file format)")
+    p.add_argument("--quick", action="store_true",
+                   help="with --schedule: coarse local grids and few trials (a smoke test, under a minute of CPU)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
+
+    p = dsub.add_parser("compare", help="trade-off table: the paper's, the previous and the shipped calibration, "
+                        "ideal and reference loop", description="The paper's tuning, the previous shipped calibration "
+                        "and the shipped schedule on the ideal loop (G_sa = 1, exact sensors) and on issue 15's "
+                        "reference loop (20 ms actuator, 30 Hz yaw-rate filter), 500 Hz with one sample of delay: "
+                        "stability, margins, delay margin, dry-road peaks, worst command noise, saturation "
+                        "thresholds; with --out also a plot of peak yaw rate against command noise over candidates.")
+    _add_envelope(p)
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help="also write tradeoff.png (and tradeoff.json) there: peak yaw rate at the Figure-10 point "
+                   "against worst command noise over candidate calibrations")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the Markdown table")
+    p.set_defaults(handler=_cmd_compare)
 
     p = dsub.add_parser("busload", help="CAN bus load of the DBC's frames (nominal and worst-case stuffing)",
                         description="Bus load of every cyclic frame of the DBC; the control-loop frames at the "
@@ -221,8 +244,22 @@ def _cmd_margins(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibration_file(text: str) -> Any:
+    from firmware_py import calibration_file
+
+    try:
+        return calibration_file.load(Path(text))
+    except (calibration_file.CalibrationError, OSError) as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _cmd_tune(args: argparse.Namespace) -> int:
     from sim_plant.offline.tuning import TuneInfeasible, tune
+
+    if args.schedule:
+        return _cmd_tune_schedule(args)
+    if args.start is not None or args.out is not None or args.quick:
+        raise ValueError("--start, --out and --quick need --schedule")
 
     try:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
@@ -247,6 +284,65 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         c = res["constraint_figures"]
         print("  " + ("every constraint met" if c["passes"] else f"FAILS: {', '.join(c['failing'])}") + ": "
               + ", ".join(f"{k} {_fmt(w['value'], '.4g')}" for k, w in c["worst"].items()))
+    return 0
+
+
+def _cmd_tune_schedule(args: argparse.Namespace) -> int:
+    from firmware_py import calibration_file
+    from firmware_py.platform.files import write_files
+    from mrsteer_cli.cli_args import say
+    from sim_plant.offline import schedule_tuning as S
+    from sim_plant.offline.loop_plant import LoopModels
+
+    d = mr.ControllerConfig()
+    if (args.ts, args.delay_steps, args.controller) != (d.ts, S.DELAY_STEPS, d.q_form):
+        raise ValueError("--schedule tunes the shipped structure: --ts, --delay-steps and --controller must keep "
+                         "their defaults")
+    given = args.reference or args.actuator is not None or args.sensors is not None
+    models = _models(args) if given else LoopModels.reference()
+    if args.out is not None and not args.out.parent.is_dir():
+        raise ValueError(f"--out: no directory {args.out.parent}")
+    res = S.tune_schedule(_envelope(args), start=args.start, models=models, grids=S.QUICK if args.quick else S.FULL,
+                          progress=say)
+    if args.out is not None:
+        write_files(args.out.parent, {args.out.name: calibration_file.dumps(res.config)})
+    out = res.as_dict()
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0 if res.passes else 1
+    print(f"{'v m/s':>6}{'K':>9}{'tau_Q ms':>10}{'tau ms':>10}{'tau_n ms':>10}{'peak r':>10}{'(start)':>10}")
+    for r in out["breakpoints"]:
+        print(f"{r['v']:>6g}{r['k']:>9.4g}{r['tau_q_s'] * 1e3:>10.4g}{r['tau_s'] * 1e3:>10.4g}{r['tau_n_s'] * 1e3:>10.4g}"
+              f"{r['peak_yaw_rate_rad_s']:>10.5f}{r['start_peak_yaw_rate_rad_s']:>10.5f}")
+    print(_constraints_table({"models": models.describe(), "constraints": out["constraints"]}))
+    if args.out is not None:
+        print(f"wrote {args.out}")
+    return 0 if res.passes else 1
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from firmware_py.platform.files import write_files
+    from sim_plant.offline import compare as K
+
+    if args.out is not None:
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"cannot create --out {args.out}: {exc.strerror}") from None
+    table = K.compare(_envelope(args), progress=_progress("compare"))
+    res: dict[str, Any] = {"assumes": K.ASSUMES, "delay_steps": K.DELAY_STEPS,
+                           "rows": {n: {loop: f.as_dict() for loop, f in loops.items()} for n, loops in table.items()}}
+    if args.out is not None:
+        cands = K.cloud(progress=_progress("cloud"))
+        res["cloud"] = [c.as_dict() for c in cands]
+        write_files(args.out, {"tradeoff.png": K.plot_png(cands), "tradeoff.json": json.dumps(res, indent=2) + "\n"})
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    print(f"Assumes: {K.ASSUMES}.\n")
+    print(K.markdown(table))
+    if args.out is not None:
+        print(f"\nwrote {args.out / 'tradeoff.png'} and {args.out / 'tradeoff.json'}")
     return 0
 
 
