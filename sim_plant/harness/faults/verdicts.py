@@ -91,7 +91,7 @@ def check_nothing_lost(e: Evidence, v: Verdict) -> None:
     plant_tx = plant["tx_frames"]
     if e.row.kill_plant and e.restarted is not None:
         # The killed plant wrote no statistics: its frames are the ones its logger saw.
-        own = {c.frame_id(n) for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED, secoc.SYNC)}
+        own = {c.frame_id(n) for n in (*names.VEHICLE_SENSORS, secoc.SYNC)}  # every frame the plant sends
         plant_tx += sum(1 for t_, fid, _ in e.vehicle_frames if fid in own and t_ < e.restarted)
         v.observed.append("applied angle judged on the restarted plant's trace")
     logged = e.logged
