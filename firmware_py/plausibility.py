@@ -45,6 +45,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from firmware_py.calibration import NOMINAL_C_F, NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS
+
 # CtrlStatus_Plausibility (mrsteer_dbc.names.PLAUS_*; equal by test, this module imports stdlib only).
 PLAUS_YAW = 0x01
 PLAUS_STEER = 0x02
@@ -66,12 +68,7 @@ STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
 
-# The nominal car of model_regulator (section 3, mu = 1); the controller's config passes its own.
-NOMINAL_L_F = 1.25
-NOMINAL_L_R = 1.32
-NOMINAL_MASS = 1296.0
-NOMINAL_C_F = 84000.0
-NOMINAL_C_R = 96000.0
+# The nominal car is the controller's own (section 3, mu = 1): one owner, firmware_py.calibration.
 
 
 @dataclass(frozen=True)
