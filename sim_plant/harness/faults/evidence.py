@@ -13,7 +13,7 @@ import mrsteer_dbc
 from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
 from sim_plant.harness.faults.rows import Row
-from sim_plant.harness.faults.settings import Setup
+from sim_plant.harness.faults.settings import TIMEOUT_CYCLES, Setup
 from sim_plant.nodes.candump_log import Frame, read_candump
 
 
@@ -51,6 +51,30 @@ def gaps(frames: list[Frame], ids: list[int], longer: float) -> list[tuple[float
     return out
 
 
+def stall_gaps(e: Evidence) -> list[tuple[float, float]]:
+    """The gaps in the control law's sensor frames on the controller's bus long enough to time
+    an input out (a machine stall): each input times out after TIMEOUT_CYCLES of its own cycle
+    (speed: 10 ms at most rates)."""
+    c, ts = mrsteer_dbc.load(), e.setup.ts
+    return [g for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)
+            for g in gaps(e.frames, [c.frame_id(n)], TIMEOUT_CYCLES * (c.cycle_time_s(n, ts) or ts) - ts)]
+
+
+def stalled(t: float, found: list[tuple[float, float]]) -> bool:
+    """A FAULT at ``t`` is explained by one of the ``stall_gaps``."""
+    return any(g0 - 0.005 <= t <= g1 + 0.1 for g0, g1 in found)
+
+
+@dataclass(frozen=True)
+class Status:
+    """One ``MRS_CtrlStatus``: its time, state, plausibility bits and cause."""
+
+    t: float
+    state: int
+    plausibility: int
+    cause: int
+
+
 @dataclass(frozen=True)
 class Evidence:
     """One row's run: what the runner did (exit status, kill and restart times, epoch s) and
@@ -72,6 +96,8 @@ class Evidence:
     angles: list[tuple[float, float]]  # (t, AuxSteerCmd_Angle) of the same
     causes: list[tuple[float, int]]  # (t, CtrlStatus_Cause)
     faults_after: list[float]  # times of FAULT commands after the controller first became active
+    statuses: list[Status]  # every decoded MRS_CtrlStatus to the run's end
+    end: float  # the run's end: the plant's last yaw-rate frame (epoch s)
 
 
 def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, restarted: float | None,
@@ -88,6 +114,8 @@ def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, 
     cmds = [(t, d.signals["AuxSteerCmd_State"]) for t, d in accepted]
     statuses = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == status_id]
     first_active = next((t for t, s in cmds if s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
+    status_list = [Status(t, int(d.signals[names.SIG_STATUS_STATE]), int(d.signals[names.SIG_STATUS_PLAUS]),
+                          int(d.signals[names.SIG_STATUS_CAUSE])) for t, d in statuses if d is not None and t <= cutoff]
     return Evidence(
         row, setup, ctl_code, killed_at, restarted, read_trace(work / "trace.csv"),
         json.loads((work / "bridge.json").read_text()), json.loads((work / "plant.json").read_text()),
@@ -95,4 +123,5 @@ def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, 
         {side: json.loads((work / f"logger-{side}.json").read_text())["frames"] for side in ("vehicle", "controller")},
         vehicle_frames, frames, cmds, [(t, d.signals["AuxSteerCmd_Angle"]) for t, d in accepted],
         [(t, int(d.signals["CtrlStatus_Cause"])) for t, d in statuses if d is not None],
-        [t for t, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t > first_active])
+        [t for t, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t > first_active],
+        status_list, cutoff)

@@ -1,14 +1,21 @@
 """The fault matrix's rows: each a fault the bridge injects (or a process the runner kills) and
 what the row must show, judged from the logged traffic (``judge``).  ``secured_rows`` gives
-the same rows as ``faults run --secoc`` runs them."""
+the same rows as ``faults run --secoc`` runs them.
+
+The sensor rows (``SENSOR_ROWS``, issue 18) put a wrong value in well-formed frames; the
+plausibility monitor must find it, fade the command and latch (``verdicts_plausibility``).
+Their windows are in scenario time and last to the run's end: the fault latches until restart,
+so they expect no recovery."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 from mrsteer_dbc import names
-from sim_plant.harness.faults.settings import E2E_FAIL_MAX, FORGED_ANGLE, TIMEOUT_CYCLES, WINDOW
-from sim_plant.nodes.fault_bridge import Fault
+from sim_plant.harness.faults.settings import (CURVE, E2E_FAIL_MAX, FORGED_ANGLE, PLAUS_DURATION, PLAUS_START,
+                                               SCENARIO, TIMEOUT_CYCLES, WINDOW)
+from sim_plant.nodes.fault_bridge import SENSOR_KINDS, Fault
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,11 @@ class Row:
     secoc: bool = False  # controller and plant authenticate the commands and the sensor frames
     auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
     e2e_only: bool = False  # shows what E2E alone lets through: meaningless with SecOC on
+    scenario: str = SCENARIO  # the plant's scenario: paper-fig9, or CURVE (settings.curve_toml)
+    duration: float | None = None  # s of scenario; None: settings.DURATION
+    # Sensor rows: the CtrlStatus_Plausibility bit the monitor must report (PLAUS_YAW or
+    # PLAUS_STEER), with cause 0x80, the command faded to zero and both latched to the end.
+    plausibility: int = 0
 
 
 def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
@@ -84,14 +96,59 @@ ROWS = (
 )
 
 
+def _sensor(name: str, kind: str, target: str, param: float, plaus: int, expected: str, *,
+            signal: str | None = None, start: float = PLAUS_START, duration: float = PLAUS_DURATION,
+            scenario: str = SCENARIO) -> Row:
+    """A sensor row: the fault from ``start`` to the run's end (scenario time)."""
+    return Row(name, Fault(kind, target, start, duration, param, signal), expected, scenario=scenario,
+               duration=duration, plausibility=plaus)
+
+
+_LATCH = "fade, latch"
+_YAW, _STEER = names.PLAUS_YAW, names.PLAUS_STEER
+#: The sensor rows.  paper-fig9 from 1.0 s: the car in its steady state (r 0.020 rad/s, a_y
+#: 0.41 m/s^2, aux -1.81 deg) with the driver's wheel held straight; the curve: r 0.168 rad/s.
+SENSOR_ROWS = (
+    _sensor("yaw rate stuck at 0.01 rad/s", "sensor_stuck", names.MSG_YAW, 0.01, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}"),
+    _sensor("yaw-rate offset +3 deg/s", "sensor_bias", names.MSG_YAW, math.radians(3.0), _YAW,
+            f"FAULT <= 300 ms, {_LATCH}"),
+    # 1 deg/s per s leaves the 2 deg/s bound after about 2 s: the target counts from then.
+    _sensor("yaw-rate drift 1 deg/s per s", "sensor_drift", names.MSG_YAW, math.radians(1.0), _YAW,
+            f"FAULT <= 300 ms past bound, {_LATCH}", duration=4.2),
+    # During the yaw moment's transient, so that the truth moves away from the held value.
+    _sensor("yaw rate frozen (value, counter runs)", "sensor_frozen", names.MSG_YAW, 0.0, _YAW,
+            f"FAULT <= 300 ms past bound, {_LATCH}", start=0.55),
+    # paper-fig9's driver holds the wheel straight: an angle stuck at 0 would be the truth.
+    _sensor("wheel held, angle stuck at 0.57 deg", "sensor_stuck", names.MSG_STEER, 0.01, _STEER,
+            f"FAULT <= 300 ms, {_LATCH}"),
+    _sensor("lateral acceleration offset +1 m/s^2", "sensor_bias", names.MSG_REDUNDANT, 1.0, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_LAT_ACCEL),
+    Row("baseline, driver steers into a curve", Fault("none", names.MSG_YAW, *WINDOW, 1.0),
+        "no plausibility alarm", no_fault=True, scenario=CURVE, duration=PLAUS_DURATION),
+    _sensor("curve: driver angle stuck at 0", "sensor_stuck", names.MSG_STEER, 0.0, _STEER,
+            f"steering: FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+    _sensor("curve: steering channel 2 stuck at 0", "sensor_stuck", names.MSG_REDUNDANT, 0.0, _STEER,
+            f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_STEER_ANGLE_2, scenario=CURVE),
+    _sensor("curve: yaw-rate gain 1.5", "sensor_scale", names.MSG_YAW, 1.5, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+    _sensor("curve: yaw-rate gain 0.5", "sensor_scale", names.MSG_YAW, 0.5, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+)
+
+ROWS = ROWS + SENSOR_ROWS
+
+
 def secured_rows(rows: tuple[Row, ...] = ROWS) -> tuple[Row, ...]:
     """The rows as they run with SecOC on (``faults run --secoc``): every row authenticates,
-    the E2E-only rows are left out, and a row that became the same run as an earlier one (the
-    baseline and "SecOC: baseline") appears once."""
+    the E2E-only rows are left out, and so are the sensor-fault rows (the bridge cannot give
+    the frames it falsifies a valid MAC: SecOC would refuse them, so they would test SecOC, not
+    the monitor), and a row that became the same run as an earlier one (the baseline and
+    "SecOC: baseline") appears once."""
     out: list[Row] = []
     seen: set[Row] = set()
     for row in rows:
-        if row.e2e_only:
+        if row.e2e_only or row.fault.kind in SENSOR_KINDS:
             continue
         row = replace(row, secoc=True)
         key = replace(row, name="", expected="")

@@ -20,7 +20,7 @@ from sim_plant.harness import launch
 from sim_plant.harness.faults.verdicts import RowResult, judge
 from sim_plant.harness.faults.rows import ROWS, Row
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_LIMIT,
-                                               RESTART_AT, SCENARIO, Setup)
+                                               RESTART_AT, Setup, scenario_spec)
 from sim_plant.harness.processes import Proc, RunError, stop, wait_for_socket, wait_ready, wait_stderr
 
 
@@ -53,8 +53,11 @@ class _RowRun:
                 self.work / f"{side}.log", iface_name=side, stats_out=self.work / f"logger-{side}.json")), stdout=True)
             loggers.append(lg)
             wait_ready(lg)
-        fault = replace(self.row.fault, start=self.row.fault.start * self.setup.time_scale,
-                        stop=self.row.fault.stop * self.setup.time_scale)
+        scale = self.setup.time_scale
+        # A sensor row's fault starts at a point of the scenario (the car's motion, which the
+        # time scale does not stretch) and lasts to the run's end, which it does.
+        start = self.row.fault.start * (1.0 if self.row.plausibility else scale)
+        fault = replace(self.row.fault, start=start, stop=self.row.fault.stop * scale)
         bridge = self.start("bridge", launch.bridge(self.setup.interface, self.vehicle, self.controller_side, fault,
                                                     self.work / "bridge.json"))
         wait_stderr(bridge, "bridging")
@@ -72,7 +75,7 @@ class _RowRun:
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
         return self.start(name, launch.plant(launch.BusArgs(self.setup.interface, self.vehicle), launch.PlantSettings(
-            self.setup.rate_hz, "realtime", SCENARIO, duration=seconds, actuator_rate=ACTUATOR_RATE,
+            self.setup.rate_hz, "realtime", scenario_spec(self.row.scenario, self.work), duration=seconds, actuator_rate=ACTUATOR_RATE,
             cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
             sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
             stats_out=self.work / "plant.json", secoc=self.row.secoc)))
@@ -105,7 +108,7 @@ class _RowRun:
 
 def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Setup()) -> RowResult:
     env = dict(os.environ)
-    duration = DURATION * setup.time_scale + (setup.startup_s if row.restart else 0.0)
+    duration = (row.duration or DURATION) * setup.time_scale + (setup.startup_s if row.restart else 0.0)
     if setup.channels is None:
         tag = f"f{os.getpid()}-{int(time.time() * 1000) % 10**7}"
         ch_a, ch_b = f"{tag}-veh", f"{tag}-ctl"

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
+from firmware_py.authority import AuthorityConfig
 from firmware_py.controller import node as rt
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from mrsteer_dbc.busload import frame_bits
@@ -21,7 +23,7 @@ RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
 PLANT_FADE = FADE_RATE_RAD_S  # rad/s, the actuator's fade (the plant's default)
 CMD_TIMEOUT = CMD_TIMEOUT_S  # s, the actuator's command timeout (the plant's default)
-SCENARIO = "paper-fig9"  # the plant's scenario in every row
+SCENARIO = "paper-fig9"  # the plant's scenario in every row but the curve rows (CURVE)
 DURATION = 2.6  # s of scenario
 WINDOW = (1.0, 1.4)  # s after the first frame: the fault window
 BUS_RESOLUTION = 1e-6  # rad, AuxSteerCmd_Angle's scale in the DBC
@@ -40,6 +42,42 @@ COUNTER_WINDOW = mrsteer_dbc.E2EReceiver().max_delta  # the actuator's alive-cou
 # 8-byte frames a 500 kbit/s bus carries per second at most (no stuff bits): a flood at this
 # rate saturates a real bus of the vehicle's kind.
 FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
+
+# Sensor-fault rows (a wrong value in well-formed frames, found by the plausibility monitor).
+PLAUS_DETECT = 0.3  # s from the error exceeding its bound to the fault on the bus (issue 18's target)
+PLAUS_FADE = AuthorityConfig().fade_rate  # rad/s, the authority limiter's fade on a plausibility fault
+STATUS_CYCLE = mrsteer_dbc.load().cycle_time_s(names.MSG_STATUS) or 0.1  # s, MRS_CtrlStatus
+PLAUS_START = 1.0  # s: the paper-fig9 car is in its steady state (r 0.020 rad/s, aux -1.81 deg)
+PLAUS_DURATION = 2.6  # s of scenario: detection (<= 0.3 s) and a fade from 3 deg (0.5 s) fit after 1.0 s
+#: The second scenario of the sensor rows: the paper's car at 20 m/s on mu 1, the driver turning
+#: the wheel at a steady rate to 1.5 deg of front-wheel angle over 0.4 s from 0.5 s, then holding
+#: it (the issue's "driver steers 1.5 deg into a curve": r 0.168 rad/s, a_y 3.4 m/s^2 from 1.4 s).
+#: Faults that paper-fig9 hides need it: its driver holds the wheel straight (a steering angle
+#: stuck at 0 is then the truth) and its yaw rate (0.02 rad/s) is too small for a gain error to
+#: leave the monitor's bound.
+CURVE = "curve"
+CURVE_ANGLE = math.radians(1.5)
+CURVE_STEPS = 40  # one steer event every 10 ms
+
+
+def curve_toml() -> str:
+    """The curve scenario as a scenario file (``sim_plant.car.scenario``): the plant takes a
+    built-in name or a file, so each curve row writes this into its work directory."""
+    lines = [f'name = "{CURVE}"', 'description = "driver steers 1.5 deg into a curve at 20 m/s (fault matrix)"',
+             "duration = 4.0", "v = 20.0", "mu = 1.0"]
+    for i in range(CURVE_STEPS):
+        lines += ["", "[[events]]", f"t = {0.5 + 0.01 * i:.2f}", f"steer = {CURVE_ANGLE * (i + 1) / CURVE_STEPS:.9f}"]
+    return "\n".join(lines) + "\n"
+
+
+def scenario_spec(name: str, work: Path) -> str:
+    """What the plant's ``--scenario`` takes for a row's scenario: a built-in name as it is, the
+    curve as a file written into ``work``."""
+    if name != CURVE:
+        return name
+    path = work / "curve.toml"
+    path.write_text(curve_toml())
+    return str(path)
 
 
 def _plain(rate_hz: float, k: float, tau: float, tau_n: float) -> mr.ControllerConfig:

@@ -19,11 +19,12 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from mrsteer_dbc import secoc
 from mrsteer_dbc import names
-from sim_plant.harness.faults.evidence import Evidence, gaps, gather
+from sim_plant.harness.faults.evidence import Evidence, gather, stalled, stall_gaps
 from sim_plant.harness.faults.rows import Row
+from sim_plant.harness.faults.verdicts_plausibility import check_plausibility, check_quiet_monitor
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
                                                FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE, RATE_LIMIT,
-                                               TIMEOUT_CYCLES, TRACE_RESOLUTION, Setup)
+                                               TRACE_RESOLUTION, Setup)
 from sim_plant.nodes.candump_log import Frame
 
 
@@ -56,15 +57,17 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
     check_alive(e, v)
     check_command_rate(e, v)
     check_no_fault(e, v)
+    check_quiet_monitor(e, v.fails, v.observed)
     affected0, affected1 = outage(e)
     detection, first_fault = check_detection(e, v, affected0, affected1)
+    plausibility = check_plausibility(e, v.fails, v.observed)
     check_fade_while_plant_down(e, v, first_fault, affected1)
     check_rejections(e, v)
     check_secoc(e, v)
     check_forgery(e, v)
     check_controller_kill(e, v)
     return RowResult(row.name, row.expected, not v.fails, "; ".join(v.observed), math.degrees(worst),
-                     math.degrees(worst_step), detection, v.fails)
+                     math.degrees(worst_step), detection if plausibility is None else plausibility, v.fails)
 
 
 def check_applied(e: Evidence, v: Verdict) -> tuple[float, float]:
@@ -132,13 +135,10 @@ def check_no_fault(e: Evidence, v: Verdict) -> None:
     """A row that must not fault: every FAULT explained by a machine stall."""
     if not (e.row.no_fault and e.faults_after):
         return
-    c, ts = mrsteer_dbc.load(), e.setup.ts
     # A FAULT is the right answer when the machine stalled the plant past the timeout: judge
     # only those without such a gap in the sensor frames the controller was given.
-    # Each input times out after TIMEOUT_CYCLES of its own cycle (speed: 10 ms at most rates).
-    found = [g for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)
-             for g in gaps(e.frames, [c.frame_id(n)], TIMEOUT_CYCLES * (c.cycle_time_s(n, ts) or ts) - ts)]
-    unexplained = [t_ for t_ in e.faults_after if not any(g0 - 0.005 <= t_ <= g1 + 0.1 for g0, g1 in found)]
+    found = stall_gaps(e)
+    unexplained = [t_ for t_ in e.faults_after if not stalled(t_, found)]
     if unexplained:
         v.fails.append(f"controller faulted without a cause {len(unexplained)} times")
     else:

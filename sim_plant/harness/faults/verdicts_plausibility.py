@@ -1,0 +1,220 @@
+"""The fault matrix's plausibility verdicts (issue 18): a sensor row's wrong value found, the
+command faded and both latched; no alarm in a fault-free row.  Judged from the logged traffic
+(``evidence``) like every other verdict (``verdicts.judge`` calls these).
+
+A sensor row (``Row.plausibility`` set) must show, counted from when the fault's error left
+the monitor's bound (for a step fault: its onset, the first falsified frame):
+
+* **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms),
+  or, if only the status shows it, the first ``MRS_CtrlStatus`` with a fault bit in
+  ``CtrlStatus_Plausibility`` within 300 ms plus its cycle (100 ms); nothing before the onset;
+* **report**: the status with a fault bit, cause 0x80 and state FAULT by the status cycle after
+  the command showed it, and the row's bit (the check watching the faulted signal) by the end;
+* **fade**: the command back at exactly zero within ``|u at detection| / PLAUS_FADE`` (6 deg/s)
+  plus two cycles (counted in commands on the bus, as the limiter fades once a period), never
+  growing on the way;
+* **latched**: every later command FAULT at zero, every later status still reporting it, to the
+  run's end; the fault window still open when the fade ended.
+
+The error is the falsified signal on the controller's bus less the same frame's value on the
+vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up), against
+the bound ``offline.plausibility_runs.error_bound`` states: the yaw rate's ``yaw_bound +
+yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v, a
+steering channel's ``steer_bound`` (``PlausibilityConfig``'s defaults, as the controller runs).
+It counts as left the bound when it stays over it for 300 ms or until the fault is reported.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py.plausibility import PLAUS_FAULT, PlausibilityConfig
+from mrsteer_dbc import names
+from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
+from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
+from sim_plant.nodes.candump_log import Frame
+
+#: A sample of the falsified signal as the controller got it: (t, error, bound).
+ErrorSample = tuple[float, float, float]
+
+
+def _values(frames: list[Frame], name: str, signal: str) -> list[tuple[float, float]]:
+    c = mrsteer_dbc.load()
+    fid = c.frame_id(name)
+    out = []
+    for t, f, data in frames:
+        if f == fid and (d := c.decode(f, data)) is not None:
+            out.append((t, float(d.signals[signal])))
+    return out
+
+
+def _latest(series: list[tuple[float, float]], times: list[float], t: float, default: float) -> float:
+    i = bisect.bisect_right(times, t) - 1
+    return series[i][1] if i >= 0 else default
+
+
+def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) -> list[ErrorSample]:
+    """The falsified signal's error and its bound at each frame the controller got."""
+    fault = e.row.fault
+    signal = fault.signal or names.SENSOR_SIGNAL[fault.target]
+    truth = _values(e.vehicle_frames, fault.target, signal)
+    seen = _values(e.frames, fault.target, signal)
+    yaw = _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE)
+    speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
+    yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
+    out = []
+    for (tv, true), (tc, got) in zip(truth, seen):
+        r = abs(_latest(yaw, yaw_t, tv, 0.0))
+        bound = cfg.yaw_bound + cfg.yaw_rel * r
+        if signal == names.SIG_LAT_ACCEL:
+            bound *= _latest(speed, speed_t, tv, 0.0)
+        elif signal in (names.SIG_STEER_ANGLE, names.SIG_STEER_ANGLE_2):
+            bound = cfg.steer_bound
+        out.append((tc, got - true, bound))
+    return out
+
+
+def exceeded_at(series: list[ErrorSample], until: float | None, hold: float = PLAUS_DETECT) -> float | None:
+    """When the error left its bound to stay over it for ``hold`` s, or until ``until`` (the
+    report) if sooner; ``None`` if it never did by then.  A brief excursion does not count."""
+    start = None
+    for t, err, bound in series:
+        if until is not None and t > until:
+            break
+        if abs(err) > bound:
+            start = t if start is None else start
+            if t - start >= hold:
+                return start
+        else:
+            start = None
+    return start if until is not None else None
+
+
+def check_quiet_monitor(e: Evidence, fails: list[str], observed: list[str]) -> None:
+    """A fault-free row: no status ever reports a plausibility fault."""
+    if not e.row.no_fault:
+        return
+    alarms = [s for s in e.statuses if s.plausibility & PLAUS_FAULT]
+    if alarms:
+        fails.append(f"false plausibility alarm: {len(alarms)} status frames with bits "
+                 f"{sorted({s.plausibility for s in alarms})}, first {alarms[0].t - e.statuses[0].t:.2f} s in")
+    else:
+        degraded = sum(1 for s in e.statuses if s.plausibility)
+        observed.append("monitor quiet" + (f" ({degraded} status frames degraded)" if degraded else ""))
+
+
+def _first_fault(e: Evidence, onset: float) -> tuple[float | None, float | None, list[str]]:
+    """The latched FAULT (the first command of the FAULT run that lasts to the end, else the
+    first FAULT) and the first status reporting a plausibility fault, at or after ``onset``;
+    and what says the monitor did not latch or alarmed early.  A FAULT explained by a machine
+    stall (an input timed out) is no plausibility fault."""
+    fails = []
+    if any(s.t < onset and s.plausibility & PLAUS_FAULT for s in e.statuses):
+        fails.append("plausibility fault reported before the fault's onset")
+    after = [(t, s) for t, s in e.cmds if t >= onset]
+    i = len(after)
+    while i > 0 and after[i - 1][1] == mr.STATUS_FAULT:
+        i -= 1
+    t_latch = after[i][0] if i < len(after) else None
+    found = stall_gaps(e)
+    episodes = [t for t, s in after[:i] if s == mr.STATUS_FAULT and not stalled(t, found)]
+    if episodes:
+        fails.append(f"not latched: FAULT {1e3 * (episodes[0] - onset):.0f} ms after onset, then not")
+    t_cmd = episodes[0] if episodes else t_latch
+    t_st = next((s.t for s in e.statuses if s.t >= onset and s.plausibility & PLAUS_FAULT), None)
+    return t_cmd, t_st, fails
+
+
+def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> int | None:
+    """A sensor row: detection, report, fade and latch (the module's docstring).  Returns the
+    detection in controller cycles from the error leaving its bound (``None``: not a sensor row,
+    or not detected)."""
+    row, ts = e.row, e.setup.ts
+    if not row.plausibility:
+        return None
+    onset = e.bridge["first_affected"]
+    if onset is None:
+        fails.append("the fault never hit a frame")
+        return None
+    t_cmd, t_st, early = _first_fault(e, onset)
+    fails.extend(early)
+    series = error_series(e)
+    worst = max((abs(err) / bound for _, err, bound in series if _ >= onset), default=0.0)
+    seen = [t_ for t_ in (t_cmd, t_st) if t_ is not None]
+    t_det = min(seen) if seen else None
+    over = exceeded_at([s for s in series if s[0] >= onset], t_det)
+    if t_det is None:
+        fails.append("no plausibility fault reported" + ("" if over is not None else
+                     f" (the error reached {worst:.2f} of its bound: the row does not test the monitor)"))
+        return None
+    ref = over if over is not None else onset
+    observed.append(f"error over its bound {1e3 * (ref - onset):.0f} ms after onset (peak {worst:.1f}x)"
+                    if over is not None else f"reported before the error stayed over its bound (peak {worst:.1f}x)")
+    # The command shows the state every cycle: it is the measure.  Only without it does the
+    # status (every STATUS_CYCLE) count, with its cycle allowed.
+    cmd_ok = t_cmd is not None and t_cmd - ref <= PLAUS_DETECT + 2 * ts
+    st_ok = t_cmd is None and t_st is not None and t_st - ref <= PLAUS_DETECT + STATUS_CYCLE + 2 * ts
+    shown = "; ".join(f"{what} {1e3 * (t_ - ref):.0f} ms" for what, t_ in (("FAULT", t_cmd), ("status", t_st))
+                      if t_ is not None)
+    observed.append(shown + " after")
+    if not (cmd_ok or st_ok):
+        fails.append(f"plausibility fault reported late ({shown}; allowed {1e3 * PLAUS_DETECT:.0f} ms)")
+    check_report(e, fails, t_cmd, t_st)
+    if t_cmd is None:
+        fails.append("no command ever in state FAULT")
+        return None
+    check_fade(e, fails, observed, t_cmd)
+    return sum(1 for t_, _ in e.cmds if ref <= t_ <= t_cmd)
+
+
+def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float | None) -> None:
+    """The status: the row's bit, cause 0x80 and FAULT, soon after the command, then to the end."""
+    row = e.row
+    if t_st is None:
+        fails.append("no status frame reported the plausibility fault")
+        return
+    if t_cmd is not None and t_st > t_cmd + STATUS_CYCLE + 0.02:
+        fails.append(f"the status reported it {1e3 * (t_st - t_cmd):.0f} ms after the command")
+    after = [s for s in e.statuses if s.t >= t_st]
+    wrong = [s for s in after if not (s.plausibility & PLAUS_FAULT and s.cause & names.CAUSE_PLAUSIBILITY
+                                      and s.state == mr.STATUS_FAULT)]
+    if wrong:
+        s = wrong[0]
+        fails.append(f"{len(wrong)} of {len(after)} status frames after the report lack a fault bit, cause 0x80 "
+                     f"or FAULT (first: bits {s.plausibility}, cause 0x{s.cause:02X}, state {s.state})")
+    # Another check may trip first (a stuck steering angle also moves the model's yaw rate),
+    # but the one that watches the faulted signal must trip too: it says which sensor it was.
+    if not any(s.plausibility & row.plausibility for s in after):
+        fails.append(f"the status never gave bit 0x{row.plausibility:X} (saw {sorted({s.plausibility for s in after})})")
+
+
+def check_fade(e: Evidence, fails: list[str], observed: list[str], t_cmd: float) -> None:
+    """The command faded to exactly zero at the limiter's rate, then held there in FAULT."""
+    ts = e.setup.ts
+    before = [abs(a) for t_, a in e.angles if t_ < t_cmd]
+    after = [(t_, a) for t_, a in e.angles if t_ >= t_cmd]
+    u_det = max(([before[-1]] if before else []) + ([abs(after[0][1])] if after else []), default=0.0)
+    allowed = math.ceil(u_det / (PLAUS_FADE * ts) - 1e-9) + 2
+    mags = [abs(a) for _, a in after]
+    if any(b > a + 2e-6 for a, b in zip(mags, mags[1:])):
+        fails.append("the command grew after the plausibility fault")
+    i_zero = next((i for i, m in enumerate(mags) if m <= BUS_RESOLUTION / 2), None)
+    if i_zero is None:
+        fails.append(f"the command never reached zero (from {math.degrees(u_det):.2f} deg)")
+        return
+    t_zero = after[i_zero][0]
+    observed.append(f"faded {math.degrees(u_det):.2f} deg to 0 in {i_zero} cycles, {1e3 * (t_zero - t_cmd):.0f} ms "
+                    f"(allowed {allowed})")
+    if i_zero > allowed:
+        fails.append(f"faded in {i_zero} cycles, allowed {allowed} ({math.degrees(u_det):.2f} deg at "
+                     f"{math.degrees(PLAUS_FADE):g} deg/s)")
+    if any(m > BUS_RESOLUTION / 2 for m in mags[i_zero:]):
+        fails.append("the command left zero again after the fade")
+    last = e.bridge["last_affected"]
+    if last is None or last < t_zero:
+        fails.append("the fault window ended before the fade did: the latch is not shown")
+    else:
+        observed.append(f"latched for {e.end - t_zero:.2f} s to the end")

@@ -1,0 +1,180 @@
+"""The fault matrix's sensor rows and their verdicts (issue 18, item 4), on synthetic evidence:
+a run's traffic built frame by frame, with the detection, fade and latch each test varies, so
+that each verdict is seen to pass what it should and fail what it should."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+
+import mrsteer_dbc
+from firmware_py import model_regulator as mr
+from firmware_py.plausibility import PlausibilityConfig
+from mrsteer_dbc import names
+from sim_plant.car import scenario as scn
+from sim_plant.harness import faults as F
+from sim_plant.harness.faults.evidence import Evidence, Status, Trace
+from sim_plant.harness.faults.settings import CURVE, curve_toml, scenario_spec
+from sim_plant.harness.faults.verdicts_plausibility import (check_plausibility, check_quiet_monitor, error_series,
+                                                            exceeded_at)
+from sim_plant.nodes.fault_bridge import SENSOR_KINDS
+
+C = mrsteer_dbc.load()
+TS = 0.002
+ONSET = 1.0
+END = 2.6
+R = 0.0203  # rad/s: paper-fig9's yaw rate from 1.0 s
+U0 = math.radians(-1.81)
+FADE = math.radians(6.0)
+
+
+def _row(name: str = "yaw-rate offset +3 deg/s") -> F.Row:
+    return next(r for r in F.ROWS if r.name == name)
+
+
+def _yaw(t: float, value: float, k: int) -> tuple[float, int, bytes]:
+    return (t, C.frame_id(names.MSG_YAW), C.encode(names.MSG_YAW, {names.SIG_YAW_RATE: value}, k % 15))
+
+
+def _speed(t: float, k: int) -> tuple[float, int, bytes]:
+    return (t, C.frame_id(names.MSG_SPEED), C.encode(names.MSG_SPEED, {names.SIG_SPEED: 20.0}, k % 15))
+
+
+def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, fade: float = FADE,
+             unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
+             early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END) -> Evidence:
+    """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
+    ONSET on the controller's), a command every period (U0, FAULT from ONSET + ``detect``,
+    faded at ``fade``), a status every 100 ms."""
+    n = int(round(end / TS))
+    vehicle, ctl, cmds, angles, statuses = [], [], [], [], []
+    t_fault = None if detect is None else ONSET + detect
+    u = U0
+    bits = row.plausibility if plaus is None else plaus
+    for k in range(n):
+        t = k * TS
+        vehicle.append(_yaw(t, R, k))
+        ctl.append(_yaw(t + 1e-4, R + (error(t) if t >= ONSET else 0.0), k))
+        if k % 5 == 0:
+            vehicle.append(_speed(t, k // 5))
+            ctl.append(_speed(t + 1e-4, k // 5))
+        faulted = t_fault is not None and t >= t_fault
+        if t_fault is not None and t >= t_fault:
+            u = min(0.0, u + fade * TS)
+        state = mr.STATUS_FAULT if faulted else mr.STATUS_ACTIVE
+        if unlatch_at is not None and t >= unlatch_at:
+            state = mr.STATUS_ACTIVE
+        cmds.append((t + 5e-4, float(state)))
+        angles.append((t + 5e-4, round(u, 6)))
+        if k % 50 == 0:
+            on = faulted or (early_alarm is not None and abs(t - early_alarm) < TS / 2)
+            statuses.append(Status(t + 6e-4, mr.STATUS_FAULT if on else mr.STATUS_ACTIVE,
+                                   bits if on else status_plaus_quiet, cause if on else 0))
+    bridge = {"first_affected": ONSET + 1e-4, "last_affected": end, "affected": n // 2}
+    trace = Trace([0.0], [0.0], [0.0], [0.0])
+    first_active = cmds[0][0]
+    faults_after = [t for t, s in cmds if s == mr.STATUS_FAULT and t > first_active]
+    return Evidence(row, F.Setup(), 0, None, None, trace, bridge, {}, {}, {}, vehicle, ctl, cmds, angles,
+                    [(s.t, s.cause) for s in statuses], faults_after, statuses, end)
+
+
+def _judge(e: Evidence) -> tuple[list[str], list[str], int | None]:
+    fails: list[str] = []
+    observed: list[str] = []
+    return fails, observed, check_plausibility(e, fails, observed)
+
+
+def test_a_fault_found_in_time_faded_and_latched_passes() -> None:
+    fails, observed, cycles = _judge(evidence(_row()))
+    assert fails == [], fails
+    assert cycles == pytest.approx(0.2 / TS, abs=2)
+    text = "; ".join(observed)
+    assert "FAULT 200 ms" in text and "faded 1.81 deg to 0" in text and "latched" in text
+
+
+def test_late_detection_fails_and_the_status_cycle_is_allowed_only_to_the_status() -> None:
+    fails, _, _ = _judge(evidence(_row(), detect=0.35))
+    assert any("reported late" in f for f in fails)
+    fails, _, _ = _judge(evidence(_row(), detect=0.29))
+    assert fails == []
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    (dict(unlatch_at=2.0), "not latched"),
+    (dict(fade=FADE / 2), "faded in"),
+    (dict(cause=names.CAUSE_E2E), "lack a fault bit"),
+    (dict(plaus=names.PLAUS_DEGRADED), "no status frame reported"),
+    (dict(plaus=names.PLAUS_STEER), "never gave bit 0x1"),  # the wrong check tripped
+    (dict(early_alarm=0.5), "before the fault's onset"),
+    (dict(detect=None), "no plausibility fault reported"),
+])
+def test_each_broken_promise_fails_its_verdict(kwargs: dict, needle: str) -> None:
+    fails, _, _ = _judge(evidence(_row(), **kwargs))
+    assert any(needle in f for f in fails), fails
+
+
+def test_a_growing_error_is_timed_from_when_it_left_its_bound() -> None:
+    row = _row("yaw-rate drift 1 deg/s per s")
+    drift = lambda t: math.radians(1.0) * (t - ONSET)  # noqa: E731
+    bound = PlausibilityConfig().yaw_bound + PlausibilityConfig().yaw_rel * R
+    leaves = ONSET + bound / math.radians(1.0)  # about 2.1 s after onset
+    fails, observed, _ = _judge(evidence(row, error=drift, detect=leaves - ONSET + 0.25, end=4.2))
+    assert fails == [], fails
+    over_ms = float("; ".join(observed).split("error over its bound ")[1].split(" ms")[0])
+    assert over_ms == pytest.approx(1e3 * (leaves - ONSET), abs=3)
+    fails, _, _ = _judge(evidence(row, error=drift, detect=leaves - ONSET + 0.4, end=4.2))
+    assert any("reported late" in f for f in fails)
+
+
+def test_an_error_within_its_bound_and_no_report_says_the_row_tests_nothing() -> None:
+    fails, _, _ = _judge(evidence(_row(), error=lambda t: 0.01, detect=None))
+    assert any("does not test the monitor" in f for f in fails), fails
+
+
+def test_error_series_pairs_the_frames_and_bounds_the_yaw_rate() -> None:
+    series = error_series(evidence(_row()))
+    after = [s for s in series if s[0] >= ONSET]
+    assert all(err == pytest.approx(0.0524, abs=2e-6) for _, err, _ in after)
+    cfg = PlausibilityConfig()
+    assert all(b == pytest.approx(cfg.yaw_bound + cfg.yaw_rel * R, abs=1e-6) for *_, b in series)
+    assert exceeded_at(after, until=None) == pytest.approx(ONSET, abs=0.01)
+    assert exceeded_at([(0.0, 1.0, 0.5), (0.1, 0.0, 0.5), (0.2, 1.0, 0.5)], until=0.25) == 0.2  # a blip does not count
+    assert exceeded_at([(0.0, 1.0, 0.5), (0.1, 0.0, 0.5)], until=None) is None
+
+
+def test_a_fault_free_row_must_keep_the_monitor_quiet() -> None:
+    clean = replace(_row("baseline"), plausibility=0)
+    for bits, alarm in ((0, False), (names.PLAUS_DEGRADED, False), (names.PLAUS_YAW, True)):
+        e = evidence(clean, detect=None, status_plaus_quiet=bits)
+        fails: list[str] = []
+        observed: list[str] = []
+        check_quiet_monitor(e, fails, observed)
+        assert bool(fails) == alarm and (alarm or "monitor quiet" in observed[0])
+
+
+def test_sensor_rows_are_the_issues_kinds_and_stay_out_of_the_secured_matrix() -> None:
+    sensor = [r for r in F.ROWS if r.fault.kind in SENSOR_KINDS]
+    assert {r.fault.kind for r in sensor} == set(SENSOR_KINDS) - {"sensor_noise"}
+    assert all(r.plausibility in (names.PLAUS_YAW, names.PLAUS_STEER) for r in sensor)
+    # each lasts to its run's end: the fault latches, so there is nothing to recover from
+    assert all(r.fault.stop == r.duration and not r.no_fault and r.detect_within is None for r in sensor)
+    targets = {(r.fault.target, r.fault.signal) for r in sensor}
+    assert {(names.MSG_YAW, None), (names.MSG_STEER, None), (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
+            (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2)} <= targets
+    assert not any(r.fault.kind in SENSOR_KINDS for r in F.secured_rows())
+    # an offset of 3 deg/s, a gain of 0.5 and 1.5, a drift of 1 deg/s per s: the issue's ranges
+    params = {(r.fault.kind, round(r.fault.param, 6)) for r in sensor}
+    assert {("sensor_bias", round(math.radians(3.0), 6)), ("sensor_scale", 0.5), ("sensor_scale", 1.5),
+            ("sensor_drift", round(math.radians(1.0), 6))} <= params
+
+
+def test_the_curve_scenario_is_a_driver_steering_1_5_deg(tmp_path) -> None:
+    spec = scenario_spec(CURVE, tmp_path)
+    sc = scn.load(spec)
+    assert sc.v == 20.0 and sc.mu == 1.0 and sc.driver.mode == "hold"
+    steer = [e for e in sc.events if e.kind == "steer"]
+    assert steer[-1].value == pytest.approx(math.radians(1.5)) and steer[0].t == 0.5 and steer[-1].t < 0.95
+    assert all(b.value > a.value for a, b in zip(steer, steer[1:]))  # turned at a steady rate, not a step
+    assert scenario_spec("paper-fig9", tmp_path) == "paper-fig9" and curve_toml().count("[[events]]") == len(steer)
