@@ -16,7 +16,7 @@ from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.harness import faults as F
 from sim_plant.harness.faults.evidence import Evidence, Status, Trace
-from sim_plant.harness.faults.settings import CURVE, curve_toml, scenario_spec
+from sim_plant.harness.faults.settings import CURVE, scenario_spec
 from sim_plant.harness.faults.verdicts_plausibility import (check_plausibility, check_quiet_monitor, error_series,
                                                             exceeded_at)
 from sim_plant.nodes.fault_bridge import SENSOR_KINDS
@@ -44,7 +44,8 @@ def _speed(t: float, k: int) -> tuple[float, int, bytes]:
 
 def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, fade: float = FADE,
              unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
-             early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END) -> Evidence:
+             early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END,
+             status_lag: float = 0.0) -> Evidence:
     """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
     ONSET on the controller's), a command every period (U0, FAULT from ONSET + ``detect``,
     faded at ``fade``), a status every 100 ms."""
@@ -69,7 +70,8 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
         cmds.append((t + 5e-4, float(state)))
         angles.append((t + 5e-4, round(u, 6)))
         if k % 50 == 0:
-            on = faulted or (early_alarm is not None and abs(t - early_alarm) < TS / 2)
+            on = (t_fault is not None and t >= t_fault + status_lag) or (
+                early_alarm is not None and abs(t - early_alarm) < TS / 2)
             statuses.append(Status(t + 6e-4, mr.STATUS_FAULT if on else mr.STATUS_ACTIVE,
                                    bits if on else status_plaus_quiet, cause if on else 0))
     bridge = {"first_affected": ONSET + 1e-4, "last_affected": end, "affected": n // 2}
@@ -109,6 +111,7 @@ def test_late_detection_fails_and_the_status_cycle_is_allowed_only_to_the_status
     (dict(plaus=names.PLAUS_STEER), "never gave bit 0x1"),  # the wrong check tripped
     (dict(early_alarm=0.5), "before the fault's onset"),
     (dict(detect=None), "no plausibility fault reported"),
+    (dict(status_lag=0.15), "the first status after the FAULT command did not report it"),
 ])
 def test_each_broken_promise_fails_its_verdict(kwargs: dict, needle: str) -> None:
     fails, _, _ = _judge(evidence(_row(), **kwargs))
@@ -154,7 +157,7 @@ def test_a_fault_free_row_must_keep_the_monitor_quiet() -> None:
         assert bool(fails) == alarm and (alarm or "monitor quiet" in observed[0])
 
 
-def test_sensor_rows_are_the_issues_kinds_and_stay_out_of_the_secured_matrix() -> None:
+def test_sensor_rows_are_the_issues_kinds() -> None:
     sensor = [r for r in F.ROWS if r.fault.kind in SENSOR_KINDS]
     assert {r.fault.kind for r in sensor} == set(SENSOR_KINDS) - {"sensor_noise"}
     assert all(r.plausibility in (names.PLAUS_YAW, names.PLAUS_STEER) for r in sensor)
@@ -163,7 +166,6 @@ def test_sensor_rows_are_the_issues_kinds_and_stay_out_of_the_secured_matrix() -
     targets = {(r.fault.target, r.fault.signal) for r in sensor}
     assert {(names.MSG_YAW, None), (names.MSG_STEER, None), (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
             (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2)} <= targets
-    assert not any(r.fault.kind in SENSOR_KINDS for r in F.secured_rows())
     # an offset of 3 deg/s, a gain of 0.5 and 1.5, a drift of 1 deg/s per s: the issue's ranges
     params = {(r.fault.kind, round(r.fault.param, 6)) for r in sensor}
     assert {("sensor_bias", round(math.radians(3.0), 6)), ("sensor_scale", 0.5), ("sensor_scale", 1.5),
@@ -171,10 +173,41 @@ def test_sensor_rows_are_the_issues_kinds_and_stay_out_of_the_secured_matrix() -
 
 
 def test_the_curve_scenario_is_a_driver_steering_1_5_deg(tmp_path) -> None:
-    spec = scenario_spec(CURVE, tmp_path)
-    sc = scn.load(spec)
-    assert sc.v == 20.0 and sc.mu == 1.0 and sc.driver.mode == "hold"
+    sc = scn.load(scenario_spec(CURVE, tmp_path))
+    assert sc.v == 20.0 and sc.mu == 1.0 and sc.driver.mode == "hold" and not sc.sensor_faults
     steer = [e for e in sc.events if e.kind == "steer"]
     assert steer[-1].value == pytest.approx(math.radians(1.5)) and steer[0].t == 0.5 and steer[-1].t < 0.95
     assert all(b.value > a.value for a, b in zip(steer, steer[1:]))  # turned at a steady rate, not a step
-    assert scenario_spec("paper-fig9", tmp_path) == "paper-fig9" and curve_toml().count("[[events]]") == len(steer)
+    assert scenario_spec("paper-fig9", tmp_path) == "paper-fig9"
+
+
+def test_under_secoc_the_plant_injects_the_sensor_rows_faults(tmp_path) -> None:
+    secured = {r.name: r for r in F.secured_rows()}
+    sensor = [r for r in F.ROWS if r.fault.kind in SENSOR_KINDS]
+    assert all(secured[r.name].at_plant and secured[r.name].secoc for r in sensor)
+    assert not any(r.at_plant for r in F.ROWS)  # without SecOC the bridge injects them
+    drift = secured["yaw-rate drift 1 deg/s per s"]
+    sc = scn.load(scenario_spec(drift.scenario, tmp_path, F.rows.plant_fault(drift)))
+    (fault,) = sc.sensor_faults
+    assert (fault.sensor, fault.kind, fault.start, fault.value) == ("yaw_rate", "drift", 1.0, math.radians(1.0))
+    assert sc.events == scn.load("paper-fig9").events and sc.duration == scn.load("paper-fig9").duration
+    channel2 = F.rows.plant_fault(secured["curve: steering channel 2 stuck at 0"])
+    frozen = F.rows.plant_fault(secured["yaw rate frozen (value, counter runs)"])
+    assert (channel2.sensor, channel2.value) == ("steer_redundant", 0.0) and frozen.value is None
+
+
+def test_a_fault_the_plant_injects_is_timed_and_measured_from_its_trace() -> None:
+    row = {r.name: r for r in F.secured_rows()}["yaw-rate offset +3 deg/s"]
+    e = evidence(row)
+    n = int(round(END / TS))
+    t = [k * TS for k in range(n)]
+    true = [R] * n
+    measured = [R + (0.0524 if tk >= ONSET else 0.0) for tk in t]
+    columns = {"t_s": t, "wall_s": t, "yaw_rate_rad_s": true, "yaw_rate_measured_rad_s": measured,
+               "v_m_s": [20.0] * n}
+    # the bridge only forwarded: it falsified nothing, and the traffic on both sides agrees
+    e = replace(e, bridge={"first_affected": None, "last_affected": None, "affected": 0},
+                vehicle_frames=e.frames, trace=Trace(t, [0.0] * n, [0.0] * n, t, columns))
+    fails, observed, cycles = _judge(e)
+    assert fails == [], fails
+    assert "error over its bound 0 ms after onset" in "; ".join(observed) and cycles == pytest.approx(100, abs=2)

@@ -5,7 +5,7 @@ the DBC)."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,20 +26,15 @@ class Trace:
     applied: list[float]
     held: list[float]
     wall: list[float]
+    columns: dict[str, list[float]] = field(default_factory=dict)  # every column, by its header name
 
 
 def read_trace(path: Path) -> Trace:
-    t, applied, held, wall = [], [], [], []
     lines = path.read_text().splitlines()
     head = lines[0].split(",")
-    ti, ai, ci, wi = (head.index(n) for n in ("t_s", "aux_applied_rad", "aux_cmd_rad", "wall_s"))
-    for line in lines[1:]:
-        cols = line.split(",")
-        t.append(float(cols[ti]))
-        applied.append(float(cols[ai]))
-        held.append(float(cols[ci]))
-        wall.append(float(cols[wi]))
-    return Trace(t, applied, held, wall)
+    rows = [[float(x) for x in line.split(",")] for line in lines[1:]]
+    columns = {name: [r[i] for r in rows] for i, name in enumerate(head)}
+    return Trace(columns["t_s"], columns["aux_applied_rad"], columns["aux_cmd_rad"], columns["wall_s"], columns)
 
 
 def gaps(frames: list[Frame], ids: list[int], longer: float) -> list[tuple[float, float]]:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from mrsteer_dbc import names
 from sim_plant.harness.faults.settings import (CURVE, E2E_FAIL_MAX, FORGED_ANGLE, PLAUS_DURATION, PLAUS_START,
                                                SCENARIO, TIMEOUT_CYCLES, WINDOW)
+from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.nodes.fault_bridge import SENSOR_KINDS, Fault
 
 
@@ -41,6 +42,7 @@ class Row:
     # Sensor rows: the CtrlStatus_Plausibility bit the monitor must report (PLAUS_YAW or
     # PLAUS_STEER), with cause 0x80, the command faded to zero and both latched to the end.
     plausibility: int = 0
+    at_plant: bool = False  # the plant injects the sensor fault (``plant_fault``), not the bridge
 
 
 def _f(kind: str, target: str = "MRS_YawRate", param: float = 1.0) -> Fault:
@@ -139,18 +141,38 @@ SENSOR_ROWS = (
 ROWS = ROWS + SENSOR_ROWS
 
 
+#: The bridge's sensor-fault kinds as the plant's (``sim_plant.car.sensor_faults``).
+_PLANT_KIND = {"sensor_stuck": "stuck", "sensor_frozen": "frozen", "sensor_bias": "bias", "sensor_scale": "scale",
+               "sensor_drift": "drift", "sensor_noise": "noise"}
+_PLANT_SENSOR = {(names.MSG_YAW, None): "yaw_rate", (names.MSG_YAW, names.SIG_YAW_RATE): "yaw_rate",
+                 (names.MSG_STEER, None): "steer", (names.MSG_STEER, names.SIG_STEER_ANGLE): "steer",
+                 (names.MSG_SPEED, None): "speed", (names.MSG_SPEED, names.SIG_SPEED): "speed",
+                 (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL): "lat_accel",
+                 (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2): "steer_redundant"}
+
+
+def plant_fault(row: Row) -> SensorFault | None:
+    """The row's sensor fault as the plant injects it (``at_plant`` rows): the same sensor,
+    kind, value and onset (scenario time), lasting to the end; ``None`` for any other row."""
+    f = row.fault
+    if not row.at_plant:
+        return None
+    kind = _PLANT_KIND[f.kind]
+    return SensorFault(_PLANT_SENSOR[(f.target, f.signal)], kind, f.start, None if kind == "frozen" else f.param)
+
+
 def secured_rows(rows: tuple[Row, ...] = ROWS) -> tuple[Row, ...]:
     """The rows as they run with SecOC on (``faults run --secoc``): every row authenticates,
-    the E2E-only rows are left out, and so are the sensor-fault rows (the bridge cannot give
-    the frames it falsifies a valid MAC: SecOC would refuse them, so they would test SecOC, not
-    the monitor), and a row that became the same run as an earlier one (the baseline and
-    "SecOC: baseline") appears once."""
+    the E2E-only rows are left out, and a row that became the same run as an earlier one (the
+    baseline and "SecOC: baseline") appears once.  The sensor rows' faults move into the plant:
+    the bridge cannot give a frame it falsifies a valid MAC (SecOC would refuse it, and the row
+    would test SecOC, not the monitor); the plant signs what its faulty sensor measures."""
     out: list[Row] = []
     seen: set[Row] = set()
     for row in rows:
-        if row.e2e_only or row.fault.kind in SENSOR_KINDS:
+        if row.e2e_only:
             continue
-        row = replace(row, secoc=True)
+        row = replace(row, secoc=True, at_plant=row.fault.kind in SENSOR_KINDS)
         key = replace(row, name="", expected="")
         if key not in seen:
             seen.add(key)

@@ -18,7 +18,7 @@ from typing import Callable
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
 from sim_plant.harness import launch
 from sim_plant.harness.faults.verdicts import RowResult, judge
-from sim_plant.harness.faults.rows import ROWS, Row
+from sim_plant.harness.faults.rows import ROWS, Row, plant_fault
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_LIMIT,
                                                RESTART_AT, Setup, scenario_spec)
 from sim_plant.harness.processes import Proc, RunError, stop, wait_for_socket, wait_ready, wait_stderr
@@ -58,6 +58,8 @@ class _RowRun:
         # time scale does not stretch) and lasts to the run's end, which it does.
         start = self.row.fault.start * (1.0 if self.row.plausibility else scale)
         fault = replace(self.row.fault, start=start, stop=self.row.fault.stop * scale)
+        if self.row.at_plant:  # the plant injects it: the bridge only forwards
+            fault = replace(fault, kind="none", signal=None)
         bridge = self.start("bridge", launch.bridge(self.setup.interface, self.vehicle, self.controller_side, fault,
                                                     self.work / "bridge.json"))
         wait_stderr(bridge, "bridging")
@@ -75,7 +77,7 @@ class _RowRun:
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
         return self.start(name, launch.plant(launch.BusArgs(self.setup.interface, self.vehicle), launch.PlantSettings(
-            self.setup.rate_hz, "realtime", scenario_spec(self.row.scenario, self.work), duration=seconds, actuator_rate=ACTUATOR_RATE,
+            self.setup.rate_hz, "realtime", scenario_spec(self.row.scenario, self.work, plant_fault(self.row)), duration=seconds, actuator_rate=ACTUATOR_RATE,
             cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
             sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
             stats_out=self.work / "plant.json", secoc=self.row.secoc)))

@@ -4,6 +4,7 @@ copied from the plant and the controller."""
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -18,6 +19,9 @@ from mrsteer_dbc import names
 from sim_plant.car import scenario
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig
+from sim_plant.car.plants import LINEAR
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.sensors import SensorConfig
 
 RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
@@ -58,25 +62,39 @@ PLAUS_DURATION = 2.6  # s of scenario: detection (<= 0.3 s) and a fade from 3 de
 CURVE = "curve"
 CURVE_ANGLE = math.radians(1.5)
 CURVE_STEPS = 40  # one steer event every 10 ms
+CURVE_SCENARIO = scenario.Scenario(
+    CURVE, 4.0, v=20.0, mu=1.0, description="driver steers 1.5 deg into a curve at 20 m/s (fault matrix)",
+    events=tuple(scenario.Event(round(0.5 + 0.01 * i, 2), "steer", CURVE_ANGLE * (i + 1) / CURVE_STEPS)
+                 for i in range(CURVE_STEPS)))
 
 
-def curve_toml() -> str:
-    """The curve scenario as a scenario file (``sim_plant.car.scenario``): the plant takes a
-    built-in name or a file, so each curve row writes this into its work directory."""
-    lines = [f'name = "{CURVE}"', 'description = "driver steers 1.5 deg into a curve at 20 m/s (fault matrix)"',
-             "duration = 4.0", "v = 20.0", "mu = 1.0"]
-    for i in range(CURVE_STEPS):
-        lines += ["", "[[events]]", f"t = {0.5 + 0.01 * i:.2f}", f"steer = {CURVE_ANGLE * (i + 1) / CURVE_STEPS:.9f}"]
+def scenario_toml(sc: scenario.Scenario, faults: tuple[SensorFault, ...] = ()) -> str:
+    """``sc`` with ``faults`` as a scenario file (``sim_plant.car.scenario``'s format), for the
+    plant's ``--scenario``.  Only what the matrix's scenarios use: the paper's ideal car, the
+    wheel held, scalar events; anything else is refused rather than written wrong."""
+    if (sc.plant != LINEAR or sc.driver.mode != "hold" or sc.actuator != ActuatorModelConfig.ideal()
+            or sc.sensors != SensorConfig.ideal() or sc.sensor_faults or any(ev.load is not None for ev in sc.events)):
+        raise ValueError(f"scenario {sc.name!r} is not one the fault matrix can write as a file")
+    lines = [f"name = {json.dumps(sc.name)}", f"description = {json.dumps(sc.description)}",
+             f"duration = {sc.duration!r}", f"v = {sc.v!r}", f"mu = {sc.mu!r}", f"mass = {sc.mass!r}"]
+    for ev in sc.events:
+        lines += ["", "[[events]]", f"t = {ev.t!r}", f"{ev.kind} = {ev.value!r}"]
+    for f in faults:
+        lines += ["", "[[sensor_fault]]", f"sensor = {json.dumps(f.sensor)}", f"kind = {json.dumps(f.kind)}",
+                  f"start = {f.start!r}"]
+        lines += [f"value = {f.value!r}"] if f.value is not None else []
+        lines += [f"stop = {f.stop!r}"] if math.isfinite(f.stop) else []
     return "\n".join(lines) + "\n"
 
 
-def scenario_spec(name: str, work: Path) -> str:
-    """What the plant's ``--scenario`` takes for a row's scenario: a built-in name as it is, the
-    curve as a file written into ``work``."""
-    if name != CURVE:
+def scenario_spec(name: str, work: Path, fault: SensorFault | None = None) -> str:
+    """What the plant's ``--scenario`` takes for a row: a built-in name as it is, or (the curve,
+    or any scenario with a sensor fault for the plant to inject) a file written into ``work``."""
+    if name != CURVE and fault is None:
         return name
-    path = work / "curve.toml"
-    path.write_text(curve_toml())
+    sc = CURVE_SCENARIO if name == CURVE else scenario.load(name)
+    path = work / "scenario.toml"
+    path.write_text(scenario_toml(sc, () if fault is None else (fault,)))
     return str(path)
 
 

@@ -5,11 +5,12 @@ command faded and both latched; no alarm in a fault-free row.  Judged from the l
 A sensor row (``Row.plausibility`` set) must show, counted from when the fault's error left
 the monitor's bound (for a step fault: its onset, the first falsified frame):
 
-* **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms),
-  or, if only the status shows it, the first ``MRS_CtrlStatus`` with a fault bit in
+* **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms;
+  in wall time or in controller cycles, as the other rows count on a starved machine), or, if
+  no command shows it, the first ``MRS_CtrlStatus`` with a fault bit in
   ``CtrlStatus_Plausibility`` within 300 ms plus its cycle (100 ms); nothing before the onset;
-* **report**: the status with a fault bit, cause 0x80 and state FAULT by the status cycle after
-  the command showed it, and the row's bit (the check watching the faulted signal) by the end;
+* **report**: the first status after that command with a fault bit, cause 0x80 and state FAULT,
+  and the row's bit (the check watching the faulted signal) by the end;
 * **fade**: the command back at exactly zero within ``|u at detection| / PLAUS_FADE`` (6 deg/s)
   plus two cycles (counted in commands on the bus, as the limiter fades once a period), never
   growing on the way;
@@ -17,7 +18,8 @@ the monitor's bound (for a step fault: its onset, the first falsified frame):
   run's end; the fault window still open when the fade ended.
 
 The error is the falsified signal on the controller's bus less the same frame's value on the
-vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up), against
+vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up; a fault
+the plant injects, under ``--secoc``, is measured less true in the plant's trace), against
 the bound ``offline.plausibility_runs.error_bound`` states: the yaw rate's ``yaw_bound +
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v, a
 steering channel's ``steer_bound`` (``PlausibilityConfig``'s defaults, as the controller runs).
@@ -56,25 +58,46 @@ def _latest(series: list[tuple[float, float]], times: list[float], t: float, def
     return series[i][1] if i >= 0 else default
 
 
+#: A signal's (measured, true) columns in the plant's trace.
+_TRACE_COLUMNS = {names.SIG_YAW_RATE: ("yaw_rate_measured_rad_s", "yaw_rate_rad_s"),
+                  names.SIG_STEER_ANGLE: ("steer_measured_rad", "driver_angle_rad"),
+                  names.SIG_LAT_ACCEL: ("lat_accel_measured_m_s2", "lat_accel_m_s2"),
+                  names.SIG_STEER_ANGLE_2: ("steer_redundant_measured_rad", "driver_angle_rad")}
+
+
+def _bound(signal: str, cfg: PlausibilityConfig, r: float, v: float) -> float:
+    if signal in (names.SIG_STEER_ANGLE, names.SIG_STEER_ANGLE_2):
+        return cfg.steer_bound
+    bound = cfg.yaw_bound + cfg.yaw_rel * abs(r)
+    return bound * v if signal == names.SIG_LAT_ACCEL else bound
+
+
+def onset(e: Evidence) -> float | None:
+    """When the fault first made a value wrong (epoch s): the bridge's first falsified frame, or
+    for a fault the plant injects, the first plant step at its start (the trace's wall clock)."""
+    if not e.row.at_plant:
+        return e.bridge["first_affected"]
+    tr = e.trace
+    return next((w for t, w in zip(tr.t, tr.wall) if t >= e.row.fault.start - 1e-9), None)
+
+
 def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) -> list[ErrorSample]:
-    """The falsified signal's error and its bound at each frame the controller got."""
+    """The falsified signal's error and its bound at each frame the controller got (for a
+    fault the plant injects: at each plant step, measured less true, from its trace)."""
     fault = e.row.fault
     signal = fault.signal or names.SENSOR_SIGNAL[fault.target]
+    if e.row.at_plant:
+        cols = e.trace.columns
+        measured, true = (cols[c] for c in _TRACE_COLUMNS[signal])
+        return [(w, m - x, _bound(signal, cfg, r, v)) for w, m, x, r, v in
+                zip(e.trace.wall, measured, true, cols["yaw_rate_rad_s"], cols["v_m_s"])]
     truth = _values(e.vehicle_frames, fault.target, signal)
     seen = _values(e.frames, fault.target, signal)
     yaw = _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE)
     speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
     yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
-    out = []
-    for (tv, true), (tc, got) in zip(truth, seen):
-        r = abs(_latest(yaw, yaw_t, tv, 0.0))
-        bound = cfg.yaw_bound + cfg.yaw_rel * r
-        if signal == names.SIG_LAT_ACCEL:
-            bound *= _latest(speed, speed_t, tv, 0.0)
-        elif signal in (names.SIG_STEER_ANGLE, names.SIG_STEER_ANGLE_2):
-            bound = cfg.steer_bound
-        out.append((tc, got - true, bound))
-    return out
+    return [(tc, got - x, _bound(signal, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0)))
+            for (tv, x), (tc, got) in zip(truth, seen)]
 
 
 def exceeded_at(series: list[ErrorSample], until: float | None, hold: float = PLAUS_DETECT) -> float | None:
@@ -106,15 +129,15 @@ def check_quiet_monitor(e: Evidence, fails: list[str], observed: list[str]) -> N
         observed.append("monitor quiet" + (f" ({degraded} status frames degraded)" if degraded else ""))
 
 
-def _first_fault(e: Evidence, onset: float) -> tuple[float | None, float | None, list[str]]:
+def _first_fault(e: Evidence, start: float) -> tuple[float | None, float | None, list[str]]:
     """The latched FAULT (the first command of the FAULT run that lasts to the end, else the
-    first FAULT) and the first status reporting a plausibility fault, at or after ``onset``;
+    first FAULT) and the first status reporting a plausibility fault, at or after ``start``;
     and what says the monitor did not latch or alarmed early.  A FAULT explained by a machine
     stall (an input timed out) is no plausibility fault."""
     fails = []
-    if any(s.t < onset and s.plausibility & PLAUS_FAULT for s in e.statuses):
+    if any(s.t < start and s.plausibility & PLAUS_FAULT for s in e.statuses):
         fails.append("plausibility fault reported before the fault's onset")
-    after = [(t, s) for t, s in e.cmds if t >= onset]
+    after = [(t, s) for t, s in e.cmds if t >= start]
     i = len(after)
     while i > 0 and after[i - 1][1] == mr.STATUS_FAULT:
         i -= 1
@@ -122,9 +145,9 @@ def _first_fault(e: Evidence, onset: float) -> tuple[float | None, float | None,
     found = stall_gaps(e)
     episodes = [t for t, s in after[:i] if s == mr.STATUS_FAULT and not stalled(t, found)]
     if episodes:
-        fails.append(f"not latched: FAULT {1e3 * (episodes[0] - onset):.0f} ms after onset, then not")
+        fails.append(f"not latched: FAULT {1e3 * (episodes[0] - start):.0f} ms after onset, then not")
     t_cmd = episodes[0] if episodes else t_latch
-    t_st = next((s.t for s in e.statuses if s.t >= onset and s.plausibility & PLAUS_FAULT), None)
+    t_st = next((s.t for s in e.statuses if s.t >= start and s.plausibility & PLAUS_FAULT), None)
     return t_cmd, t_st, fails
 
 
@@ -135,31 +158,34 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
     row, ts = e.row, e.setup.ts
     if not row.plausibility:
         return None
-    onset = e.bridge["first_affected"]
-    if onset is None:
+    start = onset(e)
+    if start is None:
         fails.append("the fault never hit a frame")
         return None
-    t_cmd, t_st, early = _first_fault(e, onset)
+    t_cmd, t_st, early = _first_fault(e, start)
     fails.extend(early)
     series = error_series(e)
-    worst = max((abs(err) / bound for _, err, bound in series if _ >= onset), default=0.0)
+    worst = max((abs(err) / bound for _, err, bound in series if _ >= start), default=0.0)
     seen = [t_ for t_ in (t_cmd, t_st) if t_ is not None]
     t_det = min(seen) if seen else None
-    over = exceeded_at([s for s in series if s[0] >= onset], t_det)
+    over = exceeded_at([s for s in series if s[0] >= start], t_det)
     if t_det is None:
         fails.append("no plausibility fault reported" + ("" if over is not None else
                      f" (the error reached {worst:.2f} of its bound: the row does not test the monitor)"))
         return None
-    ref = over if over is not None else onset
-    observed.append(f"error over its bound {1e3 * (ref - onset):.0f} ms after onset (peak {worst:.1f}x)"
+    ref = over if over is not None else start
+    observed.append(f"error over its bound {1e3 * (ref - start):.0f} ms after onset (peak {worst:.1f}x)"
                     if over is not None else f"reported before the error stayed over its bound (peak {worst:.1f}x)")
-    # The command shows the state every cycle: it is the measure.  Only without it does the
-    # status (every STATUS_CYCLE) count, with its cycle allowed.
-    cmd_ok = t_cmd is not None and t_cmd - ref <= PLAUS_DETECT + 2 * ts
+    # The command shows the state every cycle: it is the measure, in wall time or, as the other
+    # rows count (a starved controller runs its cycles late), in its cycles.  Only without it
+    # does the status (every STATUS_CYCLE) count, with its cycle allowed.
+    cycles = None if t_cmd is None else sum(1 for t_, _ in e.cmds if ref <= t_ <= t_cmd)
+    cmd_ok = t_cmd is not None and (t_cmd - ref <= PLAUS_DETECT + 2 * ts or
+                                    cycles is not None and cycles <= math.ceil(PLAUS_DETECT / ts - 1e-9) + 2)
     st_ok = t_cmd is None and t_st is not None and t_st - ref <= PLAUS_DETECT + STATUS_CYCLE + 2 * ts
     shown = "; ".join(f"{what} {1e3 * (t_ - ref):.0f} ms" for what, t_ in (("FAULT", t_cmd), ("status", t_st))
                       if t_ is not None)
-    observed.append(shown + " after")
+    observed.append(shown + " after" + ("" if cycles is None else f" ({cycles} cycles)"))
     if not (cmd_ok or st_ok):
         fails.append(f"plausibility fault reported late ({shown}; allowed {1e3 * PLAUS_DETECT:.0f} ms)")
     check_report(e, fails, t_cmd, t_st)
@@ -167,7 +193,7 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         fails.append("no command ever in state FAULT")
         return None
     check_fade(e, fails, observed, t_cmd)
-    return sum(1 for t_, _ in e.cmds if ref <= t_ <= t_cmd)
+    return cycles
 
 
 def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float | None) -> None:
@@ -176,8 +202,11 @@ def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float
     if t_st is None:
         fails.append("no status frame reported the plausibility fault")
         return
-    if t_cmd is not None and t_st > t_cmd + STATUS_CYCLE + 0.02:
-        fails.append(f"the status reported it {1e3 * (t_st - t_cmd):.0f} ms after the command")
+    # Counted in frames, not time: the first status sent after the first FAULT command.
+    first_after = next((s for s in e.statuses if t_cmd is not None and s.t >= t_cmd), None)
+    if first_after is not None and first_after.t < t_st:
+        fails.append(f"the first status after the FAULT command did not report it "
+                     f"(it came {1e3 * (t_st - first_after.t):.0f} ms later)")
     after = [s for s in e.statuses if s.t >= t_st]
     wrong = [s for s in after if not (s.plausibility & PLAUS_FAULT and s.cause & names.CAUSE_PLAUSIBILITY
                                       and s.state == mr.STATUS_FAULT)]
@@ -213,7 +242,7 @@ def check_fade(e: Evidence, fails: list[str], observed: list[str], t_cmd: float)
                      f"{math.degrees(PLAUS_FADE):g} deg/s)")
     if any(m > BUS_RESOLUTION / 2 for m in mags[i_zero:]):
         fails.append("the command left zero again after the fade")
-    last = e.bridge["last_affected"]
+    last = e.end if e.row.at_plant else e.bridge["last_affected"]  # the plant's fault lasts to the end
     if last is None or last < t_zero:
         fails.append("the fault window ended before the fade did: the latch is not shown")
     else:
