@@ -14,7 +14,10 @@ the controller or the plant.  Every row is then judged from what was logged and 
 * **alive** (every row but the controller-kill rows): the controller ran to the end and exited cleanly;
 * row-specific: detection within the stated number of controller cycles (counted in commands
   on the bus, not in wall time), the cause in ``MRS_CtrlStatus``, recovery after the fault,
-  rejected frames counted, the actuator's fade after a controller crash.
+  rejected frames counted, the actuator's fade after a controller crash;
+* the sensor rows (a wrong value in well-formed frames, issue 18): the plausibility fault
+  within 300 ms of the error leaving the monitor's bound, cause 0x80, the command faded to zero
+  at 6 deg/s, both latched; and in every no-fault row, no plausibility fault bit at all.
 
 Rows marked SecOC run controller and plant with a fresh random key (``$MRSTEER_SECOC_KEY``).  A
 16-bit MAC lets a random guess through with probability 2^-16, so those rows allow up to
@@ -22,12 +25,13 @@ Rows marked SecOC run controller and plant with a fresh random key (``$MRSTEER_S
 
 The package, by concern: ``settings`` (the numbers, ``Setup``), ``rows`` (the matrix), ``run``
 (running a row and the matrix), ``evidence`` and ``verdicts`` (reading a row's files; ``judge``
-and its checks), ``cli`` (``mrsteer faults`` and its table).
+and its checks), ``verdicts_plausibility`` (the sensor rows' and the quiet monitor's checks),
+``cli`` (``mrsteer faults`` and its table).
 """
 
 from sim_plant.harness.faults.cli import format_table, main
 from sim_plant.harness.faults.verdicts import RowResult, faulted_after_bad_frames, judge
-from sim_plant.harness.faults.rows import ROWS, Row, secured_rows
+from sim_plant.harness.faults.rows import ROWS, SENSOR_ROWS, Row, plant_fault, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix, run_row
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, CALIBRATIONS, CMD_TIMEOUT, COUNTER_WINDOW, DURATION,
                                                E2E_FAIL_MAX, FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE,
@@ -35,5 +39,5 @@ from sim_plant.harness.faults.settings import (ACTUATOR_RATE, CALIBRATIONS, CMD_
 
 __all__ = ["ACTUATOR_RATE", "CALIBRATIONS", "CMD_TIMEOUT", "COUNTER_WINDOW", "DURATION", "E2E_FAIL_MAX",
            "FLOOD_CAPACITY", "FORGED_ANGLE", "MAC_LUCK", "PLANT_FADE", "RATE_HZ", "RATE_LIMIT", "ROWS", "Row",
-           "RowResult", "Setup", "TIMEOUT_CYCLES", "WINDOW", "faulted_after_bad_frames", "format_table",
-           "holds_files", "judge", "main", "run_matrix", "run_row", "secured_rows"]
+           "RowResult", "SENSOR_ROWS", "Setup", "TIMEOUT_CYCLES", "WINDOW", "faulted_after_bad_frames", "format_table",
+           "holds_files", "judge", "main", "plant_fault", "run_matrix", "run_row", "secured_rows"]

@@ -76,8 +76,9 @@ class _RowRun:
 
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
+        spec = scenario_spec(self.row.scenario, self.work, plant_fault(self.row))
         return self.start(name, launch.plant(launch.BusArgs(self.setup.interface, self.vehicle), launch.PlantSettings(
-            self.setup.rate_hz, "realtime", scenario_spec(self.row.scenario, self.work, plant_fault(self.row)), duration=seconds, actuator_rate=ACTUATOR_RATE,
+            self.setup.rate_hz, "realtime", spec, duration=seconds, actuator_rate=ACTUATOR_RATE,
             cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
             sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
             stats_out=self.work / "plant.json", secoc=self.row.secoc)))

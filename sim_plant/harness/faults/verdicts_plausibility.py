@@ -217,7 +217,8 @@ def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float
     # Another check may trip first (a stuck steering angle also moves the model's yaw rate),
     # but the one that watches the faulted signal must trip too: it says which sensor it was.
     if not any(s.plausibility & row.plausibility for s in after):
-        fails.append(f"the status never gave bit 0x{row.plausibility:X} (saw {sorted({s.plausibility for s in after})})")
+        bits = sorted({s.plausibility for s in after})
+        fails.append(f"the status never gave bit 0x{row.plausibility:X} (saw {bits})")
 
 
 def check_fade(e: Evidence, fails: list[str], observed: list[str], t_cmd: float) -> None:
