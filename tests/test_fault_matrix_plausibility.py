@@ -45,7 +45,7 @@ def _speed(t: float, k: int) -> tuple[float, int, bytes]:
 def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, fade: float = FADE,
              unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
              early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END,
-             status_lag: float = 0.0) -> Evidence:
+             status_lag: float = 0.0, episode: tuple[float, float] | None = None, gap: bool = False) -> Evidence:
     """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
     ONSET on the controller's), a command every period (U0, FAULT from ONSET + ``detect``,
     faded at ``fade``), a status every 100 ms."""
@@ -56,12 +56,14 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
     bits = row.plausibility if plaus is None else plaus
     for k in range(n):
         t = k * TS
-        vehicle.append(_yaw(t, R, k))
-        ctl.append(_yaw(t + 1e-4, R + (error(t) if t >= ONSET else 0.0), k))
-        if k % 5 == 0:
+        stall = gap and episode is not None and episode[0] - 0.03 <= t < episode[0]  # the plant went quiet
+        if not stall:
+            vehicle.append(_yaw(t, R, k))
+            ctl.append(_yaw(t + 1e-4, R + (error(t) if t >= ONSET else 0.0), k))
+        if k % 5 == 0 and not stall:
             vehicle.append(_speed(t, k // 5))
             ctl.append(_speed(t + 1e-4, k // 5))
-        faulted = t_fault is not None and t >= t_fault
+        faulted = (t_fault is not None and t >= t_fault) or (episode is not None and episode[0] <= t < episode[1])
         if t_fault is not None and t >= t_fault:
             u = min(0.0, u + fade * TS)
         state = mr.STATUS_FAULT if faulted else mr.STATUS_ACTIVE
@@ -211,3 +213,12 @@ def test_a_fault_the_plant_injects_is_timed_and_measured_from_its_trace() -> Non
     fails, observed, cycles = _judge(e)
     assert fails == [], fails
     assert "error over its bound 0 ms after onset" in "; ".join(observed) and cycles == pytest.approx(100, abs=2)
+
+
+def test_a_fault_that_comes_and_goes_is_not_latched_unless_a_stall_explains_it() -> None:
+    # FAULT for 10 ms at 1.1 s, ACTIVE again, then the plausibility fault at 1.2 s
+    fails, _, _ = _judge(evidence(_row(), episode=(1.1, 1.11)))
+    assert any("not latched" in f for f in fails), fails
+    # the same after 30 ms without sensor frames: an input timed out, the right answer
+    fails, _, _ = _judge(evidence(_row(), episode=(1.1, 1.11), gap=True))
+    assert fails == [], fails
