@@ -37,7 +37,7 @@ class Row:
     secoc: bool = False  # controller and plant authenticate the commands and the sensor frames
     auth_rejects: bool = False  # the plant's SecOC check must reject the affected command frames
     e2e_only: bool = False  # shows what E2E alone lets through: meaningless with SecOC on
-    scenario: str = SCENARIO  # the plant's scenario: paper-fig9, or CURVE (settings.curve_toml)
+    scenario: str = SCENARIO  # the plant's scenario: paper-fig9, or CURVE (settings.CURVE_SCENARIO)
     duration: float | None = None  # s of scenario; None: settings.DURATION
     # Sensor rows: the CtrlStatus_Plausibility bit the monitor must report (PLAUS_YAW or
     # PLAUS_STEER), with cause 0x80, the command faded to zero and both latched to the end.
