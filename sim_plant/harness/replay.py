@@ -26,10 +26,10 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
 
 Each replayed command is compared with the recorded one in state, ``MeasCounter``, alive
 counter (a dropped or repeated command shows there even where the angle happens to agree)
-and angle; each status frame in state, range flags, cause and rejection count (overruns and
-lateness are timing, not replayable).  The per-step inputs that went into ``step()`` are kept
-(``Step.inputs``) so that another implementation of the law (the C port: ``replay_c``) can be
-run on exactly them.
+and angle; each status frame in state, range flags, cause, rejection count and plausibility bits
+(overruns and lateness are timing, not replayable).  The per-step inputs that went into ``step()`` and the
+plausibility monitor are kept (``Step.inputs``) so that another implementation of the law, the
+monitor and the authority limiter (the C port: ``replay_c``) can be run on exactly them.
 """
 
 from __future__ import annotations
@@ -43,18 +43,20 @@ from typing import Any
 import can
 
 import mrsteer_dbc
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
 from mrsteer_dbc.e2e import E2EStatus
-from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW, SIG_CMD_ANGLE,
-                               SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
-                               SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
+from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
+                               SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
+                               SIG_STATUS_PLAUS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
 from sim_plant.nodes.candump_log import LogError, read_candump_messages
 
 __all__ = ["LogError", "Mismatch", "Out", "ReplayResult", "ReplaySettings", "Step", "effective_config", "replay"]
 
 # What the replayed status frame is compared in (the rest is timing: overruns, lateness).
-STATUS_FIELDS = ("state", "flags", "cause", "rejected")
+STATUS_FIELDS = ("state", "flags", "cause", "rejected", "plausibility")
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,7 @@ class StatusOut:
     cause: int | None
     rejected: int | None
     valid: bool = True
+    plausibility: int | None = None  # CtrlStatus_Plausibility
 
 
 @dataclass
@@ -107,7 +110,9 @@ class Step:
     kind: str  # "yaw" (answers an accepted yaw-rate frame), "watchdog", "clock" or "final"
     line: int  # the log line that triggered it (the yaw-rate frame, or the recorded command)
     t: float
-    inputs: tuple[float, float, float]  # (delta_driver, yaw_rate, speed) into step(); NaN: invalid
+    # (delta_driver, yaw_rate, speed) into step(), then (lat_accel, delta_driver_redundant) into
+    # the monitor (with the command sent the cycle before); NaN: invalid.
+    inputs: tuple[float, float, float, float, float]
     out: Out
     flags: int = 0  # the firmware's range flags after this step
     status: StatusOut | None = None  # the status frame sent in this cycle
@@ -201,21 +206,32 @@ class _Replayer:
 
     # ------------------------------------------------------------- the node
 
-    def _inputs(self) -> tuple[float, float, float]:
-        """What ``control()`` is about to pass to ``step()``: the node's freshness rule, read from
-        its public input records; ``cycle`` checks the node's command against it."""
+    def _inputs(self) -> tuple[float, float, float, float, float]:
+        """What ``control()`` is about to pass to ``step()`` and the monitor: the node's freshness
+        rule, read from its public input records; ``cycle`` checks the node's command against it."""
         e2e_max = self.node.cfg.e2e_fail_max
         vals = []
-        for name in (MSG_STEER, MSG_YAW, MSG_SPEED):
+        for name in (MSG_STEER, MSG_YAW, MSG_SPEED, MSG_REDUNDANT):
             inp = self.node.input(name)
-            vals.append(inp.value if inp.age <= inp.limit and inp.rejects < e2e_max else math.nan)
-        return vals[0], vals[1], vals[2]
+            valid = inp.valid(e2e_max)
+            vals.append(inp.value if valid else math.nan)
+            if name == MSG_REDUNDANT:
+                vals.append(inp.second_value if valid else math.nan)
+        return vals[0], vals[1], vals[2], vals[3], vals[4]
+
+    def _shadow(self, inputs: tuple[float, float, float, float, float]) -> float:
+        """The command the node should send for ``inputs``: step(), monitor and authority limiter
+        run on copies of the node's states."""
+        node = self.node
+        d, r, v, lat, d2 = inputs
+        u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v)
+        bits = pl.monitor_step(node.monitor_coeffs, copy.deepcopy(node.monitor), d, d2, r, lat, v, node.command)
+        return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node
         inputs = self._inputs()
-        shadow_state = copy.deepcopy(node.state)
-        shadow = mr.step(node.coeffs, shadow_state, *inputs)
+        shadow = self._shadow(inputs)
         before = len(self.bus.sent)
         if kind == "final":
             node.finish()
@@ -249,7 +265,7 @@ class _Replayer:
             return StatusOut(line, t, -1, -1, None, None, valid=False)
         s = d.signals
         return StatusOut(line, t, int(s[SIG_STATUS_STATE]), int(s[SIG_STATUS_FLAGS]), int(s[SIG_STATUS_CAUSE]),
-                         int(s[SIG_STATUS_REJECTED]))
+                         int(s[SIG_STATUS_REJECTED]), plausibility=int(s[SIG_STATUS_PLAUS]))
 
     def miss(self, line: int, t: float, frame_id: int, what: str) -> None:
         self.mismatches.append(Mismatch(line, t, frame_id, what))

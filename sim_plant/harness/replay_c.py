@@ -51,7 +51,7 @@ def build() -> Path:
 def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
     """(u, status, fault_flags) of the C port at every non-final step of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs])
+    inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs[:3]])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
         cfg.write_text(calibration_file.dumps(result.config))
