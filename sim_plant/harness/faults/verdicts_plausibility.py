@@ -188,6 +188,8 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
     observed.append(shown + " after" + ("" if cycles is None else f" ({cycles} cycles)"))
     if not (cmd_ok or st_ok):
         fails.append(f"plausibility fault reported late ({shown}; allowed {1e3 * PLAUS_DETECT:.0f} ms)")
+    elif t_cmd is not None and t_cmd - ref > PLAUS_DETECT + 2 * ts:
+        observed.append(f"late in wall time only: the controller ran {cycles} cycles in {1e3 * (t_cmd - ref):.0f} ms")
     check_report(e, fails, t_cmd, t_st)
     if t_cmd is None:
         fails.append("no command ever in state FAULT")
