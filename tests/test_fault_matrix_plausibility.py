@@ -131,6 +131,9 @@ def test_a_growing_error_is_timed_from_when_it_left_its_bound() -> None:
     assert over_ms == pytest.approx(1e3 * (leaves - ONSET), abs=3)
     fails, _, _ = _judge(evidence(row, error=drift, detect=leaves - ONSET + 0.4, end=4.2))
     assert any("reported late" in f for f in fails)
+    # found before the error left the bound: early, not late
+    fails, observed, _ = _judge(evidence(row, error=drift, detect=leaves - ONSET - 0.5, end=4.2))
+    assert fails == [] and "reported before the error stayed over its bound" in "; ".join(observed)
 
 
 def test_an_error_within_its_bound_and_no_report_says_the_row_tests_nothing() -> None:

@@ -8,7 +8,8 @@ the monitor's bound (for a step fault: its onset, the first falsified frame):
 * **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms;
   in wall time or in controller cycles, as the other rows count on a starved machine), or, if
   no command shows it, the first ``MRS_CtrlStatus`` with a fault bit in
-  ``CtrlStatus_Plausibility`` within 300 ms plus its cycle (100 ms); nothing before the onset;
+  ``CtrlStatus_Plausibility`` within 300 ms plus its cycle (100 ms); or any time after the onset
+  but before the error left its bound (early); nothing before the onset;
 * **report**: the first status after that command with a fault bit, cause 0x80 and state FAULT,
   and the row's bit (the check watching the faulted signal) by the end;
 * **fade**: the command back at exactly zero within ``|u at detection| / PLAUS_FADE`` (6 deg/s)
@@ -173,9 +174,10 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         fails.append("no plausibility fault reported" + ("" if over is not None else
                      f" (the error reached {worst:.2f} of its bound: the row does not test the monitor)"))
         return None
-    ref = over if over is not None else start
+    ref = over if over is not None else start  # counted from the onset when reported before that
     observed.append(f"error over its bound {1e3 * (ref - start):.0f} ms after onset (peak {worst:.1f}x)"
-                    if over is not None else f"reported before the error stayed over its bound (peak {worst:.1f}x)")
+                    if over is not None else f"reported before the error stayed over its bound (peak {worst:.1f}x), "
+                    "so after the onset:")
     # The command shows the state every cycle: it is the measure, in wall time or, as the other
     # rows count (a starved controller runs its cycles late), in its cycles.  Only without it
     # does the status (every STATUS_CYCLE) count, with its cycle allowed.
@@ -186,7 +188,9 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
     shown = "; ".join(f"{what} {1e3 * (t_ - ref):.0f} ms" for what, t_ in (("FAULT", t_cmd), ("status", t_st))
                       if t_ is not None)
     observed.append(shown + " after" + ("" if cycles is None else f" ({cycles} cycles)"))
-    if not (cmd_ok or st_ok):
+    if over is None:
+        pass  # reported before the error left its bound (a growing error, a frozen value): early
+    elif not (cmd_ok or st_ok):
         fails.append(f"plausibility fault reported late ({shown}; allowed {1e3 * PLAUS_DETECT:.0f} ms)")
     elif t_cmd is not None and t_cmd - ref > PLAUS_DETECT + 2 * ts:
         observed.append(f"late in wall time only: the controller ran {cycles} cycles in {1e3 * (t_cmd - ref):.0f} ms")
