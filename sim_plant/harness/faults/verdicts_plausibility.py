@@ -175,9 +175,14 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
                      f" (the error reached {worst:.2f} of its bound: the row does not test the monitor)"))
         return None
     ref = over if over is not None else start  # counted from the onset when reported before that
-    observed.append(f"error over its bound {1e3 * (ref - start):.0f} ms after onset (peak {worst:.1f}x)"
-                    if over is not None else f"reported before the error stayed over its bound (peak {worst:.1f}x), "
-                    "so after the onset:")
+    if over is not None:
+        observed.append(f"error over its bound {1e3 * (ref - start):.0f} ms after onset (peak {worst:.1f}x)")
+    else:
+        # Early: say how large the error was then, so that a report the fault cannot explain
+        # (another disturbance tripped the monitor) shows.
+        then = max((abs(err) / bound for t_, err, bound in series if start <= t_ <= t_det), default=0.0)
+        observed.append(f"reported before the error stayed over its bound (it was {then:.2f}x of it), so after "
+                        f"the onset:")
     # The command shows the state every cycle: it is the measure, in wall time or, as the other
     # rows count (a starved controller runs its cycles late), in its cycles.  Only without it
     # does the status (every STATUS_CYCLE) count, with its cycle allowed.
