@@ -1,5 +1,11 @@
-"""Loop timing, latency and memory of the controller process on the fallback bus, with the
-plant running in real time: the product as users run it, measured from outside."""
+"""Loop timing, latency and memory of a controller process on the fallback bus, with the
+plant running in real time: the product as users run it, measured from outside.
+
+``loop_timing`` runs one controller (the Python one, or any program that takes its flags, such
+as the C node ``ports/c/build/mrs_node``) and reads its ``--stats-out`` (lateness, missed
+cycles, memory; the C node writes the same fields) and a latency probe on the bus (the time from
+a yaw-rate frame to the command answering it, from the two frames' bus timestamps).
+``loop_compare`` puts the Python and the C controller side by side, quiet and loaded."""
 
 from __future__ import annotations
 
@@ -21,11 +27,14 @@ from mrsteer_dbc import names
 from sim_plant.harness import launch
 
 READY_TIMEOUT_S = 60.0
+BASELINE_NAME = "empty absolute-deadline loop, same rate, bench process, no RT priority"
 
 
 class _LatencyProbe:
     """A bus client that pairs each yaw-rate frame with the command answering it
-    (AuxSteerCmd_MeasCounter) and keeps the time between their arrivals."""
+    (AuxSteerCmd_MeasCounter) and keeps the time between their bus timestamps: the broker stamps
+    a frame when it puts it on the bus, so the probe's own scheduling (a Python thread, on a
+    loaded CPU) does not enter the figure."""
 
     def __init__(self, channel: str) -> None:
         c = mrsteer_dbc.load()
@@ -41,12 +50,12 @@ class _LatencyProbe:
         self.thread.start()
 
     def _loop(self) -> None:
-        clock = time.perf_counter
+        clock = time.time  # the bus stamps' clock, if a frame came without one
         while self._run:
             msg = self.bus.recv(0.1)
             if msg is None:
                 continue
-            now = clock()
+            now = msg.timestamp or clock()
             d = self.contract.decode(msg.arbitration_id, bytes(msg.data))
             if d is None or not d.status.accepted:
                 continue
@@ -99,8 +108,12 @@ def bare_loop_lateness(rate_hz: float, seconds: float) -> dict[str, float]:
             "max_us": float(1e6 * arr.max())}
 
 
-def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, Any]:
-    """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus."""
+def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple[str, ...] | None = None,
+                baseline: bool = True) -> dict[str, Any]:
+    """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus.
+
+    ``program``: the controller process (``launch.controller_program``); None: the Python one.
+    ``baseline``: also time an empty deadline loop in this process afterwards (up to 5 s)."""
     with tempfile.TemporaryDirectory(prefix="mrsteer-bench-") as tmp:
         work = Path(tmp)
         env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
@@ -120,7 +133,7 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
             _wait_for(work / "plant.err", "realtime", plant)
             ctl = _spawn(launch.controller(bus, launch.ControllerSettings(
                 rate_hz, duration=seconds, rt_priority=50, cpu=ncpu - 1 if pin and ncpu > 1 else None,
-                stats_out=work / "ctl.json")).command(), work / "ctl.err")
+                stats_out=work / "ctl.json", program=program)).command(), work / "ctl.err")
             procs.append(ctl)
             if ctl.wait(seconds + 120) != 0:
                 raise RuntimeError(f"controller failed: {(work / 'ctl.err').read_text()[-500:]}")
@@ -134,16 +147,13 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
                         p.wait(10)
                     except subprocess.TimeoutExpired:
                         p.kill()
-    base = bare_loop_lateness(rate_hz, min(seconds, 5.0))
     cycles = max(1, stats["cycles"] + stats["missed_cycles"])
     arr = np.array(lat) if lat else np.array([np.nan])
-    return {
+    out = {
+        "implementation": stats.get("implementation", "python"),
         "rate_hz": rate_hz, "seconds": seconds, "cycles": stats["cycles"],
         "lateness_p50_us": 1e6 * stats["lateness_p50_s"], "lateness_p99_us": 1e6 * stats["lateness_p99_s"],
         "lateness_max_us": 1e6 * stats["lateness_max_s"], "missed_cycles": stats["missed_cycles"],
-        "baseline_lateness_p50_us": base["p50_us"], "baseline_lateness_p99_us": base["p99_us"],
-        "baseline_lateness_max_us": base["max_us"],
-        "baseline_name": "empty absolute-deadline loop, same rate, bench process, no RT priority",
         "missed_percent": 100.0 * stats["missed_cycles"] / cycles,
         "latency_p50_us": float(1e6 * np.median(arr)), "latency_p99_us": float(1e6 * np.percentile(arr, 99)),
         "latency_samples": len(lat),
@@ -151,3 +161,8 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, A
         "rt_priority": stats.get("rt_priority"), "rt_priority_denied": stats.get("rt_priority_denied"),
         "cpu_affinity": stats.get("cpu_affinity"), "gc_disabled_in_loop": stats.get("gc_disabled_in_loop"),
     }
+    if baseline:
+        base = bare_loop_lateness(rate_hz, min(seconds, 5.0))
+        out.update({"baseline_lateness_p50_us": base["p50_us"], "baseline_lateness_p99_us": base["p99_us"],
+                    "baseline_lateness_max_us": base["max_us"], "baseline_name": BASELINE_NAME})
+    return out
