@@ -4,8 +4,9 @@
 Python controller, then the C node (``ports/c/build/mrs_node``, built first), once on the
 machine as it is ("quiet") and once with ``CpuLoad`` (``procs`` busy loops, started before the
 run and stopped after it). Each condition also times an empty deadline loop in the bench
-process, the machine's own scheduling noise at that moment, and records the load average
-before and after, since a shared machine is never really quiet. ``format_table`` prints the
+process, the machine's own scheduling noise at that moment, and records the load average, the
+CPU time by kind (busy, niced, steal) and the other real-time processes (``machine_state``),
+since a shared machine is never really quiet. ``format_table`` prints the
 figures with the Python/C ratio and the C node's targets of issue 16 (lateness p99 <= 100 us,
 no missed cycle, latency p99 <= 500 us). Figures, not pass/fail: nothing here asserts timing.
 """
@@ -17,7 +18,7 @@ import platform
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, ContextManager
 
-from mrsteer_bench import loop
+from mrsteer_bench import loop, machine_state as ms
 from mrsteer_bench.cpu_load import CpuLoad
 from sim_plant.harness import launch
 
@@ -63,12 +64,17 @@ def judge_c(run: dict[str, Any]) -> dict[str, dict[str, Any]]:
 
 def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...] | None],
                measure: Measure, baseline: Baseline, say: Callable[[str], None]) -> dict[str, Any]:
-    out: dict[str, Any] = {"loadavg_before": list(os.getloadavg())}
+    out: dict[str, Any] = {"loadavg_before": ms.load_average()}
+    cpu0, rt0 = ms.cpu_times(), ms.realtime_processes()
     for impl in IMPLS:
         say(f"loop {name}: {impl} controller at {s.rate_hz:g} Hz for {s.seconds:g} s ...")
         out[impl] = measure(s.rate_hz, s.seconds, pin=s.pin, program=programs[impl], baseline=False)
     out["empty_loop"] = baseline(s.rate_hz, min(s.seconds, BASELINE_MAX_S))
-    out["loadavg_after"] = list(os.getloadavg())
+    out["loadavg_after"] = ms.load_average()
+    out["cpu_percent"] = ms.usage_percent(cpu0, ms.cpu_times())
+    # seen before and after the runs, when none of the bench's controllers is running
+    rt = {p["pid"]: p for p in rt0 + ms.realtime_processes()}
+    out["other_realtime_processes"] = list(rt.values())
     return out
 
 
@@ -139,7 +145,13 @@ def format_table(res: dict[str, Any]) -> str:
     lines.append(f"{'empty loop p50/p99/max (us)':<30}" + "".join(
         f"{'/'.join(_num(runs[c]['empty_loop'][k]) for k in ('p50_us', 'p99_us', 'max_us')):>32}" for c in conds))
     lines.append(f"{'load average 1 min before/after':<30}" + "".join(
-        f"{runs[c]['loadavg_before'][0]:.2f} / {runs[c]['loadavg_after'][0]:.2f}".rjust(32) for c in conds))
+        "/".join(f"{r[k][0]:.2f}" if r[k] else "?" for k in ("loadavg_before", "loadavg_after")).rjust(32)
+        for r in (runs[c] for c in conds)))
+    lines.append(f"{'CPU busy/niced/steal (%)':<30}" + "".join(
+        ("/".join(f"{r['cpu_percent'][k]:.0f}" for k in ("busy", "niced", "steal")) if r.get("cpu_percent")
+         else "?").rjust(32) for r in (runs[c] for c in conds)))
+    lines.append(f"{'other SCHED_FIFO/RR processes':<30}" + "".join(
+        str(len(runs[c].get("other_realtime_processes", []))).rjust(32) for c in conds))
     py = runs[conds[0]]["python"]
     rtp = py.get("rt_priority") or f"denied ({py.get('rt_priority_denied')})"
     ld = res["load"]

@@ -14,7 +14,7 @@ from typing import Any, Iterator
 
 import pytest
 
-from mrsteer_bench import loop_compare as lc
+from mrsteer_bench import loop_compare as lc, machine_state as ms
 from mrsteer_bench.cpu_load import CpuLoad
 from mrsteer_bench.loop import loop_timing
 from mrsteer_cli.cli import main
@@ -210,3 +210,30 @@ def test_interrupted_bench_stops_the_load_and_its_nodes() -> None:
         if proc.poll() is None:
             proc.kill()
     assert not any(_alive(p) for p in started)
+
+
+def test_machine_state_reads_cpu_times_and_realtime_processes(tmp_path: Path) -> None:
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  100 50 30 800 20 0 0 0 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
+    before = ms.cpu_times(stat)
+    stat.write_text("cpu  160 110 50 900 30 0 0 50 0 0\n")
+    use = ms.usage_percent(before, ms.cpu_times(stat))
+    # over 300 ticks: idle+iowait 110, niced 60, steal 50
+    assert use == pytest.approx({"busy": 100 * 190 / 300, "niced": 20.0, "steal": 100 * 50 / 300})
+    assert ms.usage_percent(before, before) is None and ms.cpu_times(tmp_path / "absent") is None
+
+    def proc(pid: int, policy: int, prio: int, cmd: bytes) -> None:
+        d = tmp_path / "proc" / str(pid)
+        d.mkdir(parents=True)
+        rest = ["S"] + ["0"] * 36 + [str(prio), str(policy), "0"]  # fields 3..42
+        (d / "stat").write_text(f"{pid} (name with ) paren) " + " ".join(rest))
+        (d / "cmdline").write_bytes(cmd)
+
+    proc(10, 1, 50, b"mrs_node\x00--rate-hz\x00500\x00")
+    proc(11, 0, 0, b"python\0")  # SCHED_OTHER
+    proc(12, 1, 99, b"")  # a kernel thread
+    proc(13, 2, 5, b"rr\0")
+    found = sorted(ms.realtime_processes(tmp_path / "proc"), key=lambda p: p["pid"])
+    assert [(p["pid"], p["policy"], p["rt_priority"]) for p in found] == [(10, "fifo", 50), (13, "rr", 5)]
+    assert found[0]["command"] == "mrs_node --rate-hz 500"
+    assert ms.realtime_processes(tmp_path / "proc", exclude=frozenset({10, 13})) == []
