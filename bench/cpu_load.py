@@ -74,9 +74,6 @@ class CpuLoad:
                 c.wait()
         self.children.clear()
 
-    def describe(self) -> str:
-        return f"{self.procs} busy-loop process{'es' if self.procs != 1 else ''} at nice {os.nice(0)}"
-
     def __enter__(self) -> CpuLoad:
         self.start()
         return self

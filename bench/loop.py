@@ -13,6 +13,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -27,6 +28,7 @@ from mrsteer_dbc import names
 from sim_plant.harness import launch
 
 READY_TIMEOUT_S = 60.0
+RT_PRIORITY = 50  # the controllers' SCHED_FIFO priority in every loop run
 BASELINE_NAME = "empty absolute-deadline loop, same rate, bench process, no RT priority"
 
 
@@ -88,9 +90,12 @@ def _wait_for(path: Path, needle: str, proc: subprocess.Popen) -> None:
 
 def bare_loop_lateness(rate_hz: float, seconds: float) -> dict[str, float]:
     """The baseline: an empty absolute-deadline loop in this process, same rate, same clock.
-    What the machine's timer and scheduler alone cost, measured in the same run."""
+    What the machine's timer and scheduler alone cost, measured in the same run. A wake-up
+    later than a period counts its whole periods as missed and restarts the grid from there,
+    as the controllers do."""
     period = 1.0 / rate_hz
     late = []
+    missed = 0
     clock = time.monotonic
     deadline = clock()
     end = deadline + seconds
@@ -100,12 +105,47 @@ def bare_loop_lateness(rate_hz: float, seconds: float) -> dict[str, float]:
             time.sleep(deadline - now)
             now = clock()
         late.append(now - deadline)
+        if now - deadline >= period:
+            lost = int((now - deadline) // period)
+            missed += lost
+            deadline += lost * period
         deadline += period
         if now >= end:
             break
     arr = np.array(late)
     return {"p50_us": float(1e6 * np.median(arr)), "p99_us": float(1e6 * np.percentile(arr, 99)),
-            "max_us": float(1e6 * arr.max())}
+            "max_us": float(1e6 * arr.max()), "missed_cycles": missed}
+
+
+# The empty loop in a fresh process with the controllers' real-time set-up: what any process at
+# that priority on that CPU gets from this kernel, with nothing of a controller in it.
+_RT_LOOP = ("import json, sys\n"
+            "from firmware_py.platform.realtime import apply_platform\n"
+            "from mrsteer_bench.loop import bare_loop_lateness\n"
+            "cpu = int(sys.argv[4])\n"
+            "granted = apply_platform(int(sys.argv[3]), None if cpu < 0 else cpu)\n"
+            "print(json.dumps({**bare_loop_lateness(float(sys.argv[1]), float(sys.argv[2])), **granted}))\n")
+
+
+def controller_cpu(pin: bool) -> int | None:
+    """The CPU a pinned controller runs on: the last one (the plant, broker and probe are not pinned)."""
+    ncpu = os.cpu_count() or 1
+    return ncpu - 1 if pin and ncpu > 1 else None
+
+
+def rt_loop_lateness(rate_hz: float, seconds: float, pin: bool = True) -> dict[str, Any]:
+    """``bare_loop_lateness`` in a child under the controllers' SCHED_FIFO priority and CPU
+    (``RT_PRIORITY``, ``controller_cpu``), with what was granted."""
+    cpu = controller_cpu(pin)
+    argv = [sys.executable, "-c", _RT_LOOP, repr(rate_hz), repr(seconds), str(RT_PRIORITY),
+            str(-1 if cpu is None else cpu)]
+    try:
+        proc = subprocess.run(argv, capture_output=True, text=True, timeout=seconds + 60.0)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError("the real-time empty loop did not finish") from None
+    if proc.returncode != 0:
+        raise RuntimeError(f"the real-time empty loop failed: {proc.stderr.strip()[-300:]}")
+    return dict(json.loads(proc.stdout))
 
 
 def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple[str, ...] | None = None,
@@ -123,7 +163,6 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
             broker = _spawn(launch.broker(env_channel).command(), work / "bus.err")
             procs.append(broker)
             _wait_for(work / "bus.err", "serving", broker)
-            ncpu = os.cpu_count() or 1
             probe = _LatencyProbe(env_channel)
             # The plant first, sending before the controller's timed window opens: a process
             # start (about a second here, longer on a loaded machine) must not eat the window.
@@ -132,7 +171,7 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
             procs.append(plant)
             _wait_for(work / "plant.err", "realtime", plant)
             ctl = _spawn(launch.controller(bus, launch.ControllerSettings(
-                rate_hz, duration=seconds, rt_priority=50, cpu=ncpu - 1 if pin and ncpu > 1 else None,
+                rate_hz, duration=seconds, rt_priority=RT_PRIORITY, cpu=controller_cpu(pin),
                 stats_out=work / "ctl.json", program=program)).command(), work / "ctl.err")
             procs.append(ctl)
             if ctl.wait(seconds + 120) != 0:

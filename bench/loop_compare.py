@@ -34,7 +34,7 @@ LOAD_MARGIN_S = 240.0  # the load's own time bound beyond the run: process start
 BASELINE_MAX_S = 5.0
 
 Measure = Callable[..., dict[str, Any]]
-Baseline = Callable[[float, float], dict[str, float]]
+Baseline = Callable[[float, float, bool], dict[str, dict[str, Any]]]
 LoadFactory = Callable[[int, float], ContextManager[Any]]
 
 
@@ -44,6 +44,12 @@ class CompareSettings:
     seconds: float  # each controller, each condition
     load_procs: int  # busy loops for the loaded condition; 0: no loaded condition
     pin: bool = True  # the controller on the last CPU (as loop_timing does), SCHED_FIFO 50 both ways
+
+
+def empty_loops(rate_hz: float, seconds: float, pin: bool) -> dict[str, dict[str, Any]]:
+    """The two baselines: an empty deadline loop in the bench process (no real-time set-up), and
+    one with the controllers' SCHED_FIFO priority and CPU, what the kernel gives any such loop."""
+    return {"no_rt": loop.bare_loop_lateness(rate_hz, seconds), "rt": loop.rt_loop_lateness(rate_hz, seconds, pin)}
 
 
 def ratio(python: float, c: float) -> float | None:
@@ -69,7 +75,8 @@ def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...
     for impl in IMPLS:
         say(f"loop {name}: {impl} controller at {s.rate_hz:g} Hz for {s.seconds:g} s ...")
         out[impl] = measure(s.rate_hz, s.seconds, pin=s.pin, program=programs[impl], baseline=False)
-    out["empty_loop"] = baseline(s.rate_hz, min(s.seconds, BASELINE_MAX_S))
+    say(f"loop {name}: empty deadline loops, without and with the real-time set-up ...")
+    out["empty_loop"] = baseline(s.rate_hz, min(s.seconds, BASELINE_MAX_S), s.pin)
     out["loadavg_after"] = ms.load_average()
     out["cpu_percent"] = ms.usage_percent(cpu0, ms.cpu_times())
     # seen before and after the runs, when none of the bench's controllers is running
@@ -79,7 +86,7 @@ def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...
 
 
 def compare(s: CompareSettings, say: Callable[[str], None], *, measure: Measure = loop.loop_timing,
-            baseline: Baseline = loop.bare_loop_lateness, load: LoadFactory = CpuLoad,
+            baseline: Baseline = empty_loops, load: LoadFactory = CpuLoad,
             programs: dict[str, tuple[str, ...] | None] | None = None) -> dict[str, Any]:
     """Both controllers, quiet then loaded (when ``load_procs`` > 0); the load is stopped on
     leaving its condition, also on an error or Ctrl-C. ``measure``, ``baseline``, ``load`` and
@@ -142,8 +149,10 @@ def format_table(res: dict[str, Any]) -> str:
     for label, cell in rows:
         lines.append(f"{label:<30}" + "".join(f"{cell(runs[c], 'python'):>16}{cell(runs[c], 'c'):>9}{'':>7}"
                                               for c in conds))
-    lines.append(f"{'empty loop p50/p99/max (us)':<30}" + "".join(
-        f"{'/'.join(_num(runs[c]['empty_loop'][k]) for k in ('p50_us', 'p99_us', 'max_us')):>32}" for c in conds))
+    for kind, label in (("no_rt", "empty loop, no RT (us)"), ("rt", "empty loop, RT+pin (us)")):
+        lines.append(f"{label:<30}" + "".join(
+            ("/".join(_num(runs[c]["empty_loop"][kind][k]) for k in ("p50_us", "p99_us", "max_us"))
+             + f", {runs[c]['empty_loop'][kind]['missed_cycles']} missed").rjust(32) for c in conds))
     lines.append(f"{'load average 1 min before/after':<30}" + "".join(
         "/".join(f"{r[k][0]:.2f}" if r[k] else "?" for k in ("loadavg_before", "loadavg_after")).rjust(32)
         for r in (runs[c] for c in conds)))
@@ -158,6 +167,9 @@ def format_table(res: dict[str, Any]) -> str:
     lines.append(f"controllers: SCHED_FIFO {rtp}, CPU affinity {py.get('cpu_affinity')}; machine: "
                  f"{res['machine']['cpus']} CPUs, {res['machine']['platform']}")
     if "loaded" in runs:
-        lines.append(f"loaded: {ld['procs']} {ld['kind']} at nice {ld['nice']}, started before and stopped after "
+        kind = ld["kind"] if ld["procs"] != 1 else ld["kind"].replace("processes", "process")
+        lines.append(f"loaded: {ld['procs']} {kind} at nice {ld['nice']}, started before and stopped after "
                      "the loaded runs; quiet: the machine as it was (see its load average)")
+    lines.append("empty loops: p50/p99/max lateness of an empty deadline loop, in the bench process (no RT) and "
+                 "with the controllers' SCHED_FIFO priority and CPU (RT+pin)")
     return "\n".join(lines)

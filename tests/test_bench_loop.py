@@ -16,7 +16,7 @@ import pytest
 
 from mrsteer_bench import loop_compare as lc, machine_state as ms
 from mrsteer_bench.cpu_load import CpuLoad
-from mrsteer_bench.loop import loop_timing
+from mrsteer_bench.loop import loop_timing, rt_loop_lateness
 from mrsteer_cli.cli import main
 from sim_plant.harness import launch
 
@@ -58,9 +58,10 @@ class Recorder:
             raise RuntimeError("controller failed")
         return _figures(impl, condition)
 
-    def baseline(self, rate_hz: float, seconds: float) -> dict[str, float]:
+    def baseline(self, rate_hz: float, seconds: float, pin: bool) -> dict[str, dict[str, Any]]:
         self.calls.append(("empty", "loaded" if self.load_on else "quiet", False))
-        return {"p50_us": 1.0, "p99_us": 2.0, "max_us": 3.0}
+        return {"no_rt": {"p50_us": 1.0, "p99_us": 2.0, "max_us": 3.0, "missed_cycles": 0},
+                "rt": {"p50_us": 4.0, "p99_us": 5.0, "max_us": 6.0, "missed_cycles": 7}}
 
     @contextmanager
     def load(self, procs: int, max_seconds: float) -> Iterator[None]:
@@ -126,6 +127,7 @@ def test_table_shows_both_controllers_the_ratio_and_the_targets() -> None:
     assert rows["lateness p99 (us)"] == ["200", "50", "4.00", "100", "50", "2.00", "<=", "100", "yes/yes"]
     assert rows["latency p99 (us)"] == ["1600", "400", "4.00", "1800", "900", "2.00", "<=", "500", "yes/NO"]
     assert rows["missed cycles"] == ["3", "0", "-", "3", "0", "-", "0", "in", "30", "s", "yes/yes"]
+    assert rows["empty loop, RT+pin (us)"] == ["4/5/6,", "7", "missed"] * 2
     assert "2 busy-loop processes" in table and "fallback bus" in table and "SCHED_FIFO 50" in table
 
 
@@ -237,3 +239,12 @@ def test_machine_state_reads_cpu_times_and_realtime_processes(tmp_path: Path) ->
     assert [(p["pid"], p["policy"], p["rt_priority"]) for p in found] == [(10, "fifo", 50), (13, "rr", 5)]
     assert found[0]["command"] == "mrs_node --rate-hz 500"
     assert ms.realtime_processes(tmp_path / "proc", exclude=frozenset({10, 13})) == []
+
+
+def test_real_time_empty_loop_runs_with_the_controllers_set_up() -> None:
+    r = rt_loop_lateness(500.0, 0.5, pin=True)
+    assert r["rt_priority"] == 50 or "rt_priority_denied" in r
+    assert 0.0 <= r["p50_us"] <= r["p99_us"] <= r["max_us"] and r["missed_cycles"] >= 0
+    ncpu = os.cpu_count() or 1
+    if ncpu > 1 and "cpu_denied" not in r:
+        assert r["cpu_affinity"] == [ncpu - 1]
