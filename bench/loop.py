@@ -70,9 +70,11 @@ class _LatencyProbe:
                     self.latencies.append(now - t)
 
     def stop(self) -> list[float]:
-        self._run = False
-        self.thread.join(5)
-        self.bus.shutdown()
+        """End the probe (again: no effect) and give the latencies, in s."""
+        if self._run:
+            self._run = False
+            self.thread.join(5)
+            self.bus.shutdown()
         return self.latencies
 
 
@@ -159,6 +161,7 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
         env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
         bus = launch.BusArgs("mrsteer", env_channel)
         procs: list[subprocess.Popen] = []
+        probe: _LatencyProbe | None = None
         try:
             broker = _spawn(launch.broker(env_channel).command(), work / "bus.err")
             procs.append(broker)
@@ -179,6 +182,8 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
             lat = probe.stop()
             stats = json.loads((work / "ctl.json").read_text())
         finally:
+            if probe is not None:
+                probe.stop()  # before the broker goes, or its thread dies on a closed bus
             for p in reversed(procs):
                 if p.poll() is None:
                     p.send_signal(signal.SIGTERM)

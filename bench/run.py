@@ -1,5 +1,5 @@
-"""``mrsteer bench [--quick] [--json] [--only NAME] [--loop-seconds S] [--load-procs N]``: every
-benchmark, a table and JSON."""
+"""``mrsteer bench [--quick] [--json] [--only NAME] [--loop-seconds S] [--loop-rate-hz HZ]
+[--load-procs N]``: every benchmark, a table and JSON."""
 
 from __future__ import annotations
 
@@ -10,10 +10,13 @@ import signal
 import sys
 import time
 from types import FrameType
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py.controller import node as rt
 from firmware_py.platform.cli import Parser
+
+if TYPE_CHECKING:
+    from mrsteer_bench.loop_compare import CompareSettings
 
 NAMES = ("step", "receive", "sweep", "campaign", "loop", "soak")
 
@@ -21,7 +24,8 @@ NAMES = ("step", "receive", "sweep", "campaign", "loop", "soak")
 def build_parser(prog: str = "mrsteer bench") -> Parser:
     p = Parser(prog=prog, description="Benchmarks with same-run baselines: firmware step() against numpy, the "
                "receive path against cantools alone, the offline sweep against scipy.signal point by point, "
-               "a validation campaign against the scalar firmware loop, and the controller loop's timing, latency and memory on the fallback bus with the plant running. "
+               "a validation campaign against the scalar firmware loop, the loop timing and latency of the Python and the C controller side by side on the fallback bus with the "
+               "plant running, quiet and under a CPU load the bench starts and stops, and the controller's memory. "
                "Figures, not pass/fail: timing on shared machines is noisy.")
     p.add_argument("--quick", action="store_true",
                    help="short runs (loop 5 s, soak 30 s, 1,000 sweep points) instead of the full ones "
@@ -97,7 +101,7 @@ def format_table(res: dict[str, Any]) -> str:
 
 
 def run(names: Sequence[str], quick: bool, say: Callable[[str], None],
-        loop_settings: Any = None) -> dict[str, Any]:
+        loop_settings: CompareSettings | None = None) -> dict[str, Any]:
     """Each benchmark of ``names``; ``loop_settings``: a ``loop_compare.CompareSettings`` (default:
     the controller's rate, 30 s or 5 s with ``quick``, one busy loop per CPU)."""
     from mrsteer_bench import loop, loop_compare, micro, offline
