@@ -1,10 +1,17 @@
 """The C node's plausibility monitor and authority limiter (issue 18) against the Python
-controller's, frame for frame: the same received frames into ``mrs_node_receive`` /
+controller's.
+
+In process, frame for frame: the same received frames into ``mrs_node_receive`` /
 ``mrs_node_control`` (through ``ports/c/build/secoc_check``) and into ``ControllerNode.receive``
 / ``control`` must give the same command and status frames, byte for byte, on a fault-free
 drive, a yaw-rate sensor stuck at 0.01 rad/s (FAULT, ``CAUSE_PLAUSIBILITY``, fade to zero) and
 a drive without ``MRS_RedundantSensors`` (DEGRADED: no cause bit, the command held to the
-panic window).  No processes, no bus: one run is a fraction of a second."""
+panic window).  No processes, no bus: one run is a fraction of a second.
+
+On the car: a lockstep HIL run with the plant's yaw-rate sensor stuck (a scenario's
+``[[sensor_fault]]``) gives the same commands from both nodes, and its log replays to them in
+Python and in C (``mrsteer replay --impl both``); without its redundant frames the two replays
+still agree with each other (the DEGRADED path)."""
 
 from __future__ import annotations
 
@@ -24,7 +31,9 @@ from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from firmware_py.controller import node as rt
 from mrsteer_dbc import names
-from sim_plant.harness import launch
+from conftest import lockstep_traffic
+from sim_plant.harness import hil, launch, replay_c
+from sim_plant.harness.replay import replay
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE_HZ = 500.0
@@ -179,3 +188,86 @@ def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in
     k_dist = int(DIST_T * RATE_HZ)
     assert abs(cmds[k_dist + int(0.5 * RATE_HZ)][names.SIG_CMD_ANGLE]) > 1e-3
     assert all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[-int(0.3 * RATE_HZ):])
+
+
+STUCK_SCENARIO = """
+name = "fig9-yaw-stuck"
+description = "paper-fig9 with the yaw-rate sensor stuck at 0.01 rad/s from 0.3 s"
+duration = 1.5
+v = 20.0
+mu = 1.0
+
+[[events]]
+t = 0.5
+yaw_moment = 4000.0
+
+[[sensor_fault]]
+sensor = "yaw_rate"
+kind = "stuck"
+value = 0.01
+start = 0.3
+"""
+
+
+def _hil(out: Path, scenario: Path, program: tuple[str, ...] | None) -> dict[str, list]:
+    """A lockstep run's traffic (``lockstep_traffic``), run again (twice at most) when the plant
+    stalled for a watchdog cycle: the machine's load, not the controller.  The last command is
+    the node's final zero command, which names the measurement before it: no stall."""
+    for _ in range(3):
+        hil.run(hil.HilConfig(scenario=str(scenario), mode="lockstep", out=out, controller_program=program))
+        traffic = lockstep_traffic(out / "traffic.log")
+        if not [i for i in traffic["stalls"] if i != len(traffic["commands"]) - 1]:
+            break
+    return traffic
+
+
+def _statuses(log: Path) -> list[tuple[int, int, int]]:
+    """(state, plausibility, cause) of the status frames, repeats merged: their phase against the
+    plant's frames depends on the watchdog cycles before the plant started."""
+    c = mrsteer_dbc.load()
+    sid = c.frame_id(names.MSG_STATUS)
+    out: list[tuple[int, int, int]] = []
+    for line in log.read_text().splitlines():
+        fid, data = line.split()[2].split("#")
+        if int(fid, 16) == sid:
+            d = c.decode(sid, bytes.fromhex(data))
+            assert d is not None
+            s = d.signals
+            row = (int(s[names.SIG_STATUS_STATE]), int(s[names.SIG_STATUS_PLAUS]), int(s[names.SIG_STATUS_CAUSE]))
+            if not out or out[-1] != row:
+                out.append(row)
+    return out
+
+
+def test_lockstep_with_a_stuck_yaw_rate_sensor_and_its_replay_equal_python(secoc_check: Path, tmp_path: Path) -> None:
+    scenario = tmp_path / "stuck.toml"
+    scenario.write_text(STUCK_SCENARIO)
+    py = _hil(tmp_path / "py", scenario, None)
+    c = _hil(tmp_path / "c", scenario, launch.controller_program("c"))
+    assert c == py and len(c["commands"]) > 700  # every command's state, angle and measurement
+    states = [int(cmd[0]) for cmd in c["commands"]]
+    k_fault = states.index(mr.STATUS_FAULT)
+    assert 0.3 * RATE_HZ < k_fault < 1.2 * RATE_HZ  # after the onset, before the end
+    assert max(abs(cmd[1]) for cmd in c["commands"][:k_fault]) > 1e-3  # the law was acting on the stuck value
+    assert all(cmd[1] == 0.0 for cmd in c["commands"][-100:])  # faded to zero
+    st = _statuses(tmp_path / "c" / "traffic.log")
+    assert st == _statuses(tmp_path / "py" / "traffic.log")
+    assert (mr.STATUS_FAULT, pl.PLAUS_YAW, names.CAUSE_PLAUSIBILITY) in st
+
+    # The C run's log through both replays: each gives the recorded commands.
+    log = tmp_path / "c" / "traffic.log"
+    result = replay(log)
+    c_result = replay_c.replay_c(result)
+    assert result.agrees and c_result.agrees, (result.mismatches[:3], c_result.mismatches[:3])
+    assert any(s.out.state == mr.STATUS_FAULT for s in c_result.steps)
+
+    # Without MRS_RedundantSensors the node runs degraded: other commands than recorded, the
+    # same in Python and in C.
+    red = f"{mrsteer_dbc.load().frame_id(names.MSG_REDUNDANT):03X}#"
+    stripped = tmp_path / "no-redundant.log"
+    stripped.write_text("".join(ln for ln in log.read_text().splitlines(keepends=True) if red not in ln))
+    result = replay(stripped)
+    c_result = replay_c.replay_c(result)
+    assert all(math.isnan(s.redundant[0]) for s in result.steps)
+    assert not result.agrees
+    assert [(s.out.angle, s.out.state) for s in c_result.steps] == [(s.out.angle, s.out.state) for s in result.steps]

@@ -2,11 +2,12 @@
 
 ``replay()`` reads a candump ``-L`` log (``hil run``'s ``traffic.log``, or ``candump -L`` from
 anywhere), feeds every frame the controller takes (its receive filters: driver angle, yaw
-rate, speed, and the SecOC sync when keyed) to a real ``ControllerNode`` on a bus that only
+rate, speed, the redundant sensors, and the SecOC sync when keyed) to a real ``ControllerNode`` on a bus that only
 records what the node sends, and lines the node's commands and status frames up with the
 ones recorded in the log.  Nothing of the controller is re-implemented here: the frames go
 through ``ControllerNode.receive`` (``RxLink``: length, CRC, range, MAC, counter), the cycle
-is ``ControllerNode.control`` (freshness, ``step()``, cause bits), and the frames it sends are
+is ``ControllerNode.control`` (freshness, ``step()``, the plausibility monitor and the authority
+limiter, cause bits), and the frames it sends are
 decoded through the contract like the recorded ones.
 
 When the node ran a cycle is taken from the log, by the node's own trigger:
@@ -27,9 +28,9 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
 Each replayed command is compared with the recorded one in state, ``MeasCounter``, alive
 counter (a dropped or repeated command shows there even where the angle happens to agree)
 and angle; each status frame in state, range flags, cause and rejection count (overruns and
-lateness are timing, not replayable).  The per-step inputs that went into ``step()`` are kept
-(``Step.inputs``) so that another implementation of the law (the C port: ``replay_c``) can be
-run on exactly them.
+lateness are timing, not replayable).  The per-step inputs that went into ``step()`` and the
+plausibility monitor are kept (``Step.inputs``, ``Step.redundant``) so that another
+implementation of the law and its guards (the C port: ``replay_c``) can be run on exactly them.
 """
 
 from __future__ import annotations
@@ -43,12 +44,15 @@ from typing import Any
 import can
 
 import mrsteer_dbc
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
 from mrsteer_dbc.e2e import E2EStatus
-from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW, SIG_CMD_ANGLE,
-                               SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
-                               SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
+from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
+                               SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE,
+                               SIG_STATUS_FLAGS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE,
+                               SIG_YAW_RATE)
 from sim_plant.nodes.candump_log import LogError, read_candump_messages
 
 __all__ = ["LogError", "Mismatch", "Out", "ReplayResult", "ReplaySettings", "Step", "effective_config", "replay"]
@@ -113,6 +117,8 @@ class Step:
     status: StatusOut | None = None  # the status frame sent in this cycle
     recorded: Out | None = None
     recorded_status: StatusOut | None = None
+    # (lat_accel, delta_driver_redundant) into the plausibility monitor; NaN: invalid
+    redundant: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -211,11 +217,28 @@ class _Replayer:
             vals.append(inp.value if inp.age <= inp.limit and inp.rejects < e2e_max else math.nan)
         return vals[0], vals[1], vals[2]
 
+    def _redundant(self) -> tuple[float, float]:
+        """What ``control()`` is about to pass to the plausibility monitor from the redundant frame."""
+        inp = self.node.input(MSG_REDUNDANT)
+        if inp.valid(self.node.cfg.e2e_fail_max):
+            return inp.value, inp.second_value
+        return math.nan, math.nan
+
+    def _shadow(self, inputs: tuple[float, float, float], redundant: tuple[float, float]) -> float:
+        """The command ``control()`` will send for these inputs, on copies of the node's states:
+        ``step()``, the monitor (given the command sent last) and the authority limiter."""
+        node = self.node
+        u = mr.step(node.coeffs, copy.deepcopy(node.state), *inputs)
+        d, r, v = inputs
+        bits = pl.monitor_step(node.monitor_coeffs, copy.deepcopy(node.monitor), d, redundant[1], r, redundant[0], v,
+                               node.command)
+        return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits)
+
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node
         inputs = self._inputs()
-        shadow_state = copy.deepcopy(node.state)
-        shadow = mr.step(node.coeffs, shadow_state, *inputs)
+        redundant = self._redundant()
+        shadow = self._shadow(inputs, redundant)
         before = len(self.bus.sent)
         if kind == "final":
             node.finish()
@@ -230,7 +253,7 @@ class _Replayer:
             else:
                 status = self._status(msg, line, t)
         assert out is not None
-        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status)
+        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status, redundant=redundant)
         self.steps.append(step)
         return step
 

@@ -1,7 +1,8 @@
-"""The C port's law on a replay's inputs: ``ports/c/mrs_replay`` (``mrsteer replay --impl c``).
+"""The C port's law and its guards on a replay's inputs: ``ports/c/mrs_replay`` (``mrsteer replay
+--impl c``): ``mrs_step``, the plausibility monitor and the authority limiter, as the node runs them.
 
 The Python replay (``replay.replay``) has already decoded the frames, run the receive checks,
-the freshness rule and the trigger, and kept what went into ``step()`` at every cycle.  Those
+the freshness rule and the trigger, and kept what went into ``step()`` and the monitor at every cycle.  Those
 inputs go to the C driver with the node's effective calibration (a calibration file,
 ``firmware_py.calibration_file``); its ``mrs_step`` outputs are put in the command's DBC encoding
 (so an angle is compared at the resolution the bus carries) and compared with the recorded
@@ -49,9 +50,10 @@ def build() -> Path:
 
 
 def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
-    """(u, status, fault_flags) of the C port at every non-final step of ``result``."""
+    """(u, reported state, fault_flags) of the C port at every non-final step of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs])
+    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r}\n" for s in result.steps if s.kind != "final"
+                     for (d, r, v), (lat, d2) in [(s.inputs, s.redundant)])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
         cfg.write_text(calibration_file.dumps(result.config))
@@ -60,7 +62,7 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
         raise PortError(f"{DRIVER} failed: {proc.stderr.strip()}")
     rows = []
     for line in proc.stdout.splitlines():
-        u, status, flags = line.split()
+        u, status, flags, _plausibility = line.split()
         rows.append((float(u), int(status), int(flags)))
     return rows
 
