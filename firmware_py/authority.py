@@ -28,7 +28,7 @@ class AuthorityConfig:
 
     ts: float = 0.002
     u_max: float = math.radians(3.0)  # magnitude: the actuator's range
-    rate_max: float = 2.0  # rad/s (115 deg/s): 3 deg in 26 ms; above the law's own needs
+    rate_max: float = 10.0  # rad/s: a 6 deg reversal in >= 10.5 ms; above the law's needs (docs/controller.md)
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 on a fault or when the time is up
     panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
     engage: float = math.radians(0.1)  # |u| above this counts as intervening

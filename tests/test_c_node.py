@@ -212,10 +212,11 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
 
     contract = mrsteer_dbc.load()
     rng = random.Random(16)
-    # (message, its measurements, their upper bounds): the redundant frame carries two
-    sensors = [("MRS_DriverSteer", ("DriverSteer_Angle",), (0.7,)), ("MRS_YawRate", ("YawRate_YawRate",), (3.0,)),
-               ("MRS_VehicleSpeed", ("VehicleSpeed_Speed",), (70.0,)),
-               ("MRS_RedundantSensors", ("RedundantSensors_LatAccel", "RedundantSensors_SteerAngle"), (20.0, 0.7))]
+    # (message, its measurements, their upper DBC bounds): the redundant frame carries two
+    sensors = [(name, sigs, tuple(contract.signal_range(name, sig)[1] for sig in sigs)) for name, sigs in (
+        ("MRS_DriverSteer", ("DriverSteer_Angle",)), ("MRS_YawRate", ("YawRate_YawRate",)),
+        ("MRS_VehicleSpeed", ("VehicleSpeed_Speed",)),
+        ("MRS_RedundantSensors", ("RedundantSensors_LatAccel", "RedundantSensors_SteerAngle")))]
     alive = dict.fromkeys([s[0] for s in sensors], 0)
     frames: list[tuple[int, bytes]] = []
     for _ in range(4000):
@@ -230,9 +231,9 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
             data = data[:rng.randrange(len(data))]
         elif kind == 3:
             data = bytearray(rng.randbytes(len(data)))
-        elif kind == 4:  # one measurement out of range with a valid CRC
+        elif kind == 4:  # one measurement out of range with a valid CRC (within its raw field)
             sig, hi = rng.choice(list(zip(sigs, his)))
-            data = bytearray(contract.encode(name, {**values, sig: 1.05 * hi}, alive[name], strict=False))
+            data = bytearray(contract.encode(name, {**values, sig: 1.02 * hi}, alive[name], strict=False))
         frames.append((contract.frame_id(name), bytes(data)))
     got = _secoc_check(["plain"] + [f"rx {fid:X} {data.hex() or '-'}" for fid, data in frames])
     bus = can.Bus(interface="virtual", channel="c-node-fuzz")

@@ -24,8 +24,9 @@ class Rig:
         self.ctl_bus = can.Bus(interface="virtual", channel=channel)
         self.sensors = can.Bus(interface="virtual", channel=channel)
         self.node = rt.ControllerNode(self.ctl_bus, rt.RuntimeConfig(rate_hz=1000.0))
-        self.counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
+        self.counters = {n: mrsteer_dbc.AliveCounter() for n in names.VEHICLE_SENSORS}
         self.k = 0
+        self.statuses: list[dict] = []
 
     def send(self, name: str, values: dict, *, counter: int | None = None, corrupt: bool = False,
              strict: bool = True) -> None:
@@ -36,11 +37,18 @@ class Rig:
         self.sensors.send(can.Message(arbitration_id=C.frame_id(name), data=bytes(data), is_extended_id=False))
 
     def cycle(self, yaw: float | None = 0.0, steer: float | None = 0.0, speed: float | None = 20.0,
-              **kw) -> tuple[float, dict]:
+              redundant: tuple[float, float] | None = None, **kw) -> tuple[float, dict]:
+        """One 1 ms cycle; ``redundant`` = (lateral acceleration, second steering channel), sent
+        every 50 ms as the plant does, with the LSB toggling as a real sensor's noise does (the
+        monitor takes an unchanged frame for no new sample)."""
         if steer is not None:
             self.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
         if speed is not None and self.k % 10 == 0:
             self.send(names.MSG_SPEED, {"VehicleSpeed_Speed": speed})
+        if redundant is not None and self.k % 50 == 0:
+            lsb = 0.001 * ((self.k // 50) % 2)
+            self.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: redundant[0] + lsb,
+                                            names.SIG_STEER_ANGLE_2: redundant[1]})
         if yaw is not None:
             self.send(names.MSG_YAW, {"YawRate_YawRate": yaw}, **kw)
         self.k += 1
@@ -50,6 +58,10 @@ class Rig:
         while (m := self.sensors.recv(0.0)) is not None:
             if m.arbitration_id == C.frame_id(names.MSG_CMD):
                 cmd = C.decode(m.arbitration_id, bytes(m.data))
+            elif m.arbitration_id == C.frame_id(names.MSG_STATUS):
+                status = C.decode(m.arbitration_id, bytes(m.data))
+                assert status is not None
+                self.statuses.append(status.signals)
         assert cmd is not None and cmd.status is mrsteer_dbc.E2EStatus.OK
         return cmd.signals["AuxSteerCmd_Angle"], cmd.signals
 
@@ -224,3 +236,60 @@ def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str)
     d = C.decode(after[0].arbitration_id, bytes(after[0].data))
     assert d.name == names.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0
     assert d.signals["AuxSteerCmd_State"] == mr.STATUS_INACTIVE
+
+
+# ------------------------------------------------------------ plausibility and bounded authority
+
+AUTH_FADE = math.radians(6.0) * 1e-3  # firmware_py.authority's fade per 1 ms period
+RESOLUTION = 2e-6  # the DBC's 1e-6 rad, twice
+
+
+def test_consistent_inputs_with_the_redundant_frame_raise_no_plausibility_bit(rig: Rig) -> None:
+    for _ in range(1000):
+        u, sig = rig.cycle(yaw=0.05, redundant=(0.05 * 20.0, 0.0))
+        assert sig["AuxSteerCmd_State"] != mr.STATUS_FAULT
+    assert abs(u) > math.radians(0.5)
+    assert rig.node.plausibility == 0 and rig.node.cause == 0
+    assert rig.statuses and all(s[names.SIG_STATUS_PLAUS] == 0 for s in rig.statuses)
+
+
+def test_without_the_redundant_frame_the_node_reports_degraded_but_no_fault(rig: Rig) -> None:
+    for _ in range(300):
+        _, sig = rig.cycle(yaw=0.02)
+    assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
+    assert rig.statuses[-1][names.SIG_STATUS_PLAUS] == names.PLAUS_DEGRADED
+    assert rig.node.cause == 0  # a missing redundant input is no reason to stop
+
+
+def test_yaw_rate_that_disagrees_with_lateral_acceleration_faults_fades_and_latches(rig: Rig) -> None:
+    for _ in range(300):  # a consistent intervention first
+        u, _ = rig.cycle(yaw=0.05, redundant=(1.0, 0.0))
+    assert abs(u) > math.radians(0.5) and rig.node.plausibility == 0
+    outs, states, k_fault = [u], [], None
+    for k in range(1500):  # the yaw-rate sensor sticks at 0.05 while the car yaws at 0.25 rad/s
+        u, sig = rig.cycle(yaw=0.05, redundant=(0.25 * 20.0, 0.0))
+        outs.append(u)
+        states.append(sig["AuxSteerCmd_State"])
+        if k_fault is None and sig["AuxSteerCmd_State"] == mr.STATUS_FAULT:
+            k_fault = k
+    assert k_fault is not None and k_fault <= 300  # reported within 300 ms
+    assert all(s == mr.STATUS_FAULT for s in states[k_fault:])
+    assert rig.node.cause & names.CAUSE_PLAUSIBILITY
+    assert rig.statuses[-1][names.SIG_STATUS_PLAUS] & names.PLAUS_YAW
+    assert rig.statuses[-1][names.SIG_STATUS_CAUSE] & names.CAUSE_PLAUSIBILITY
+    steps = [abs(b - a) for a, b in zip(outs[k_fault:], outs[k_fault + 1:])]
+    assert max(steps) <= AUTH_FADE + RESOLUTION
+    u_at = abs(outs[k_fault])
+    assert outs[k_fault + math.ceil(u_at / AUTH_FADE) + 2] == 0.0  # back at zero within the fade time
+    for _ in range(300):  # consistent again: the fault stays latched until the next start
+        u, sig = rig.cycle(yaw=0.05, redundant=(1.0, 0.0))
+    assert u == 0.0 and sig["AuxSteerCmd_State"] == mr.STATUS_FAULT
+
+
+def test_steering_channels_that_disagree_fault_with_the_steering_bit(rig: Rig) -> None:
+    for k in range(400):
+        _, sig = rig.cycle(yaw=0.0, steer=0.02, redundant=(0.0, 0.0))
+        if sig["AuxSteerCmd_State"] == mr.STATUS_FAULT:
+            break
+    assert k <= 300 and rig.node.plausibility & names.PLAUS_STEER
+    assert not rig.node.plausibility & names.PLAUS_YAW

@@ -125,3 +125,17 @@ def test_the_shipped_calibration_does_not_limit_cycle_on_the_realistic_car(tmp_p
     assert (s["plant"], s["actuator"]) == ("nonlinear", "order 1, 20 ms")
     assert s["time_at_limit_s"] == 0.0 and s["aux_rms_deg"] < 0.5
     assert s["peak_yaw_rate_true_rad_s"] < 0.02
+
+
+def test_a_stuck_yaw_rate_sensor_on_the_command_line_is_reported_and_the_command_faded(tmp_path: Path) -> None:
+    # Issue 18's first case on the realistic car: the yaw-rate sensor sticks at 0.01 rad/s in
+    # well-formed frames.  The monitor reports it within 300 ms of its error passing the bound,
+    # the command fades to zero, and the car yaws little meanwhile.
+    s = _run(tmp_path, "--scenario", "side-wind", "--duration", "3.0", "--sensor-fault", "yaw_rate:stuck:0.01@1.5")
+    pl = s["plausibility"]
+    assert pl["sensor_faults"] == ["yaw_rate:stuck:0.01@1.5"] and pl["bits_seen"] & 1  # PLAUS_YAW
+    assert pl["fault_detected_s"] > 1.5 and pl["latency_from_bound_s"] <= 0.3
+    assert s["final_aux_steer_deg"] == 0.0
+    assert s["peak_yaw_rate_true_rad_s"] < 0.05
+    steps = read_steps_csv(tmp_path / "steps.csv")
+    assert all(st.ctrl_state == "FAULT" for st in steps if st.t_s > pl["fault_detected_s"] + 0.01)

@@ -34,18 +34,18 @@ def _cmd(ctl: can.BusABC, angle: float, counter: int, corrupt: bool = False) -> 
 
 
 def test_valid_commands_are_applied_bad_ones_ignored(rig) -> None:
-    node, ctl = rig
-    _cmd(ctl, 0.02, 0)
+    node, ctl = rig  # steps within the authority limiter's 10 rad/s (0.01 rad per 1 ms step)
+    _cmd(ctl, 0.008, 0)
     node.step(0)
-    assert node.actuator.applied == pytest.approx(0.02)
-    _cmd(ctl, -0.04, 1, corrupt=True)  # bad CRC
-    _cmd(ctl, -0.04, 0)  # counter 0 again: stale
+    assert node.actuator.applied == pytest.approx(0.008)
+    _cmd(ctl, -0.001, 1, corrupt=True)  # bad CRC
+    _cmd(ctl, -0.001, 0)  # counter 0 again: stale
     node.step(1)
-    assert node.actuator.applied == pytest.approx(0.02)
+    assert node.actuator.applied == pytest.approx(0.008)
     assert node.stats.cmd_rejected == 2
-    _cmd(ctl, 0.03, 1)
+    _cmd(ctl, 0.012, 1)
     node.step(2)
-    assert node.actuator.applied == pytest.approx(0.03)
+    assert node.actuator.applied == pytest.approx(0.012)
 
 
 def test_spoofed_out_of_range_command_is_refused(rig) -> None:
@@ -63,11 +63,12 @@ def test_a_command_at_the_signals_edge_is_clamped_to_the_actuators_3_degrees(rig
     node, ctl = rig
     edge = C.signal_range("MRS_AuxSteerCmd", "AuxSteerCmd_Angle")[1]
     assert edge > math.radians(3.0)
-    for k in range(3):
-        _cmd(ctl, edge if k % 2 == 0 else -edge, k)
+    for k in range(30):  # +edge, then -edge: the authority limiter's rate takes 6 and 11 steps
+        _cmd(ctl, edge if k < 15 else -edge, k % 15)
         node.step(k)
-        assert abs(node.actuator.applied) == pytest.approx(math.radians(3.0), abs=1e-15)
         assert abs(node.actuator.applied) <= math.radians(3.0)
+        if k in (14, 29):
+            assert abs(node.actuator.applied) == pytest.approx(math.radians(3.0), abs=1e-15)
 
 
 def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
@@ -98,13 +99,59 @@ def test_missing_commands_fade_the_actuator_to_zero(rig) -> None:
 
 
 def test_frames_of_other_ids_are_ignored_even_if_they_pass_the_filter(rig) -> None:
-    # SocketCAN queues every ID between opening the socket and installing the filter; the
-    # controller's status frame (no E2E counter) once crashed the plant on real vcan0.
+    # SocketCAN queues every ID between opening the socket and installing the filter (the
+    # plant's own sensor frames among them).
     node, _ = rig
-    status = C.encode("MRS_CtrlStatus", {s.name: 0 for s in C.message("MRS_CtrlStatus").signals})
-    msg = can.Message(arbitration_id=C.frame_id("MRS_CtrlStatus"), data=status, is_extended_id=False)
+    steer = C.encode("MRS_DriverSteer", {"DriverSteer_Angle": 0.0}, 0)
+    msg = can.Message(arbitration_id=C.frame_id("MRS_DriverSteer"), data=steer, is_extended_id=False)
     assert node.receive(msg, 0) is False
     assert node.stats.rx_ignored == 1 and node.stats.cmd_accepted == node.stats.cmd_rejected == 0
+
+
+def _status(ctl: can.BusABC, plausibility: int) -> None:
+    values = {s.name: 0 for s in C.message("MRS_CtrlStatus").signals}
+    values["CtrlStatus_Plausibility"] = plausibility
+    ctl.send(can.Message(arbitration_id=C.frame_id("MRS_CtrlStatus"), data=C.encode("MRS_CtrlStatus", values),
+                         is_extended_id=False))
+
+
+@pytest.mark.parametrize("plausibility, held", [(0, True), (4, False), (None, False)])
+def test_the_actuator_ends_an_intervention_at_the_panic_window_unless_the_inputs_are_checked(
+        rig, plausibility: int | None, held: bool) -> None:
+    # A second, independent authority limit (issue 18): a steady 2 deg lasts beyond the 2 s
+    # panic window only while the controller's status says every check is running; DEGRADED (4)
+    # or no status at all end it with a 6 deg/s fade.
+    node, ctl = rig
+    applied = []
+    for k in range(3000):
+        if plausibility is not None and k % 100 == 0:
+            _status(ctl, plausibility)
+        _cmd(ctl, math.radians(2.0), k % 15)
+        node.step(k)
+        applied.append(node.actuator.applied)
+    assert applied[1990] == pytest.approx(math.radians(2.0), abs=1e-6)
+    if held:
+        # ... it limited only the first steps' rate (0.01 rad per 1 ms step up to 0.035 rad)
+        assert applied[-1] == pytest.approx(math.radians(2.0), abs=1e-6) and node.stats.actuator_authority_steps == 3
+    else:
+        fade = math.radians(6.0) * 1e-3
+        assert max(a - b for a, b in zip(applied[1990:], applied[1991:])) <= fade + 1e-12
+        assert applied[-1] == 0.0 and node.stats.actuator_authority_steps > 0
+
+
+def test_a_plausibility_fault_in_the_status_fades_the_actuator_whatever_the_command(rig) -> None:
+    node, ctl = rig
+    for k in range(100):
+        _cmd(ctl, math.radians(2.0), k % 15)
+        node.step(k)
+    _status(ctl, 1)  # yaw rate implausible: the controller fades, and so does the actuator
+    applied = []
+    for k in range(100, 900):  # ... latched: the status going quiet does not bring the command back
+        _cmd(ctl, math.radians(2.0), k % 15)
+        node.step(k)
+        applied.append(node.actuator.applied)
+    assert applied[-1] == 0.0
+    assert max(a - b for a, b in zip(applied, applied[1:])) <= math.radians(6.0) * 1e-3 + 1e-12
 
 
 def test_the_actuators_defaults_are_the_plants_and_its_command_lines(rig) -> None:

@@ -117,7 +117,7 @@ def test_bad_calibrations_are_refused() -> None:
 def test_authority_bounds_magnitude_and_rate_and_fades_on_a_fault() -> None:
     c, s = au.configure_authority(au.AuthorityConfig()), au.AuthorityState()
     u = [au.authority_step(c, s, 0.1, 0) for _ in range(30)]
-    assert u[0] == pytest.approx(2.0 * TS) and s.flags == au.AUTH_MAGNITUDE  # rate, then the range
+    assert u[0] == pytest.approx(10.0 * TS) and s.flags == au.AUTH_MAGNITUDE  # rate, then the range
     assert max(u) == pytest.approx(D(3.0))
     u = [au.authority_step(c, s, 0.04, pl.PLAUS_YAW) for _ in range(100)]
     assert u[0] == pytest.approx(D(3.0) - D(6.0) * TS) and s.flags == au.AUTH_FAULT

@@ -18,6 +18,7 @@ import pytest
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from mrsteer_cli.cli import main
+from mrsteer_dbc import names
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, MSG_YAW, SIG_CMD_ANGLE, SIG_STATUS_CAUSE
 from sim_plant.harness.replay import replay
 from firmware_py import calibration_file
@@ -160,6 +161,19 @@ def test_altered_status_cause_is_a_cause_mismatch(clean_log: Path, tmp_path: Pat
     code, doc, _ = _replay(capsys, str(_write(tmp_path, lines)))
     s = doc["replays"][0]
     assert code == 1 and s["cause_mismatches"] == 1 and s["first_mismatch"]["line"] == i + 1
+
+
+def test_altered_plausibility_bits_are_a_status_mismatch(clean_log: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    lines = _lines(clean_log)
+    i = [j for j, ln in enumerate(lines) if _frame(ln)[0] == STATUS][-1]
+    d = C.decode(STATUS, _frame(lines[i])[1])
+    assert d is not None and d.signals[names.SIG_STATUS_PLAUS] == 0  # the clean run: every check running, none tripped
+    lines[i] = _with_payload(lines[i], C.encode(MSG_STATUS, {**d.signals, names.SIG_STATUS_PLAUS: names.PLAUS_DEGRADED},
+                                                d.counter))
+    code, doc, _ = _replay(capsys, str(_write(tmp_path, lines)))
+    s = doc["replays"][0]
+    assert code == 1 and s["first_mismatch"]["line"] == i + 1 and "plausibility" in s["first_mismatch"]["what"]
 
 
 def test_the_wrong_recorded_calibration_disagrees(clean_log: Path, tmp_path: Path,

@@ -22,7 +22,8 @@ YAW = C.frame_id(names.MSG_YAW)
 
 
 def yaw_values(i: int) -> dict[str, float]:
-    return {"YawRate_YawRate": 1e-3 * (i % 1000)}
+    # Below the plausibility monitor's model bound (0.15 rad/s with the wheel straight).
+    return {"YawRate_YawRate": 1e-4 * (i % 1000)}
 
 
 def yaw_stream(n: int, epoch: int | None = EPOCH, signer: secoc.SensorSigner | None = None,

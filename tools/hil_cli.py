@@ -14,7 +14,7 @@ from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
 from firmware_py.controller.options import calibration_from_args
 from mrsteer_cli.cli_args import add_gains, count, number, say
-from sim_plant.car.options import add_car_args
+from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
 from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
@@ -51,6 +51,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("--delay-steps", type=count, default=1, metavar="N",
                    help="lockstep: samples from measurement to applied command (default 1)")
     add_car_args(p)
+    add_sensor_fault_arg(p)
     add_controller_impl_args(p)
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(handler=_cmd_hil_run)
@@ -110,7 +111,8 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
                       controller=args.controller,
                       calibration=calibration_from_args(args),
                       delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
-                      sensors=args.sensors, seed=args.seed, controller_program=program)
+                      sensors=args.sensors, seed=args.seed, sensor_faults=tuple(args.sensor_fault),
+                      controller_program=program)
     try:
         result = hil.run(cfg, progress=say)
     except hil.HilError as exc:
@@ -127,6 +129,13 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
             value = s[key]
             print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
         print(f"  {'frames':<26}{s['frames']}")
+        pl = s["plausibility"]
+        found = "none" if pl["fault_detected_s"] is None else f"at {pl['fault_detected_s']:.3f} s"
+        if pl["detection_latency_s"] is not None:
+            found += f", {1e3 * pl['detection_latency_s']:.0f} ms after the sensor fault"
+        if pl["latency_from_bound_s"] is not None:
+            found += f", {1e3 * pl['latency_from_bound_s']:.0f} ms after its error passed the bound"
+        print(f"  {'plausibility':<26}bits seen {pl['bits_seen']}, fault reported {found}")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Receive state of one sensor input (the C port's per-signal RX record; the counter-sequence
+"""Receive state of one sensor input (the C port's per-message RX record; the counter-sequence
 state is the link's, ``mrsteer_dbc.link.RxLink``)."""
 
 from __future__ import annotations
@@ -7,18 +7,28 @@ import math
 
 
 class Input:
-    """Receive state of one sensor message: newest accepted value, its age in cycles, the
-    rejections in a row and the cause of the last one."""
+    """Receive state of one sensor message: newest accepted value (and, for a message that
+    carries two measurements such as ``MRS_RedundantSensors``, the second one), its age in
+    cycles, the rejections in a row and the cause of the last one."""
 
-    __slots__ = ("name", "signal", "missing_cause", "value", "age", "limit", "rejects", "last_counter", "bad_cause")
+    __slots__ = ("name", "signal", "second_signal", "missing_cause", "value", "second_value", "age", "limit",
+                 "rejects", "last_counter", "bad_cause")
 
-    def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int) -> None:
+    def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int,
+                 second_signal: str | None = None) -> None:
         self.name = name
         self.signal = signal_name
+        self.second_signal = second_signal
         self.missing_cause = missing_cause
         self.value = math.nan
+        self.second_value = math.nan
         self.age = limit_cycles + 1  # never received: invalid until the first good frame
         self.limit = limit_cycles
         self.rejects = 0
         self.last_counter = 0
         self.bad_cause = 0
+
+    def valid(self, e2e_fail_max: int) -> bool:
+        """Fresh (its last accepted frame within ``limit`` cycles) and not rejected
+        ``e2e_fail_max`` times in a row."""
+        return self.age <= self.limit and self.rejects < e2e_fail_max

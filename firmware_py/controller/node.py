@@ -8,7 +8,13 @@ Each cycle, in this order (the scheduling contract a port must keep):
    DBC cycle time, or which has been rejected ``e2e_fail_max`` times in a row, is invalid;
 3. run ``step()``; an invalid input is passed as NaN, which makes the firmware fade its
    command to zero and re-initialise bumplessly once the input is good again;
-4. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
+4. the plausibility monitor (``firmware_py.plausibility``) checks the inputs against each other,
+   against ``MRS_RedundantSensors`` (lateral acceleration, the second steering channel; NaN when
+   missing, which makes it report DEGRADED) and against the nominal car, given the command sent
+   the period before; the authority limiter (``firmware_py.authority``) bounds ``step()``'s
+   command in magnitude, rate and time and fades it to zero on a plausibility fault, which the
+   node reports as state FAULT with ``CAUSE_PLAUSIBILITY``;
+5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
 
 Every frame goes through the node's links (``mrsteer_dbc.link``): ``RxLink`` checks a received
 one and names the cause of a rejection, ``TxLink`` builds the command and the status.  With a
@@ -37,7 +43,9 @@ from typing import Any
 import can
 
 import mrsteer_dbc
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
 from firmware_py.controller.inputs import Input
 from firmware_py.controller.stats import LoopStats
 from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG_S, STOP_POLL_S, SYNC_POLL_S,
@@ -45,12 +53,13 @@ from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG
 from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
-from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_RANGE, CAUSE_SPEED_MISSING,
-                               CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD, MSG_SPEED,
-                               MSG_STATUS, MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS,
-                               SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
-                               SIG_STATUS_LATENESS, SIG_STATUS_OVERRUNS, SIG_STATUS_REJECTED,
-                               SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
+from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, CAUSE_RANGE,
+                               CAUSE_SPEED_MISSING, CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD,
+                               MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE,
+                               SIG_CMD_MEAS, SIG_CMD_STATE, SIG_LAT_ACCEL, SIG_SPEED, SIG_STATUS_CAUSE,
+                               SIG_STATUS_FLAGS, SIG_STATUS_LATENESS, SIG_STATUS_OVERRUNS, SIG_STATUS_PLAUS,
+                               SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2,
+                               SIG_YAW_RATE)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
@@ -91,6 +100,10 @@ class ControllerNode:
                        aux_limit=min(config.controller.aux_limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1]))
         self.coeffs = mr.configure(ctrl)
         self.state = mr.State()
+        self.monitor_coeffs = pl.configure(pl.PlausibilityConfig(ts=period))
+        self.monitor = pl.MonitorState()
+        self.authority_coeffs = au.configure_authority(au.AuthorityConfig(ts=period, u_max=ctrl.aux_limit))
+        self.authority = au.AuthorityState()
 
         def limit(name: str, cycles: int = config.timeout_cycles) -> int:
             """``cycles`` of the message's own cycle time, in controller periods (rounded up; the
@@ -102,9 +115,11 @@ class ControllerNode:
             c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, limit(MSG_STEER)),
             c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW)),
             c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
+            # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
+            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT), SIG_STEER_ANGLE_2),
         }
         self._by_name = {inp.name: inp for inp in self.inputs.values()}
-        self._steer, self._yaw, self._speed = self.inputs.values()
+        self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
         self.yaw_id = c.frame_id(MSG_YAW)
         keyed = config.secoc_key is not None
         self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
@@ -122,7 +137,9 @@ class ControllerNode:
         self.status_every = max(1, int(round(status_cycle / period)))
         self.stats = LoopStats()
         self.cause = 0
-        self.command = 0.0
+        self.command = 0.0  # the angle sent last: what acts on the car during the next period
+        self.reported_state = mr.STATUS_INACTIVE  # step()'s, or FAULT on a plausibility fault
+        self.plausibility = 0  # the monitor's CtrlStatus_Plausibility bits
         self._max_lateness = 0.0
         self._running = True
         self._was_fault = False
@@ -132,7 +149,8 @@ class ControllerNode:
     # ---------------------------------------------------------------- receive
 
     def input(self, name: str) -> Input:
-        """The receive state of sensor message ``name`` (``MSG_STEER``, ``MSG_YAW``, ``MSG_SPEED``)."""
+        """The receive state of sensor message ``name`` (``MSG_STEER``, ``MSG_YAW``, ``MSG_SPEED``,
+        ``MSG_REDUNDANT``)."""
         return self._by_name[name]
 
     def receive(self, msg: can.Message) -> bool:
@@ -161,6 +179,8 @@ class ControllerNode:
         inp = self.inputs[frame_id]
         inp.rejects = 0
         inp.value = got.signals[inp.signal]
+        if inp.second_signal is not None:
+            inp.second_value = got.signals[inp.second_signal]
         inp.last_counter = got.counter
         inp.age = 0
         if frame_id == self.yaw_id:
@@ -180,15 +200,22 @@ class ControllerNode:
     # ---------------------------------------------------------------- control
 
     def control(self) -> None:
-        """Steps 2-4 of the cycle, after the receive queue has been drained."""
+        """Steps 2-5 of the cycle, after the receive queue has been drained."""
         cause = 0
         values = []
+        fail_max = self.cfg.e2e_fail_max
         for inp in (self._steer, self._yaw, self._speed):
-            ok = inp.age <= inp.limit and inp.rejects < self.cfg.e2e_fail_max
+            ok = inp.age <= inp.limit and inp.rejects < fail_max
             if not ok:
-                cause |= inp.missing_cause if inp.rejects < self.cfg.e2e_fail_max else inp.bad_cause
+                cause |= inp.missing_cause if inp.rejects < fail_max else inp.bad_cause
             values.append(inp.value if ok else math.nan)
             inp.age += 1
+        red = self._redundant
+        if red.age <= red.limit and red.rejects < fail_max:
+            lat, steer_2 = red.value, red.second_value
+        else:
+            lat = steer_2 = math.nan
+        red.age += 1
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2])
@@ -200,13 +227,22 @@ class ControllerNode:
             self._sync_age += 1
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
-        fault = self.state.status == mr.STATUS_FAULT
+        bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat, values[2],
+                               self.command)
+        u = au.authority_step(self.authority_coeffs, self.authority, u, bits)
+        state = self.state.status
+        if bits & pl.PLAUS_FAULT:
+            state = mr.STATUS_FAULT
+            cause |= CAUSE_PLAUSIBILITY
+        fault = state == mr.STATUS_FAULT
         if fault and not self._was_fault:
             self.stats.faults_entered += 1
         self._was_fault = fault
         self.cause = cause
+        self.plausibility = bits
+        self.reported_state = state
         self.command = u
-        self._send_command(u, self.state.status)
+        self._send_command(u, state)
         self.stats.cycles += 1
         if self.stats.cycles % self.status_every == 0:
             self._send_status()
@@ -217,8 +253,9 @@ class ControllerNode:
 
     def _send_status(self) -> None:
         self.bus.send(self.tx.frame(MSG_STATUS, {
-            SIG_STATUS_STATE: self.state.status,
+            SIG_STATUS_STATE: self.reported_state,
             SIG_STATUS_FLAGS: self.state.fault_flags,
+            SIG_STATUS_PLAUS: self.plausibility,
             SIG_STATUS_CAUSE: self.cause,
             SIG_STATUS_REJECTED: self.stats.rx_rejected % 65536,
             SIG_STATUS_OVERRUNS: self.stats.overruns % 65536,

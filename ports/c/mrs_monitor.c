@@ -311,7 +311,7 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg)
 {
     cfg->ts = 0.002;
     cfg->u_max = 0.05235987755982989; /* 3 deg */
-    cfg->rate_max = 2.0;
+    cfg->rate_max = 10.0;
     cfg->fade_rate = 0.10471975511965978; /* 6 deg/s */
     cfg->panic_window = 2.0;
     cfg->engage = 0.0017453292519943296; /* 0.1 deg */

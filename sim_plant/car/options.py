@@ -1,5 +1,6 @@
 """The command-line options that choose the car a plant plays (``mrsteer plant``, ``hil run``,
-``faults run``): one definition, so that every command names and checks them alike."""
+``faults run``) and the sensor faults it carries (``plant``, ``hil run``): one definition, so
+that every command names and checks them alike."""
 
 from __future__ import annotations
 
@@ -34,3 +35,12 @@ def add_car_args(p: argparse.ArgumentParser, default: str = "the scenario's", wi
                    f"or a TOML file (docs/realistic-car.md); default: {default}")
     if with_seed:
         p.add_argument("--seed", type=seed, metavar="N", help=f"the sensors' noise seed; default: {default}")
+
+
+def add_sensor_fault_arg(p: argparse.ArgumentParser) -> None:
+    """``--sensor-fault SPEC`` (repeatable; ``sim_plant.car.sensor_faults.parse_spec``)."""
+    p.add_argument("--sensor-fault", action="append", default=[], metavar="SENSOR:KIND[:VALUE]@START",
+                   help="a sensor fault in well-formed frames, added to the scenario's [[sensor_fault]] tables "
+                   "(repeatable): SENSOR yaw_rate, lat_accel, steer, steer_redundant or speed; KIND stuck (VALUE "
+                   "optional: else the value at onset), bias, scale, drift (VALUE per s), noise (VALUE RMS) or "
+                   "frozen (no VALUE); VALUE in the signal's SI unit; START in s, e.g. yaw_rate:bias:0.05@1.0")

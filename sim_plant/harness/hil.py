@@ -25,6 +25,7 @@ from firmware_py.platform import bus_open
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from sim_plant.car import scenario as scn
+from sim_plant.car.sensor_faults import parse_spec
 from sim_plant.harness.hil_report import TRACE, HilRun, finish
 from sim_plant.harness import launch
 from sim_plant.harness.processes import Proc, RunError, stop, tail, wait_for_socket, wait_ready, wait_stderr
@@ -56,6 +57,7 @@ class HilConfig:
     actuator: str | None = None
     sensors: str | None = None
     seed: int | None = None
+    sensor_faults: tuple[str, ...] = ()  # --sensor-fault specs for the plant (sim_plant.car.sensor_faults)
     out: Path = Path("out/hil")
     secoc_key: bytes | None = None  # authenticate the commands and the sensor frames (mrsteer_dbc.secoc)
     # The controller process: None for the Python one, else an external program that takes the
@@ -70,6 +72,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     # The scenario on the chosen car, checked here: a bad choice fails before anything starts.
     sc = scn.load(cfg.scenario).with_overrides(v=cfg.v, mu=cfg.mu, mz=cfg.mz, duration=cfg.duration).with_models(
         cfg.plant, cfg.actuator, cfg.sensors, cfg.seed)
+    sc = sc.with_sensor_faults(tuple(parse_spec(spec) for spec in cfg.sensor_faults))  # ModelFileError: one line
     ctrl = replace(cfg.calibration, q_form=cfg.controller if cfg.controller != "none" else cfg.calibration.q_form,
                    ts=1.0 / cfg.rate_hz)
     mr.configure(ctrl)  # reject an impossible calibration before starting anything
@@ -107,7 +110,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
             cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,
             duration=cfg.duration, plant=cfg.plant, actuator=cfg.actuator, sensors=cfg.sensors, seed=cfg.seed,
-            no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
+            sensor_faults=cfg.sensor_faults, no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
             secoc=cfg.secoc_key is not None)), work, env)
         procs.append(plant)
         impl = "" if cfg.controller_program is None else f" ({' '.join(cfg.controller_program)})"

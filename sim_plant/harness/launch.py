@@ -222,6 +222,7 @@ class PlantSettings:
     actuator: str | None = None  # ideal, default or a TOML file; default: the scenario's
     sensors: str | None = None  # ideal, default or a TOML file; default: the scenario's
     seed: int | None = None  # the sensors' noise seed; default: the scenario's
+    sensor_faults: tuple[str, ...] = ()  # --sensor-fault specs (sim_plant.car.sensor_faults.parse_spec)
     no_controller: bool = False
     trace_out: Path | None = None  # the true state of every step, as CSV
     stats_out: Path | None = None
@@ -235,6 +236,7 @@ def plant(bus: BusArgs, s: PlantSettings) -> Launch:
         *_opt("--actuator-rate", s.actuator_rate), *_opt("--cmd-timeout", s.cmd_timeout),
         *_opt("--v", s.v), *_opt("--mu", s.mu), *_opt("--mz", s.mz), *_opt("--plant", s.plant),
         *_opt("--actuator", s.actuator), *_opt("--sensors", s.sensors), *_opt("--seed", s.seed),
+        *(arg for spec in s.sensor_faults for arg in ("--sensor-fault", spec)),
         *_flag("--no-controller", s.no_controller), *_opt("--trace-out", s.trace_out),
         *_opt("--stats-out", s.stats_out), *_flag("--secoc", s.secoc)))
 

@@ -2,12 +2,11 @@
 
 ``replay()`` reads a candump ``-L`` log (``hil run``'s ``traffic.log``, or ``candump -L`` from
 anywhere), feeds every frame the controller takes (its receive filters: driver angle, yaw
-rate, speed, the redundant sensors, and the SecOC sync when keyed) to a real ``ControllerNode`` on a bus that only
+rate, speed, and the SecOC sync when keyed) to a real ``ControllerNode`` on a bus that only
 records what the node sends, and lines the node's commands and status frames up with the
 ones recorded in the log.  Nothing of the controller is re-implemented here: the frames go
 through ``ControllerNode.receive`` (``RxLink``: length, CRC, range, MAC, counter), the cycle
-is ``ControllerNode.control`` (freshness, ``step()``, the plausibility monitor and the authority
-limiter, cause bits), and the frames it sends are
+is ``ControllerNode.control`` (freshness, ``step()``, cause bits), and the frames it sends are
 decoded through the contract like the recorded ones.
 
 When the node ran a cycle is taken from the log, by the node's own trigger:
@@ -27,10 +26,10 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
 
 Each replayed command is compared with the recorded one in state, ``MeasCounter``, alive
 counter (a dropped or repeated command shows there even where the angle happens to agree)
-and angle; each status frame in state, range flags, cause and rejection count (overruns and
-lateness are timing, not replayable).  The per-step inputs that went into ``step()`` and the
-plausibility monitor are kept (``Step.inputs``, ``Step.redundant``) so that another
-implementation of the law and its guards (the C port: ``replay_c``) can be run on exactly them.
+and angle; each status frame in state, range flags, cause, rejection count and plausibility bits
+(overruns and lateness are timing, not replayable).  The per-step inputs that went into ``step()`` and the
+plausibility monitor are kept (``Step.inputs``) so that another implementation of the law, the
+monitor and the authority limiter (the C port: ``replay_c``) can be run on exactly them.
 """
 
 from __future__ import annotations
@@ -50,15 +49,14 @@ from firmware_py import plausibility as pl
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
 from mrsteer_dbc.e2e import E2EStatus
 from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
-                               SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE,
-                               SIG_STATUS_FLAGS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE,
-                               SIG_YAW_RATE)
+                               SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
+                               SIG_STATUS_PLAUS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
 from sim_plant.nodes.candump_log import LogError, read_candump_messages
 
 __all__ = ["LogError", "Mismatch", "Out", "ReplayResult", "ReplaySettings", "Step", "effective_config", "replay"]
 
 # What the replayed status frame is compared in (the rest is timing: overruns, lateness).
-STATUS_FIELDS = ("state", "flags", "cause", "rejected")
+STATUS_FIELDS = ("state", "flags", "cause", "rejected", "plausibility")
 
 
 @dataclass(frozen=True)
@@ -101,6 +99,7 @@ class StatusOut:
     cause: int | None
     rejected: int | None
     valid: bool = True
+    plausibility: int | None = None  # CtrlStatus_Plausibility
 
 
 @dataclass
@@ -111,14 +110,14 @@ class Step:
     kind: str  # "yaw" (answers an accepted yaw-rate frame), "watchdog", "clock" or "final"
     line: int  # the log line that triggered it (the yaw-rate frame, or the recorded command)
     t: float
-    inputs: tuple[float, float, float]  # (delta_driver, yaw_rate, speed) into step(); NaN: invalid
+    # (delta_driver, yaw_rate, speed) into step(), then (lat_accel, delta_driver_redundant) into
+    # the monitor (with the command sent the cycle before); NaN: invalid.
+    inputs: tuple[float, float, float, float, float]
     out: Out
     flags: int = 0  # the firmware's range flags after this step
     status: StatusOut | None = None  # the status frame sent in this cycle
     recorded: Out | None = None
     recorded_status: StatusOut | None = None
-    # (lat_accel, delta_driver_redundant) into the plausibility monitor; NaN: invalid
-    redundant: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -207,38 +206,32 @@ class _Replayer:
 
     # ------------------------------------------------------------- the node
 
-    def _inputs(self) -> tuple[float, float, float]:
-        """What ``control()`` is about to pass to ``step()``: the node's freshness rule, read from
-        its public input records; ``cycle`` checks the node's command against it."""
+    def _inputs(self) -> tuple[float, float, float, float, float]:
+        """What ``control()`` is about to pass to ``step()`` and the monitor: the node's freshness
+        rule, read from its public input records; ``cycle`` checks the node's command against it."""
         e2e_max = self.node.cfg.e2e_fail_max
         vals = []
-        for name in (MSG_STEER, MSG_YAW, MSG_SPEED):
+        for name in (MSG_STEER, MSG_YAW, MSG_SPEED, MSG_REDUNDANT):
             inp = self.node.input(name)
-            vals.append(inp.value if inp.age <= inp.limit and inp.rejects < e2e_max else math.nan)
-        return vals[0], vals[1], vals[2]
+            valid = inp.valid(e2e_max)
+            vals.append(inp.value if valid else math.nan)
+            if name == MSG_REDUNDANT:
+                vals.append(inp.second_value if valid else math.nan)
+        return vals[0], vals[1], vals[2], vals[3], vals[4]
 
-    def _redundant(self) -> tuple[float, float]:
-        """What ``control()`` is about to pass to the plausibility monitor from the redundant frame."""
-        inp = self.node.input(MSG_REDUNDANT)
-        if inp.valid(self.node.cfg.e2e_fail_max):
-            return inp.value, inp.second_value
-        return math.nan, math.nan
-
-    def _shadow(self, inputs: tuple[float, float, float], redundant: tuple[float, float]) -> float:
-        """The command ``control()`` will send for these inputs, on copies of the node's states:
-        ``step()``, the monitor (given the command sent last) and the authority limiter."""
+    def _shadow(self, inputs: tuple[float, float, float, float, float]) -> float:
+        """The command the node should send for ``inputs``: step(), monitor and authority limiter
+        run on copies of the node's states."""
         node = self.node
-        u = mr.step(node.coeffs, copy.deepcopy(node.state), *inputs)
-        d, r, v = inputs
-        bits = pl.monitor_step(node.monitor_coeffs, copy.deepcopy(node.monitor), d, redundant[1], r, redundant[0], v,
-                               node.command)
+        d, r, v, lat, d2 = inputs
+        u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v)
+        bits = pl.monitor_step(node.monitor_coeffs, copy.deepcopy(node.monitor), d, d2, r, lat, v, node.command)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node
         inputs = self._inputs()
-        redundant = self._redundant()
-        shadow = self._shadow(inputs, redundant)
+        shadow = self._shadow(inputs)
         before = len(self.bus.sent)
         if kind == "final":
             node.finish()
@@ -253,7 +246,7 @@ class _Replayer:
             else:
                 status = self._status(msg, line, t)
         assert out is not None
-        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status, redundant=redundant)
+        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status)
         self.steps.append(step)
         return step
 
@@ -272,7 +265,7 @@ class _Replayer:
             return StatusOut(line, t, -1, -1, None, None, valid=False)
         s = d.signals
         return StatusOut(line, t, int(s[SIG_STATUS_STATE]), int(s[SIG_STATUS_FLAGS]), int(s[SIG_STATUS_CAUSE]),
-                         int(s[SIG_STATUS_REJECTED]))
+                         int(s[SIG_STATUS_REJECTED]), plausibility=int(s[SIG_STATUS_PLAUS]))
 
     def miss(self, line: int, t: float, frame_id: int, what: str) -> None:
         self.mismatches.append(Mismatch(line, t, frame_id, what))

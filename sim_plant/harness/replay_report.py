@@ -101,7 +101,8 @@ def steps_csv(steps: Sequence[Step], new: Sequence[Step] | None = None) -> str:
     """One row per cycle: what went in, what the replay commanded, what the log holds."""
     f = io.StringIO()
     w = csv.writer(f, lineterminator="\n")
-    w.writerow(["step", "kind", "line", "t", "delta_driver", "yaw_rate", "speed", "replayed_angle", "replayed_state",
+    w.writerow(["step", "kind", "line", "t", "delta_driver", "yaw_rate", "speed", "lat_accel", "delta_driver_2",
+                "replayed_angle", "replayed_state",
                 "recorded_angle", "recorded_state", *(["new_angle", "new_state"] if new is not None else [])])
     for i, s in enumerate(steps):
         rec = s.recorded

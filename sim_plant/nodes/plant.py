@@ -56,14 +56,15 @@ from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, 
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
-from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW,
-                               SIG_BENCH_MU, SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_LAT_ACCEL, SIG_SPEED,
-                               SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE, VEHICLE_SENSORS)
+from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_SYNC,
+                               MSG_YAW, SIG_BENCH_MU, SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_LAT_ACCEL,
+                               SIG_SPEED, SIG_STATUS_PLAUS, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE,
+                               VEHICLE_SENSORS)
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
-from sim_plant.car.options import add_car_args
+from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.plants import Car
 from sim_plant.car.model_files import ModelFileError
 from sim_plant.car.sensor_faults import parse_spec
@@ -82,6 +83,7 @@ class PlantStats:
     cmd_unmatched: int = 0  # valid commands that did not answer the awaited measurement (lockstep)
     lockstep_timeouts: int = 0
     actuator_timeouts: int = 0
+    actuator_authority_steps: int = 0  # steps in which the actuator's authority limiter changed the command
     bench_injections: int = 0
     rx_ignored: int = 0  # frames of other IDs (queued before the kernel filter was installed)
     overruns: int = 0
@@ -120,7 +122,9 @@ class PlantNode:
         self.verifier = secoc.CommandVerifier(c, secoc_key) if secoc_key is not None else None
         self.sensor_signer = secoc.SensorSigner(c, secoc_key) if secoc_key is not None else None
         self.sync_every = max(1, int(round((c.cycle_time_s(MSG_SYNC) or 0.1) / ts)))
-        self.rx = RxLink(c, (MSG_CMD, MSG_BENCH), {MSG_CMD: self.verifier} if self.verifier is not None else None)
+        # The controller's status tells the actuator's authority limiter whether the inputs are checked.
+        self.rx = RxLink(c, (MSG_CMD, MSG_BENCH, MSG_STATUS),
+                         {MSG_CMD: self.verifier} if self.verifier is not None else None)
         bus.set_filters(self.rx.filters())
         # strict=False: a real sensor saturates its range; the controller range-checks.
         self.tx = TxLink(c, (MSG_SYNC, *VEHICLE_SENSORS), self.sensor_signer, strict=False)
@@ -150,6 +154,9 @@ class PlantNode:
                 self.stats.cmd_rejected += 1
                 if got is Rejected.MAC:
                     self.stats.cmd_auth_failed += 1
+            return False
+        if got.name == MSG_STATUS:
+            self.actuator.status_received(int(got.signals[SIG_STATUS_PLAUS]))
             return False
         if got.name == MSG_BENCH:
             self.bench_m_z = got.signals[SIG_BENCH_YAW_MOMENT]
@@ -234,6 +241,7 @@ class PlantNode:
                 actuator.apply(answer)
         actuator.tick()
         self.stats.actuator_timeouts = actuator.timeouts
+        self.stats.actuator_authority_steps = actuator.authority_steps
         applied = actuator.applied if position is None else position.step(actuator.applied)
         if self.record_trace:
             # m_z: the whole yaw moment on the car, the physical disturbances' included.
@@ -313,11 +321,7 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--mass", type=float, help="override the vehicle mass, kg")
     p.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, s")
     add_car_args(p)  # each overrides the scenario's car
-    p.add_argument("--sensor-fault", action="append", default=[], metavar="SENSOR:KIND[:VALUE]@START",
-                   help="a sensor fault in well-formed frames, added to the scenario's [[sensor_fault]] tables "
-                   "(repeatable): SENSOR yaw_rate, lat_accel, steer, steer_redundant or speed; KIND stuck (VALUE "
-                   "optional: else the value at onset), bias, scale, drift (VALUE per s), noise (VALUE RMS) or "
-                   "frozen (no VALUE); VALUE in the signal's SI unit; START in s, e.g. yaw_rate:bias:0.05@1.0")
+    add_sensor_fault_arg(p)
     p.add_argument("--actuator-rate", type=float, default=RATE_LIMIT_RAD_S, metavar="RAD_S",
                    help="the actuator's own slew-rate limit in rad/s, applied to whatever command arrives "
                    "(default 0: follows the command at once)")

@@ -1,0 +1,65 @@
+"""What a HIL run's logged traffic says about the plausibility monitor (issue 18): which bits the
+controller reported, when it first reported a plausibility fault, how long after the scenario's
+first sensor fault that was, and where the command was at the end.  Part of ``summary.json``.
+
+The detection time is read from the command frames, which come every control period: the first
+of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
+plausibility fault bit (``CtrlStatus_Plausibility`` 1 or 2; the status frame itself comes only
+every 100 ms).  For a yaw-rate fault the plant's trace also gives when the sensor's error
+(measured less true yaw rate) first exceeded the monitor's kinematic bound, the moment from
+which issue 18 counts its 300 ms.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
+lockstep the log's wall-clock stamps are not simulated time."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
+from mrsteer_dbc import names
+from sim_plant.car import scenario as scn
+from sim_plant.harness.hil_steps import Step
+
+_FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
+
+
+def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: float,
+                         steps: list[Step] | None = None) -> dict[str, Any]:
+    """The ``plausibility`` entry of a run's summary, from its decoded frames (``hil_report.decode``),
+    times in s of the scenario (the k-th yaw-rate frame is sent at (k - 1) / ``rate_hz``)."""
+    ts = 1.0 / rate_hz
+    seen = 0
+    yaw_frames = 0
+    degraded_s: float | None = None
+    run_start: float | None = None  # the current unbroken run of FAULT commands began here
+    detected_s: float | None = None
+    for r in rows:
+        msg = r["message"]
+        if msg == names.MSG_YAW:
+            yaw_frames += 1
+        elif msg == names.MSG_CMD and names.SIG_CMD_STATE in r and yaw_frames:
+            faulted = int(r[names.SIG_CMD_STATE]) == mr.STATUS_FAULT
+            run_start = (run_start if run_start is not None else (yaw_frames - 1) * ts) if faulted else None
+        elif msg == names.MSG_STATUS and names.SIG_STATUS_PLAUS in r and yaw_frames:
+            bits = int(r[names.SIG_STATUS_PLAUS])
+            seen |= bits
+            if bits & names.PLAUS_DEGRADED and degraded_s is None:
+                degraded_s = (yaw_frames - 1) * ts
+            if bits & _FAULT_BITS and detected_s is None:
+                detected_s = run_start if run_start is not None else (yaw_frames - 1) * ts
+    onset = min((f.start for f in sc.sensor_faults), default=None)
+    over: float | None = None
+    if steps and any(f.sensor == "yaw_rate" for f in sc.sensor_faults):
+        bound = pl.PlausibilityConfig().yaw_bound
+        over = next((s.t_s for s in steps if abs(s.yaw_rate_measured_rad_s - s.yaw_rate_rad_s) > bound), None)
+    return {
+        "bits_seen": seen,
+        "fault_detected_s": detected_s,
+        "first_degraded_s": degraded_s,
+        "sensor_fault_onset_s": onset,
+        "detection_latency_s": None if detected_s is None or onset is None else detected_s - onset,
+        "yaw_error_over_bound_s": over,
+        "latency_from_bound_s": None if detected_s is None or over is None else detected_s - over,
+        "sensor_faults": [f"{f.sensor}:{f.kind}" + ("" if f.value is None else f":{f.value:g}") + f"@{f.start:g}"
+                          for f in sc.sensor_faults],
+    }
