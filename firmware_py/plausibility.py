@@ -79,7 +79,7 @@ class PlausibilityConfig:
     speed_min: float = 5.0  # m/s: below, a_y / v and K_n(v) say too little; checks pause
     yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel |a_y / v|, rad/s (2 deg/s)
     yaw_rel: float = 0.1
-    yaw_count: int = 2  # samples of the redundant frame (50 ms each) over the bound, net
+    yaw_count: int = 1  # samples of the redundant frame (50 ms each) over the bound, net (docs/controller.md)
     yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
     steer_bound: float = 0.004  # |delta - delta_2|, rad (0.23 deg of wheel angle)
     steer_count: int = 3

@@ -41,7 +41,11 @@ def lockstep_traffic(log: "os.PathLike[str] | str") -> dict[str, list]:
     wall time), and those shift the counters; the frames before the plant's first are dropped
     for the same reason. Each command frame must pass its E2E check. ``stalls`` counts the
     watchdog cycles during the run (a command naming the same measurement as the one before: the
-    plant was descheduled for more than a second, as a loaded machine does now and then)."""
+    plant was descheduled for more than a second, as a loaded machine does now and then).
+    Commands after the last one that answers a new measurement (watchdog cycles after the plant
+    finished, and the final zero command) are left out too: how many there are depends on how
+    soon the harness stops the controller after the plant, which is process timing (under a VM,
+    seconds)."""
     from pathlib import Path
 
     import mrsteer_dbc
@@ -65,6 +69,10 @@ def lockstep_traffic(log: "os.PathLike[str] | str") -> dict[str, list]:
             if out["commands"] and out["commands"][-1][2] == cmd[2]:
                 out["stalls"].append(len(out["commands"]))
             out["commands"].append(cmd)
+    cmds = out["commands"]
+    while len(cmds) >= 2 and cmds[-1][2] == cmds[-2][2]:
+        cmds.pop()
+    out["stalls"] = [i for i in out["stalls"] if i < len(cmds)]
     return out
 
 

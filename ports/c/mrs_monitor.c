@@ -11,7 +11,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->speed_min = 5.0;
     cfg->yaw_bound = 0.035;
     cfg->yaw_rel = 0.1;
-    cfg->yaw_count = 2;
+    cfg->yaw_count = 1;
     cfg->yaw_raw_fraction = 0.5;
     cfg->steer_bound = 0.004;
     cfg->steer_count = 3;
