@@ -96,3 +96,30 @@ def test_batch_equals_scalar_with_the_other_calibrations(name: str) -> None:
 def test_the_shipped_law_is_scheduled_with_its_nominal_actuator_and_filter() -> None:
     c = mr.configure(mr.ControllerConfig())  # what the equality tests above exercise
     assert c.n_sched > 1 and c.act_a > 0.0 and c.flt_a1 != 0.0 and c.model_delay == 1
+
+
+def test_the_batch_tyre_curve_is_the_scalar_magic_formula_across_and_beyond_its_peak() -> None:
+    """The batch computes the sine as 2t/(1+t^2) of tan(x/2); the scalar with libm's sin.  Over
+    slip angles from deep in the linear range to far past the peak (where the argument of the
+    sine is largest), on the stiffnesses of light and heavy cars."""
+    from sim_plant.campaign.batch_car import shape_sine
+    from sim_plant.car.tyres import PACEJKA_CURVATURE, PACEJKA_SHAPE, magic_formula
+
+    alpha = np.concatenate([np.linspace(-1.5, 1.5, 2001), [0.0, 1e-9, -1e-9, np.pi / 2]])
+    for b in (5.0, 12.0, 30.0):
+        batch = shape_sine(alpha, np.full(alpha.size, b))
+        scalar = np.array([magic_formula(float(a), b, PACEJKA_SHAPE, 1.0, PACEJKA_CURVATURE) for a in alpha])
+        assert np.max(np.abs(batch - scalar)) < 1e-15
+        assert batch[np.argmax(alpha)] > 0.0 and np.sign(batch[-4]) == 0.0
+
+
+def test_campaign_workers_keep_freed_arrays_in_the_heap() -> None:
+    """glibc's mallopt is found and accepts the thresholds (the workers' page-fault fix)."""
+    import platform
+
+    from sim_plant.campaign import results
+
+    applied = results.tune_allocator()
+    assert isinstance(applied, bool)
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert applied
