@@ -123,3 +123,35 @@ def test_campaign_workers_keep_freed_arrays_in_the_heap() -> None:
     assert isinstance(applied, bool)
     if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
         assert applied
+
+
+def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
+    """``BatchAuthority`` against ``authority_step`` per row: requests that wander past the
+    magnitude, jump faster than the rate bound, rest long enough to re-arm, go NaN or infinite,
+    under random monitor bits; a short panic window so that the time-out fades some rows."""
+    from firmware_py import authority as au
+    from firmware_py import plausibility as pl
+    from sim_plant.campaign.batch_monitor import BatchAuthority
+
+    cfg = au.AuthorityConfig(ts=0.002, panic_window=0.03, rearm_time=0.01)
+    rows, steps = 40, 400
+    rng = np.random.default_rng(7)
+    walk = np.cumsum(rng.normal(0.0, 0.01, (steps, rows)), axis=0)
+    quiet = rng.random((steps, rows)) < 0.3
+    requests = np.where(quiet, 0.0, walk)
+    requests[rng.random((steps, rows)) < 0.01] = np.nan
+    requests[rng.random((steps, rows)) < 0.005] = np.inf
+    choices = np.array([0, 0, 0, 0, pl.PLAUS_DEGRADED, pl.PLAUS_DEGRADED, pl.PLAUS_YAW, pl.PLAUS_STEER])
+    bits = choices[rng.integers(0, choices.size, (steps, rows))]
+    batch = BatchAuthority(cfg, rows)
+    c = au.configure_authority(cfg)
+    states = [au.AuthorityState() for _ in range(rows)]
+    seen = 0
+    for k in range(steps):
+        u = batch.step(requests[k], bits[k])
+        for i, s in enumerate(states):
+            expected = au.authority_step(c, s, float(requests[k, i]), int(bits[k, i]))
+            assert u[i] == expected and batch.flags[i] == s.flags, (k, i)
+            assert batch.engaged[i] == s.engaged and batch.quiet[i] == s.quiet, (k, i)
+            seen |= s.flags
+    assert seen == au.AUTH_MAGNITUDE | au.AUTH_RATE | au.AUTH_TIME | au.AUTH_FAULT  # every branch ran
