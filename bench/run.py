@@ -83,9 +83,14 @@ def format_table(res: dict[str, Any]) -> str:
         lines.append(_row(f"campaign {s['samples']} x {s['duration_s']:g} s, {s['workers']} workers",
                           f"{s['ours_s']:.1f} s", f"{s['baseline_s']:.0f} s", f"{s['speedup']:.0f}x",
                           "100,000 x 5 s in <= 120 s, >= 100x the scalar loop"))
+        lines.append(_row("  the same in CPU seconds", f"{s['ours_cpu_s']:.1f} s", f"{s['baseline_cpu_s']:.0f} s",
+                          f"{s['speedup_cpu']:.0f}x", "load average " + "/".join(f"{x:.1f}" for x in s["loadavg_1min"])))
         sc = s["scaling"]
         lines.append(_row(f"campaign {sc['samples']}: 2 workers vs 1", f"{sc['two_workers_s']:.1f} s",
                           f"{sc['one_worker_s']:.1f} s", f"{sc['speedup']:.2f}x", ">= 1.7x (LocalCluster)"))
+        lines.append(_row("  cores obtained (CPU s / wall s)", f"{sc['two_workers_cores']:.2f}",
+                          f"{sc['one_worker_cores']:.2f}", f"{sc['one_worker_cpu_s'] / sc['two_workers_cpu_s']:.2f}",
+                          f"CPU s 1 vs 2 workers: {sc['one_worker_cpu_s']:.0f} / {sc['two_workers_cpu_s']:.0f}"))
     if "soak" in res:
         run = res["soak"]
         rtp = run["rt_priority"] or f"denied ({run['rt_priority_denied']})"
