@@ -24,13 +24,14 @@ integrated, each axle's two wheels on their own mu with one shared tyre curve); 
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
 from sim_plant.campaign.batch_law import BatchLaw
+from sim_plant.campaign.batch_monitor import BatchAuthority
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
 
@@ -94,6 +95,11 @@ class _Group:
         self.car = BatchCar(s["v"], s["mu"], s["mass"], ts)
         self.loads = GripLoads(s, self.car) if grip else IntactLoads(s)
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
+        # The actuator's own authority limit (actuator.Actuator): size and rate, the controller's
+        # status saying every check runs (no monitor in the batch yet: docs/campaigns.md).
+        self.authority = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)),
+                                        self.mass.size)
+        self.checked = np.zeros(self.mass.size, dtype=np.int64)
         self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts)
         self.law = BatchLaw(config, len(s)) if config is not None else None
         self.panic_until = s["onset"] + s["reaction_time"]
@@ -130,7 +136,8 @@ class _Group:
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
                 correction = np.where(steering, correction - self.gain_step * r / nominal, correction)
                 driver = np.maximum(-DRIVER_LIMIT, np.minimum(DRIVER_LIMIT, 0.0 + correction))
-                handled = np.minimum(limit, np.maximum(-limit, pending))  # actuator.Actuator.apply, fresh
+                # actuator.Actuator.apply, fresh: its authority limit, then its range
+                handled = np.minimum(limit, np.maximum(-limit, self.authority.step(pending, self.checked)))
                 yaw = self.sensors.yaw_rate(r)
                 u, status = self._command(self.sensors.steer(driver), yaw, self.sensors.speed(car.v))
                 np.maximum(peak_u, np.abs(u), out=peak_u)
