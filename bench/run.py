@@ -1,15 +1,22 @@
-"""``mrsteer bench [--quick] [--json] [--only NAME]``: every benchmark, a table and JSON."""
+"""``mrsteer bench [--quick] [--json] [--only NAME] [--loop-seconds S] [--loop-rate-hz HZ]
+[--load-procs N]``: every benchmark, a table and JSON."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
+import signal
 import sys
 import time
-from typing import Any, Callable, Sequence
+from types import FrameType
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py.controller import node as rt
 from firmware_py.platform.cli import Parser
+
+if TYPE_CHECKING:
+    from mrsteer_bench.loop_compare import CompareSettings
 
 NAMES = ("step", "receive", "sweep", "campaign", "loop", "soak")
 
@@ -17,15 +24,35 @@ NAMES = ("step", "receive", "sweep", "campaign", "loop", "soak")
 def build_parser(prog: str = "mrsteer bench") -> Parser:
     p = Parser(prog=prog, description="Benchmarks with same-run baselines: firmware step() against numpy, the "
                "receive path against cantools alone, the offline sweep against scipy.signal point by point, "
-               "a validation campaign against the scalar firmware loop, and the controller loop's timing, latency and memory on the fallback bus with the plant running. "
+               "a validation campaign against the scalar firmware loop, the loop timing and latency of the Python and the C controller side by side on the fallback bus with the "
+               "plant running, quiet and under a CPU load the bench starts and stops, and the controller's memory. "
                "Figures, not pass/fail: timing on shared machines is noisy.")
     p.add_argument("--quick", action="store_true",
                    help="short runs (loop 5 s, soak 30 s, 1,000 sweep points) instead of the full ones "
-                   "(loop 30 s at each rate, soak 10 min, 10,000 points); campaign 4,096 scenarios instead of 100,000")
+                   "(loop 30 s per controller and condition, soak 10 min, 10,000 points); campaign 4,096 "
+                   "scenarios instead of 100,000")
     p.add_argument("--only", choices=NAMES, action="append", metavar="NAME",
                    help=f"run only these ({', '.join(NAMES)}); repeatable")
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
+    g = p.add_argument_group("loop", "the Python and the C controller side by side (the C node is built first), "
+                             "quiet and under a CPU load the bench starts and stops itself")
+    g.add_argument("--loop-seconds", type=float, metavar="S",
+                   help="each controller's run in each condition (default 30, 5 with --quick)")
+    g.add_argument("--loop-rate-hz", type=float, default=rt.DEFAULT_RATE_HZ, metavar="HZ",
+                   help=f"the control rate of the loop runs (default {rt.DEFAULT_RATE_HZ:g})")
+    g.add_argument("--load-procs", type=int, metavar="N",
+                   help="busy-loop processes of the loaded condition, at the bench's niceness (default: one per "
+                   "CPU; 0: quiet only)")
     return p
+
+
+def _check(p: Parser, args: argparse.Namespace) -> None:
+    if args.loop_seconds is not None and not 0 < args.loop_seconds <= 3600:
+        p.error(f"--loop-seconds must be in (0, 3600], got {args.loop_seconds:g}")
+    if not 1 <= args.loop_rate_hz <= 10000:
+        p.error(f"--loop-rate-hz must be in [1, 10000], got {args.loop_rate_hz:g}")
+    if args.load_procs is not None and not 0 <= args.load_procs <= 64:
+        p.error(f"--load-procs must be in [0, 64], got {args.load_procs}")
 
 
 def _row(name: str, value: str, baseline: str, ratio: str, target: str) -> str:
@@ -47,18 +74,6 @@ def format_table(res: dict[str, Any]) -> str:
         s = res["sweep"]
         lines.append(_row(f"sweep {s['points']} pts x {s['duration_s']:g} s", f"{s['ours_s']:.2f} s",
                           f"{s['baseline_s']:.1f} s", f"{s['speedup']:.0f}x", "10,000 pts in <= 10 s"))
-    for run in res.get("loop", []):
-        lines.append(_row(f"loop {run['rate_hz']:g} Hz lateness p50/p99/max",
-                          f"{run['lateness_p50_us']:.0f}/{run['lateness_p99_us']:.0f}/{run['lateness_max_us']:.0f} us",
-                          f"{run['baseline_lateness_p50_us']:.0f}/{run['baseline_lateness_p99_us']:.0f}/"
-                          f"{run['baseline_lateness_max_us']:.0f} us",
-                          f"{run['lateness_p99_us'] / max(run['baseline_lateness_p99_us'], 1.0):.1f}",
-                          "p50 <= 100 us, p99 <= 500 us (baseline: empty loop)"))
-        lines.append(_row(f"loop {run['rate_hz']:g} Hz missed cycles", f"{run['missed_percent']:.3f} %", "", "",
-                          "<= 0.1 %"))
-        lines.append(_row(f"loop {run['rate_hz']:g} Hz latency p50/p99",
-                          f"{run['latency_p50_us']:.0f}/{run['latency_p99_us']:.0f} us", "", "",
-                          "p50 <= 300 us, p99 <= 1 ms"))
     if "soak" in res:
         s = res["soak"]
         lines.append(_row(f"controller RSS, growth in {s['seconds']:g} s", f"{s['rss_kb'] / 1024:.1f} MiB",
@@ -68,19 +83,34 @@ def format_table(res: dict[str, Any]) -> str:
         lines.append(_row(f"campaign {s['samples']} x {s['duration_s']:g} s, {s['workers']} workers",
                           f"{s['ours_s']:.1f} s", f"{s['baseline_s']:.0f} s", f"{s['speedup']:.0f}x",
                           "100,000 x 5 s in <= 120 s, >= 100x the scalar loop"))
+        lines.append(_row("  the same in CPU seconds", f"{s['ours_cpu_s']:.1f} s", f"{s['baseline_cpu_s']:.0f} s",
+                          f"{s['speedup_cpu']:.0f}x", "load average " + "/".join(f"{x:.1f}" for x in s["loadavg_1min"])))
         sc = s["scaling"]
         lines.append(_row(f"campaign {sc['samples']}: 2 workers vs 1", f"{sc['two_workers_s']:.1f} s",
                           f"{sc['one_worker_s']:.1f} s", f"{sc['speedup']:.2f}x", ">= 1.7x (LocalCluster)"))
-    if "loop" in res or "soak" in res:
-        run = (res.get("loop") or [res.get("soak")])[0]
+        lines.append(_row("  cores obtained (CPU s / wall s)", f"{sc['two_workers_cores']:.2f}",
+                          f"{sc['one_worker_cores']:.2f}", f"{sc['one_worker_cpu_s'] / sc['two_workers_cpu_s']:.2f}",
+                          f"CPU s 1 vs 2 workers: {sc['one_worker_cpu_s']:.0f} / {sc['two_workers_cpu_s']:.0f}"))
+    if "soak" in res:
+        run = res["soak"]
         rtp = run["rt_priority"] or f"denied ({run['rt_priority_denied']})"
         lines.append(f"platform: SCHED_FIFO {rtp}; CPU affinity {run['cpu_affinity']}; "
                      f"GC off in loop: {run['gc_disabled_in_loop']}; absolute-deadline sleeps")
+    if len(lines) == 2:
+        lines = []  # no row of this table was run
+    if "loop" in res:
+        from mrsteer_bench import loop_compare
+
+        lines += ["", loop_compare.format_table(res["loop"])] if lines else [loop_compare.format_table(res["loop"])]
     return "\n".join(lines)
 
 
-def run(names: Sequence[str], quick: bool, say: Callable[[str], None]) -> dict[str, Any]:
-    from mrsteer_bench import loop, micro, offline
+def run(names: Sequence[str], quick: bool, say: Callable[[str], None],
+        loop_settings: CompareSettings | None = None) -> dict[str, Any]:
+    """Each benchmark of ``names``; ``loop_settings``: a ``loop_compare.CompareSettings`` (default:
+    the controller's rate, 30 s or 5 s with ``quick``, one busy loop per CPU)."""
+    from mrsteer_bench import loop, loop_compare, micro, offline
+    from mrsteer_bench.cpu_load import default_procs
 
     out: dict[str, Any] = {"quick": quick, "python": platform.python_version(), "machine": platform.machine()}
     t0 = time.monotonic()
@@ -99,11 +129,9 @@ def run(names: Sequence[str], quick: bool, say: Callable[[str], None]) -> dict[s
 
         out["campaign"] = campaign.campaign_bench(quick)
     if "loop" in names:
-        secs = 5.0 if quick else 30.0
-        out["loop"] = []
-        for rate in sorted({1000.0, rt.DEFAULT_RATE_HZ}, reverse=True):
-            say(f"loop timing at {rate:g} Hz for {secs:g} s ...")
-            out["loop"].append(loop.loop_timing(rate, secs))
+        settings = loop_settings or loop_compare.CompareSettings(rt.DEFAULT_RATE_HZ, 5.0 if quick else 30.0,
+                                                                 default_procs())
+        out["loop"] = loop_compare.compare(settings, say)
     if "soak" in names:
         secs = 30.0 if quick else 600.0
         say(f"memory soak at {rt.DEFAULT_RATE_HZ:g} Hz for {secs:g} s ...")
@@ -112,18 +140,35 @@ def run(names: Sequence[str], quick: bool, say: Callable[[str], None]) -> dict[s
     return out
 
 
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt  # SIGTERM unwinds like Ctrl-C: every node and the CPU load are stopped
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "mrsteer bench") -> int:
-    args = build_parser(prog).parse_args(argv)
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    _check(parser, args)
     names = args.only or NAMES
+    from mrsteer_bench.cpu_load import default_procs
+    from mrsteer_bench.loop_compare import CompareSettings
+
+    loop_settings = CompareSettings(args.loop_rate_hz, args.loop_seconds or (5.0 if args.quick else 30.0),
+                                    default_procs() if args.load_procs is None else args.load_procs)
 
     def say(msg: str) -> None:
         print(f"{prog}: {msg}", file=sys.stderr, flush=True)
 
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
-        res = run(names, args.quick, say)
-    except (RuntimeError, OSError) as exc:
+        res = run(names, args.quick, say, loop_settings)
+    except (RuntimeError, OSError, ValueError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted; every process it started is stopped", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     print(json.dumps(res, indent=2) if args.json else format_table(res))
     return 0
 

@@ -200,8 +200,9 @@ def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path
 
 def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) -> None:
     """Fuzzing the C receive chain against ``ControllerNode.receive``: good frames of every
-    input, each mutated (bit flips, truncation, other counters, out-of-range values) and random
-    payloads, in one sequence; the two nodes must accept exactly the same frames."""
+    input (the redundant sensors' too), each mutated (bit flips, truncation, other counters,
+    out-of-range values) and random payloads, in one sequence; the two nodes must accept exactly
+    the same frames."""
     import random
 
     import can
@@ -210,14 +211,17 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
 
     contract = mrsteer_dbc.load()
     rng = random.Random(16)
-    sensors = [("MRS_DriverSteer", "DriverSteer_Angle", 0.7), ("MRS_YawRate", "YawRate_YawRate", 3.0),
-               ("MRS_VehicleSpeed", "VehicleSpeed_Speed", 70.0)]
+    # (message, its measurements, their upper DBC bounds): the redundant frame carries two
+    sensors = [(name, sigs, tuple(contract.signal_range(name, sig)[1] for sig in sigs)) for name, sigs in (
+        ("MRS_DriverSteer", ("DriverSteer_Angle",)), ("MRS_YawRate", ("YawRate_YawRate",)),
+        ("MRS_VehicleSpeed", ("VehicleSpeed_Speed",)),
+        ("MRS_RedundantSensors", ("RedundantSensors_LatAccel", "RedundantSensors_SteerAngle")))]
     alive = dict.fromkeys([s[0] for s in sensors], 0)
     frames: list[tuple[int, bytes]] = []
-    for _ in range(3000):
-        name, sig, hi = rng.choice(sensors)
-        value = rng.uniform(-hi if hi < 10 else 0.0, hi)
-        data = bytearray(contract.encode(name, {sig: value}, alive[name]))
+    for _ in range(4000):
+        name, sigs, his = rng.choice(sensors)
+        values = {sig: rng.uniform(-hi if hi < 50 else 0.0, hi) for sig, hi in zip(sigs, his)}
+        data = bytearray(contract.encode(name, values, alive[name]))
         alive[name] = (alive[name] + rng.choice([1, 1, 1, 2, 4])) % 15
         kind = rng.randrange(6)
         if kind == 1:
@@ -226,8 +230,9 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
             data = data[:rng.randrange(len(data))]
         elif kind == 3:
             data = bytearray(rng.randbytes(len(data)))
-        elif kind == 4:  # out of range with a valid CRC
-            data = bytearray(contract.encode(name, {sig: 1.05 * hi}, alive[name], strict=False))
+        elif kind == 4:  # one measurement out of range with a valid CRC (within its raw field)
+            sig, hi = rng.choice(list(zip(sigs, his)))
+            data = bytearray(contract.encode(name, {**values, sig: 1.02 * hi}, alive[name], strict=False))
         frames.append((contract.frame_id(name), bytes(data)))
     got = _secoc_check(["plain"] + [f"rx {fid:X} {data.hex() or '-'}" for fid, data in frames])
     bus = can.Bus(interface="virtual", channel="c-node-fuzz")

@@ -279,26 +279,27 @@ def test_plant_applies_signed_commands_and_counts_forged_ones_as_rejected_and_fa
     signer, ctr = secoc.CommandSigner(C, KEY), mrsteer_dbc.AliveCounter()
     node.step(0)  # the first step announces the epoch
     _sync_from(ctl, signer)
-    real = signed(signer, ctr, 0.02)
+    # Angles a step apart within the actuator's authority rate (0.01 rad per 1 ms step).
+    real = signed(signer, ctr, 0.004)
     ctl.send(can.Message(arbitration_id=CMD, data=real, is_extended_id=False))
-    ctl.send(can.Message(arbitration_id=CMD, data=_forge(real, 0.05), is_extended_id=False))
+    ctl.send(can.Message(arbitration_id=CMD, data=_forge(real, 0.009), is_extended_id=False))
     node.step(1)
-    assert node.actuator.applied == pytest.approx(0.02)
+    assert node.actuator.applied == pytest.approx(0.004)
     assert node.stats.cmd_auth_failed == 1 and node.stats.cmd_rejected == 1 and node.stats.cmd_accepted == 1
-    ctl.send(can.Message(arbitration_id=CMD, data=signed(signer, ctr, 0.03), is_extended_id=False))
+    ctl.send(can.Message(arbitration_id=CMD, data=signed(signer, ctr, 0.012), is_extended_id=False))
     node.step(2)
-    assert node.actuator.applied == pytest.approx(0.03) and node.stats.cmd_rejected == 1
+    assert node.actuator.applied == pytest.approx(0.012) and node.stats.cmd_rejected == 1
 
 
 def test_without_secoc_the_same_forgery_is_taken(channel: str) -> None:
     """Why SecOC: E2E alone accepts a forgery with the next counter (documented in faults.md)."""
     with can.Bus(interface="virtual", channel=channel) as pb, can.Bus(interface="virtual", channel=channel) as ctl:
         node = PlantNode(pb, scn.load("paper-fig9"), mode="realtime", ts=1e-3)
-        real = C.encode(secoc.COMMAND, dict(VALUES, AuxSteerCmd_Angle=0.02), 0)
+        real = C.encode(secoc.COMMAND, dict(VALUES, AuxSteerCmd_Angle=0.004), 0)
         ctl.send(can.Message(arbitration_id=CMD, data=real, is_extended_id=False))
-        ctl.send(can.Message(arbitration_id=CMD, data=_forge(real, 0.05), is_extended_id=False))
+        ctl.send(can.Message(arbitration_id=CMD, data=_forge(real, 0.009), is_extended_id=False))
         node.step(0)
-        assert node.actuator.applied == pytest.approx(0.05)
+        assert node.actuator.applied == pytest.approx(0.009)
 
 
 def test_plant_rejects_unauthenticated_commands_when_secoc_is_on(plant) -> None:

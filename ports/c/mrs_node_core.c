@@ -30,6 +30,7 @@ size_t mrs_node_filter_ids(int keyed, uint32_t ids[8])
     ids[n++] = mrs_messages[MRS_MSG_STEER].frame_id;
     ids[n++] = mrs_messages[MRS_MSG_YAW].frame_id;
     ids[n++] = mrs_messages[MRS_MSG_SPEED].frame_id;
+    ids[n++] = mrs_messages[MRS_MSG_REDUNDANT].frame_id;
     if (keyed) {
         ids[n++] = mrs_messages[MRS_MSG_SYNC].frame_id;
     }
@@ -38,11 +39,16 @@ size_t mrs_node_filter_ids(int keyed, uint32_t ids[8])
 
 int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, char *err, size_t err_len)
 {
-    static const int msgs[3] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED};
-    static const int sigs[3] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED};
-    static const unsigned causes[3] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING, MRS_CAUSE_SPEED_MISSING};
+    static const int msgs[MRS_N_INPUTS] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED, MRS_MSG_REDUNDANT};
+    static const int sigs[MRS_N_INPUTS] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED, MRS_SIG_LAT_ACCEL};
+    static const int sigs2[MRS_N_INPUTS] = {-1, -1, -1, MRS_SIG_STEER_ANGLE_2};
+    /* A missing redundant input is no cause: the monitor reports it (PLAUS_DEGRADED). */
+    static const unsigned causes[MRS_N_INPUTS] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING,
+                                                  MRS_CAUSE_SPEED_MISSING, 0u};
     const mrs_msg_t *cmd = &mrs_messages[MRS_MSG_CMD];
     mrs_config_t ctrl = cfg->controller;
+    mrs_monitor_config_t mon;
+    mrs_authority_config_t auth;
     double status_cycle, every;
     int i;
     memset(n, 0, sizeof *n);
@@ -63,12 +69,28 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         return -1;
     }
     mrs_init_state(&n->state);
-    for (i = 0; i < 3; ++i) {
+    /* The monitor's and the limiter's defaults at the node's period; the limiter's magnitude is
+     * the law's effective aux_limit (the calibration's, within the DBC's). */
+    mrs_monitor_default_config(&mon);
+    mon.ts = n->period;
+    mrs_authority_default_config(&auth);
+    auth.ts = n->period;
+    auth.u_max = ctrl.aux_limit;
+    if (mrs_monitor_configure(&mon, &n->mon_c) != 0 || mrs_authority_configure(&auth, &n->auth_c) != 0) {
+        snprintf(err, err_len, "invalid plausibility monitor or authority limiter configuration at %g Hz",
+                 cfg->rate_hz);
+        return -1;
+    }
+    mrs_monitor_reset(&n->mon_s);
+    mrs_authority_reset(&n->auth_s);
+    for (i = 0; i < MRS_N_INPUTS; ++i) {
         mrs_input_t *in = &n->in[i];
         in->msg = msgs[i];
         in->sig = sigs[i];
+        in->sig2 = sigs2[i];
         in->missing_cause = causes[i];
         in->value = NAN;
+        in->value2 = NAN;
         in->limit = limit_cycles(&mrs_messages[msgs[i]], n->period, cfg->timeout_cycles);
         in->age = in->limit + 1; /* never received: invalid until the first good frame */
         mrs_e2e_receiver_init(&in->seq, (uint8_t)cfg->max_counter_delta);
@@ -142,7 +164,7 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
     mrs_input_t *in = NULL;
     rx_verdict_t v;
     int i, is_sync;
-    for (i = 0; i < 3; ++i) {
+    for (i = 0; i < MRS_N_INPUTS; ++i) {
         if (f->id == mrs_messages[n->in[i].msg].frame_id) {
             in = &n->in[i];
         }
@@ -177,6 +199,9 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
     }
     in->rejects = 0;
     in->value = phys[in->sig];
+    if (in->sig2 >= 0) {
+        in->value2 = phys[in->sig2];
+    }
     in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
     in->age = 0;
     if (in->msg == MRS_MSG_YAW) {
@@ -241,8 +266,9 @@ static int send_command(mrs_node_t *n, double u, unsigned state)
 static int send_status(mrs_node_t *n)
 {
     double phys[MRS_MAX_SIGNALS] = {0.0};
-    phys[MRS_SIG_STATUS_STATE] = (double)n->state.status;
+    phys[MRS_SIG_STATUS_STATE] = (double)n->reported_state;
     phys[MRS_SIG_STATUS_FLAGS] = (double)n->state.fault_flags;
+    phys[MRS_SIG_STATUS_PLAUS] = (double)n->plaus;
     phys[MRS_SIG_STATUS_CAUSE] = (double)n->cause;
     phys[MRS_SIG_STATUS_REJECTED] = (double)(n->stats.rx_rejected % 65536u);
     phys[MRS_SIG_STATUS_OVERRUNS] = (double)(n->stats.overruns % 65536u);
@@ -251,23 +277,36 @@ static int send_status(mrs_node_t *n)
     return send_frame(n, MRS_MSG_STATUS, phys);
 }
 
+/* An input is valid while its newest accepted frame is at most `limit` periods old and it has
+ * not been rejected e2e_fail_max times in a row (inputs.py); ages it by one period. */
+static int fresh(mrs_node_t *n, mrs_input_t *in)
+{
+    const int ok = in->age <= in->limit && in->rejects < n->e2e_fail_max;
+    ++in->age;
+    return ok;
+}
+
 int mrs_node_control(mrs_node_t *n)
 {
-    unsigned cause = 0u;
+    unsigned cause = 0u, state;
     mrs_real_t values[3];
+    double lat = NAN, steer2 = NAN, u_req;
     int i, fault;
     for (i = 0; i < 3; ++i) {
         mrs_input_t *in = &n->in[i];
-        const int ok = in->age <= in->limit && in->rejects < n->e2e_fail_max;
+        const int ok = fresh(n, in);
         if (!ok) {
             cause |= in->rejects < n->e2e_fail_max ? in->missing_cause : in->bad_cause;
         }
         values[i] = ok ? (mrs_real_t)in->value : (mrs_real_t)NAN;
-        ++in->age;
+    }
+    if (fresh(n, &n->in[MRS_IN_REDUNDANT])) {
+        lat = n->in[MRS_IN_REDUNDANT].value;
+        steer2 = n->in[MRS_IN_REDUNDANT].value2;
     }
     /* Which measurement this command answers; NONE when no valid yaw rate went into it. */
     n->answers = isnan(values[1]) ? MRS_MEAS_NONE : n->in[1].last_counter;
-    n->command = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2]);
+    u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2]);
     if (n->state.fault_flags && !cause) {
         cause |= MRS_CAUSE_RANGE;
     }
@@ -280,13 +319,24 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    fault = n->state.status == MRS_STATUS_FAULT;
+    /* The monitor sees the command sent last period (n->command: 0 before the first); the
+     * limiter bounds this period's request with the monitor's verdict. */
+    n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
+                                (double)values[2], n->command);
+    n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus);
+    state = n->state.status;
+    if (n->plaus & MRS_PLAUS_FAULT) {
+        state = MRS_STATUS_FAULT;
+        cause |= MRS_CAUSE_PLAUSIBILITY;
+    }
+    n->reported_state = state;
+    fault = state == MRS_STATUS_FAULT;
     if (fault && !n->was_fault) {
         ++n->stats.faults_entered;
     }
     n->was_fault = fault;
     n->cause = cause;
-    if (send_command(n, n->command, n->state.status) != 0) {
+    if (send_command(n, n->command, state) != 0) {
         return -1;
     }
     ++n->stats.cycles;

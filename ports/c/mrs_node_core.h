@@ -1,7 +1,9 @@
 /*
  * One controller on one bus, C99 port of firmware_py/controller/node.py (ControllerNode): the
  * receive chain of mrsteer_dbc.link.RxLink (length -> CRC -> counter value -> range -> MAC ->
- * counter sequence), each input's freshness, mrs_step(), and the command and status frames of
+ * counter sequence), each input's freshness, mrs_step(), the plausibility monitor and the
+ * authority limiter (mrs_monitor.c: firmware_py.plausibility, firmware_py.authority) on its
+ * command, and the command and status frames of
  * mrsteer_dbc.link.TxLink (alive counter, SecOC fields and MAC when keyed, CRC last).
  * Frames are packed and unpacked only through mrs_contract.c, i.e. the cantools-generated codec.
  */
@@ -13,17 +15,21 @@
 #include "mrs_bus.h"
 #include "mrs_controller.h"
 #include "mrs_e2e.h"
+#include "mrs_monitor.h"
 #include "mrs_secoc.h"
 
 #define MRS_LATENESS_BINS 50000u /* 1 us bins up to 50 ms; one more for the overflow */
 #define MRS_SYNC_STALE_CYCLES 3 /* MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH */
+#define MRS_N_INPUTS 4 /* driver angle, yaw rate, speed, the redundant sensors */
+#define MRS_IN_REDUNDANT 3 /* its index in mrs_node_t.in */
 
 /* Receive state of one sensor input (firmware_py/controller/inputs.py). */
 typedef struct {
     int msg; /* MRS_MSG_* */
     int sig; /* its measurement signal */
-    unsigned missing_cause;
-    double value;
+    int sig2; /* a second measurement signal of the same frame, -1 if none */
+    unsigned missing_cause; /* 0: an invalid input adds no cause bit (the redundant sensors) */
+    double value, value2;
     long age, limit;
     int rejects;
     unsigned last_counter, bad_cause;
@@ -58,7 +64,13 @@ typedef struct {
     int e2e_fail_max;
     mrs_coeffs_t coeffs;
     mrs_state_t state;
-    mrs_input_t in[3]; /* driver angle, yaw rate, speed */
+    mrs_input_t in[MRS_N_INPUTS]; /* driver angle, yaw rate, speed, redundant (lat. accel., 2nd steering) */
+    mrs_monitor_coeffs_t mon_c;
+    mrs_monitor_state_t mon_s;
+    mrs_authority_coeffs_t auth_c;
+    mrs_authority_state_t auth_s;
+    uint8_t plaus; /* the monitor's CtrlStatus_Plausibility bits of the latest period */
+    unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */
     int keyed;
     mrs_cmac_t *cmac;
     mrs_signer_t signer;
@@ -82,7 +94,8 @@ size_t mrs_node_filter_ids(int keyed, uint32_t ids[8]);
 /* Check one frame and store it: 1 if it was an accepted yaw-rate frame, else 0. */
 int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f);
 
-/* Freshness, step, command (and status at its cycle): 0, or -1 when the bus failed. */
+/* Freshness, step, plausibility monitor, authority limiter, command (and status at its cycle),
+ * as ControllerNode.control: 0, or -1 when the bus failed. */
 int mrs_node_control(mrs_node_t *n);
 
 /* The next frame of message msg (MRS_MSG_CMD or MRS_MSG_STATUS) from its physical values: alive

@@ -1,21 +1,28 @@
-/* The C port's step() on the per-step inputs of a log replay (mrsteer replay --impl c).
+/* The C port's step(), plausibility monitor and authority limiter on the per-step inputs of a
+ * log replay (mrsteer replay --impl c).
  *
  *   mrs_replay CONFIG.cfg [INPUTS]    (INPUTS: a file, or standard input when absent or "-")
  *
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
- * read by mrs_config_load). Each input line is one controller
- * cycle, "DELTA_DRIVER YAW_RATE SPEED" (rad, rad/s, m/s; "nan" for an input the receive side
- * found invalid), as sim_plant/harness/replay.py extracts them from the frames; each output line
- * is "U STATUS FAULT_FLAGS" after mrs_step (U to 17 significant digits). The frame decoding,
- * E2E, freshness and cause bits stay on the Python side: this driver isolates the law, so a
- * mismatch it shows is the port's, not the receive path's. Exit 2 on unreadable input.
+ * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
+ * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2]" (rad, rad/s,
+ * m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant pair absent
+ * counts as invalid), as sim_plant/harness/replay.py extracts them from the frames. Each cycle
+ * runs as mrs_node_control does: u_req = mrs_step(...), the monitor on the inputs and the
+ * previous line's command, the limiter on u_req; each output line is
+ * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
+ * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
+ * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
+ * port's, not the receive path's. Exit 2 on unreadable input.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "mrs_config.h"
 #include "mrs_controller.h"
+#include "mrs_monitor.h"
 
 #define LINE_MAX_LEN 4096
 
@@ -30,6 +37,13 @@ int main(int argc, char **argv)
     mrs_config_t g;
     mrs_coeffs_t c;
     mrs_state_t s;
+    mrs_monitor_config_t mon_cfg;
+    mrs_monitor_coeffs_t mon_c;
+    mrs_monitor_state_t mon_s;
+    mrs_authority_config_t auth_cfg;
+    mrs_authority_coeffs_t auth_c;
+    mrs_authority_state_t auth_s;
+    double u_prev = 0.0;
     char err[256];
     char line[LINE_MAX_LEN];
     FILE *in = stdin;
@@ -44,6 +58,16 @@ int main(int argc, char **argv)
     if (mrs_configure(&g, &c) != 0) {
         return fail("invalid calibration in", argv[1]);
     }
+    mrs_monitor_default_config(&mon_cfg);
+    mon_cfg.ts = (double)g.ts;
+    mrs_authority_default_config(&auth_cfg);
+    auth_cfg.ts = (double)g.ts;
+    auth_cfg.u_max = (double)g.aux_limit;
+    if (mrs_monitor_configure(&mon_cfg, &mon_c) != 0 || mrs_authority_configure(&auth_cfg, &auth_c) != 0) {
+        return fail("no plausibility monitor or authority limiter at the period of", argv[1]);
+    }
+    mrs_monitor_reset(&mon_s);
+    mrs_authority_reset(&auth_s);
     if (argc == 3 && strcmp(argv[2], "-") != 0) {
         in = fopen(argv[2], "r");
         if (in == NULL) {
@@ -52,21 +76,34 @@ int main(int argc, char **argv)
     }
     mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
-        double v[3];
+        double v[5] = {0.0, 0.0, 0.0, NAN, NAN};
         char *p = line, *end;
         int k;
-        mrs_real_t u;
+        double u_req;
+        uint8_t bits;
+        unsigned state;
         ++n;
-        for (k = 0; k < 3; ++k) {
-            v[k] = strtod(p, &end);
+        for (k = 0; k < 5; ++k) {
+            const double x = strtod(p, &end);
             if (end == p) {
-                fprintf(stderr, "mrs_replay: line %ld: expected three numbers\n", n);
-                return 2;
+                if (k < 3) {
+                    fprintf(stderr, "mrs_replay: line %ld: expected three or five numbers\n", n);
+                    return 2;
+                }
+                break;
             }
+            v[k] = x;
             p = end;
         }
-        u = mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
-        printf("%.17g %u %u\n", (double)u, (unsigned)s.status, (unsigned)s.fault_flags);
+        if (k == 4) {
+            fprintf(stderr, "mrs_replay: line %ld: expected three or five numbers\n", n);
+            return 2;
+        }
+        u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
+        bits = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev);
+        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, bits);
+        state = (bits & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
+        printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)bits);
     }
     if (in != stdin) {
         fclose(in);

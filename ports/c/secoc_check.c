@@ -5,7 +5,9 @@
  *   rx HEX                                      a received frame (sync or sensor) through the
  *                                               node's whole receive chain: "1" accepted, "0" refused
  *   cmd EPOCH FV_COUNTER ALIVE STATE ANGLE MEAS the command frame the node builds with its signer
- *                                               at (EPOCH, FV_COUNTER) and alive counter ALIVE: its hex */
+ *                                               at (EPOCH, FV_COUNTER) and alive counter ALIVE: its hex
+ *   ctl                                         one control period (mrs_node_control): the frames it
+ *                                               sends, "ID#HEX" (ID in hex) separated by spaces */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,6 +16,20 @@
 #include "mrs_node_core.h"
 
 static mrs_node_t node;
+static mrs_bus_t bus; /* records nothing: ctl prints what the node sends */
+static char sent[256];
+
+static int print_send(mrs_bus_t *b, uint32_t id, const uint8_t *data, uint8_t len)
+{
+    size_t at = strlen(sent);
+    uint8_t i;
+    (void)b;
+    at += (size_t)snprintf(sent + at, sizeof sent - at, "%s%03X#", at > 0u ? " " : "", (unsigned)id);
+    for (i = 0u; i < len && at + 3u < sizeof sent; ++i) {
+        at += (size_t)snprintf(sent + at, sizeof sent - at, "%02X", data[i]);
+    }
+    return 0;
+}
 
 static size_t from_hex(const char *hex, uint8_t *out, size_t max)
 {
@@ -51,25 +67,32 @@ int main(void)
     cfg.e2e_fail_max = 3;
     cfg.max_counter_delta = 3;
     mrs_default_config(&cfg.controller);
+    bus.send = print_send;
     while (fgets(line, sizeof line, stdin) != NULL) {
         if (sscanf(line, "%15s", word) != 1) {
             continue;
         }
         if (strcmp(word, "key") == 0 && sscanf(line, "%*s %159s", a) == 1 && from_hex(a, key, 16u) == 16u) {
             cfg.secoc_key = key;
-            if (mrs_node_init(&node, NULL, &cfg, err, sizeof err) != 0) {
+            if (mrs_node_init(&node, &bus, &cfg, err, sizeof err) != 0) {
                 fprintf(stderr, "secoc_check: %s\n", err);
                 return 2;
             }
             puts("ok");
         } else if (strcmp(word, "plain") == 0) {
             cfg.secoc_key = NULL;
-            if (mrs_node_init(&node, NULL, &cfg, err, sizeof err) != 0) {
+            if (mrs_node_init(&node, &bus, &cfg, err, sizeof err) != 0) {
                 return 2;
             }
             puts("ok");
         } else if (strcmp(word, "rx") == 0 && sscanf(line, "%*s %159s %159s", a, b) == 2) {
             printf("%d\n", on_rx(a, b));
+        } else if (strcmp(word, "ctl") == 0) {
+            sent[0] = '\0';
+            if (mrs_node_control(&node) != 0) {
+                return 2;
+            }
+            puts(sent);
         } else if (strcmp(word, "cmd") == 0) {
             unsigned long long epoch;
             unsigned counter, alive, state, meas, i;

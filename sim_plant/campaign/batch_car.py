@@ -35,20 +35,48 @@ from sim_plant.car.vehicle import MAX_SPEED, VehicleParams, zoh_discretize
 BASE = VehicleParams()  # the car's data besides mass (inertia, axle positions, stiffnesses)
 
 
-def magic_formula(alpha: np.ndarray, b: np.ndarray, peak: np.ndarray) -> np.ndarray:
-    """``tyres.magic_formula`` with the car's shape and curvature, element-wise."""
-    return peak * shape_sine(alpha, b)
+#: tan's argument in ``shape_sine``: half the shape factor (sin x = 2 t / (1 + t^2), t = tan(x/2)).
+HALF_SHAPE = 0.5 * PACEJKA_SHAPE
 
 
-def shape_sine(alpha: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """sin(C atan(B alpha - E (B alpha - atan(B alpha)))): the magic formula over its peak D.
-    Two wheels of one B (split mu: the same tyre on two roads) share it."""
-    ba = b * alpha
-    return np.sin(PACEJKA_SHAPE * np.arctan(ba - PACEJKA_CURVATURE * (ba - np.arctan(ba))))
+def shape_sine(alpha: np.ndarray, b: np.ndarray, out: np.ndarray | None = None,
+               tmp: np.ndarray | None = None) -> np.ndarray:
+    """sin(C atan(B alpha - E (B alpha - atan(B alpha)))): the magic formula over its peak D,
+    written into ``out`` (``tmp`` a scratch array of its shape; both made when not given).
+
+    The sine is taken as 2 t / (1 + t^2) with t = tan(x / 2): numpy's float64 ``tan`` is
+    vectorised and its ``sin`` is not (about 7x slower), and |x| < C pi / 2 keeps t finite.  The
+    identity costs a few ulp against libm's ``sin``, well inside the engine's 1e-12."""
+    if out is None or tmp is None:
+        shape = np.broadcast_shapes(np.shape(alpha), np.shape(b))
+        out, tmp = np.empty(shape), np.empty(shape)
+    ba = np.multiply(b, alpha, out=tmp)
+    np.arctan(ba, out=out)
+    np.subtract(ba, out, out=out)
+    out *= PACEJKA_CURVATURE
+    np.subtract(ba, out, out=out)
+    np.arctan(out, out=out)
+    out *= HALF_SHAPE
+    np.tan(out, out=out)
+    np.multiply(out, out, out=tmp)
+    tmp += 1.0
+    out += out
+    out /= tmp
+    return out
+
+
+class Tyres:
+    """The tyres of a batch for one step: ``b`` (2, nb, N) and ``d`` (2, nd, N), axis 0 the axle
+    (front, rear), axis 1 its wheels.  nb = nd = 1: each axle as one tyre on one mu
+    (``AxleTyre.force``); nb = 1, nd = 2: the axle's two wheels share B and differ in their peak
+    (split mu: ``axle_force``'s two ``wheel_force`` of one B); nb = nd = 2: every wheel its own."""
+
+    def __init__(self, b: np.ndarray, d: np.ndarray) -> None:
+        self.b, self.d = b, d
 
 
 class BatchCar:
-    """N nonlinear single-track cars: state beta, r, v (arrays of N)."""
+    """N nonlinear single-track cars: state beta, r, v (arrays of N, advanced in place)."""
 
     def __init__(self, v: np.ndarray, mu: np.ndarray, mass: np.ndarray, ts: float) -> None:
         p = BASE
@@ -62,16 +90,23 @@ class BatchCar:
         self.b_r = p.c_r0 / (PACEJKA_SHAPE * self.f_zr)
         self.peak_f = mu * self.f_zf  # AxleTyre.force: D = mu F_z
         self.peak_r = mu * self.f_zr
-        self.beta = np.zeros_like(v)
-        self.r = np.zeros_like(v)
-        self.v = v.astype(float).copy()
+        #: the intact axles on the road's mu (rows of the yaw-moment step and the side wind)
+        self.intact = Tyres(np.stack([self.b_f, self.b_r])[:, None], np.stack([self.peak_f, self.peak_r])[:, None])
+        n = v.size
+        self.x = np.zeros((3, n))  # beta, r, v: one array, so that RK4 combines them in one operation
+        self.beta, self.r, self.v = self.x
+        self.v[:] = v
         self._fixed_substeps: np.ndarray | None = None
-
-    def wheel(self, front: bool, stiffness: np.ndarray, peak: np.ndarray, mu: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-        """(B, D) of one wheel: ``AxleTyre.wheel_force``'s (B stiffness / peak, 0.5 peak mu F_z)."""
-        b, f_z = (self.b_f, self.f_zf) if front else (self.b_r, self.f_zr)
-        return b * stiffness / peak, 0.5 * peak * mu * f_z
+        # scratch arrays of the right-hand side and RK4 (no temporaries in the step)
+        self._alpha = np.empty((2, 1, n))
+        self._s = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._s_tmp = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._f = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._axle = np.empty((2, n))
+        self._k = np.empty((4, 3, n))  # k1..k4 of (beta, r, v)
+        self._stage = np.empty((3, n))
+        self._t1, self._t2 = np.empty(n), np.empty(n)
+        self._acc_tmp = np.empty((3, n))
 
     def substeps(self, mu_max: np.ndarray) -> np.ndarray:
         """``NonlinearPlant.substeps`` per row, with ``mu_max`` the largest mu on any wheel."""
@@ -82,36 +117,43 @@ class BatchCar:
         row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
         return np.maximum(1, np.ceil(self.ts * np.maximum(row1, row2) / MAX_STEP_RATE)).astype(np.int64)
 
-    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, wheels):
-        l_f, l_r = self.l_f, self.l_r
-        alpha_f = delta - beta - l_f * r / v
-        alpha_r = -beta + l_r * r / v
-        if wheels is None:
-            f_front = magic_formula(alpha_f, self.b_f, self.peak_f)
-            f_rear = magic_formula(alpha_r, self.b_r, self.peak_r)
-        elif len(wheels) == 2:  # each axle's wheels share B: ((B, D_left, D_right), ...)
-            (b_f, pfl, pfr), (b_r, prl, prr) = wheels
-            s_f, s_r = shape_sine(alpha_f, b_f), shape_sine(alpha_r, b_r)
-            f_front = pfl * s_f + pfr * s_f
-            f_rear = prl * s_r + prr * s_r
+    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
+        """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
+        t1, t2 = self._t1, self._t2
+        alpha = self._alpha
+        np.multiply(self.l_f, r, out=t1)  # alpha_f = delta - beta - l_f r / v
+        t1 /= v
+        np.subtract(delta, beta, out=alpha[0, 0])
+        alpha[0, 0] -= t1
+        np.multiply(self.l_r, r, out=t1)  # alpha_r = -beta + l_r r / v
+        t1 /= v
+        np.subtract(t1, beta, out=alpha[1, 0])
+        nb, nd = tyres.b.shape[1], tyres.d.shape[1]
+        s = shape_sine(alpha, tyres.b, self._s[nb], self._s_tmp[nb])
+        f = np.multiply(tyres.d, s, out=self._f[nd])
+        if nd == 2:
+            f_front, f_rear = np.add(f[:, 0], f[:, 1], out=self._axle)
         else:
-            (bfl, pfl), (bfr, pfr), (brl, prl), (brr, prr) = wheels
-            f_front = magic_formula(alpha_f, bfl, pfl) + magic_formula(alpha_f, bfr, pfr)
-            f_rear = magic_formula(alpha_r, brl, prl) + magic_formula(alpha_r, brr, prr)
-        total = f_front + f_rear
+            f_front, f_rear = f[:, 0]
+        np.add(f_front, f_rear, out=t1)
         if f_y is not None:
-            total = total + f_y
-        d_beta = total / (self.mass * v) - r
-        d_r = (l_f * f_front - l_r * f_rear + m_z) / self.inertia
-        d_v = None if a_x is None else np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0)
-        return d_beta, d_r, d_v
+            t1 += f_y
+        np.multiply(self.mass, v, out=t2)
+        np.divide(t1, t2, out=k[0])
+        k[0] -= r
+        np.multiply(self.l_f, f_front, out=t1)
+        np.multiply(self.l_r, f_rear, out=t2)
+        np.subtract(t1, t2, out=k[1])
+        k[1] += m_z
+        k[1] /= self.inertia
+        if a_x is not None:
+            np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
 
     def advance(self, delta: np.ndarray, m_z: np.ndarray, f_y: np.ndarray | None, a_x: np.ndarray | None,
-                wheels, mu_max: np.ndarray) -> None:
+                tyres: Tyres | None, mu_max: np.ndarray) -> None:
         """``NonlinearPlant.advance``: one step, inputs held.  ``f_y`` None: no side force;
-        ``a_x`` None: the speed stays; ``wheels`` None: intact axles, else the four wheels' (B, D),
-        or per axle (B, D_left, D_right) when its two wheels share B."""
-        if a_x is None and wheels is None:  # speed and grip constant: so is the sub-step count
+        ``a_x`` None: the speed stays; ``tyres`` None: the intact axles (``self.intact``)."""
+        if a_x is None and tyres is None:  # speed and grip constant: so is the sub-step count
             if self._fixed_substeps is None:
                 self._fixed_substeps = self.substeps(mu_max)
             n = self._fixed_substeps
@@ -121,31 +163,35 @@ class BatchCar:
         h = self.ts / n if n_max > 1 else self.ts
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
         for j in range(n_max):
-            self._rk4(delta, m_z, f_y, a_x, wheels, h, braking, None if n_max == 1 else j < n)
+            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n)
         if a_x is not None:
             np.minimum(self.v, MAX_SPEED, out=self.v)
 
-    def _rk4(self, delta, m_z, f_y, a_x, wheels, h, braking, active) -> None:
-        b, r, v = self.beta, self.r, self.v
-        d = self._derivative
-        k1 = d(b, r, v, delta, m_z, f_y, a_x, wheels)
+    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active) -> None:
+        """One classical RK4 step of (beta, r[, v]) in place (``NonlinearPlant``'s)."""
+        dims = 3 if a_x is not None else 2
+        x, k, stage = self.x[:dims], self._k[:, :dims], self._stage[:dims]
         half = 0.5 * h
-        v2 = v if a_x is None else v + half * k1[2]
-        k2 = d(b + half * k1[0], r + half * k1[1], v2, delta, m_z, f_y, a_x, wheels)
-        v3 = v if a_x is None else v + half * k2[2]
-        k3 = d(b + half * k2[0], r + half * k2[1], v3, delta, m_z, f_y, a_x, wheels)
-        v4 = v if a_x is None else v + h * k3[2]
-        k4 = d(b + h * k3[0], r + h * k3[1], v4, delta, m_z, f_y, a_x, wheels)
-        sixth = h / 6.0
-        nb = b + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
-        nr = r + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-        nv = v
-        if a_x is not None:
-            nv = v + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
-            nv = np.where(braking, np.maximum(nv, STOP_SPEED), nv)
-        if active is not None:  # rows with fewer sub-steps than the most are done
-            nb, nr, nv = (np.where(active, new, old) for new, old in ((nb, b), (nr, r), (nv, v)))
-        self.beta, self.r, self.v = nb, nr, nv
+        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0])
+        for i, step in ((1, half), (2, half), (3, h)):
+            np.multiply(step, k[i - 1], out=stage)  # the stage's state x + step k_(i-1)
+            np.add(x, stage, out=stage)
+            v = stage[2] if dims == 3 else self.v
+            self._derivative(stage[0], stage[1], v, delta, m_z, f_y, a_x, tyres, self._k[i])
+        acc, tmp = stage, self._acc_tmp[:dims]  # x + h/6 (k1 + 2 k2 + 2 k3 + k4)
+        np.multiply(2.0, k[1], out=acc)
+        np.add(k[0], acc, out=acc)
+        np.multiply(2.0, k[2], out=tmp)
+        acc += tmp
+        acc += k[3]
+        acc *= h / 6.0
+        acc += x
+        if dims == 3:
+            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
+        if active is None:
+            x[:] = acc
+        else:  # rows with fewer sub-steps than the most are done
+            np.copyto(x, acc, where=active)
 
 
 class BatchPositionActuator:
@@ -154,14 +200,11 @@ class BatchPositionActuator:
     def __init__(self, time_constant: np.ndarray, rate_limit_deg_s: np.ndarray, limit_deg: float, ts: float) -> None:
         self.limit = math.radians(limit_deg)
         self.max_move = np.radians(rate_limit_deg_s) * ts
-        inv = 1.0 / time_constant
-        aug = np.zeros((time_constant.size, 2, 2))
-        aug[:, 0, 0], aug[:, 0, 1] = -inv, inv
-        # vehicle.zoh_discretize's expm, batched over rows (the scalar model's own discretisation)
-        from scipy.linalg import expm
-
-        e = expm(aug * ts)
-        self.phi, self.gamma = e[:, 0, 0].copy(), e[:, 0, 1].copy()
+        # vehicle.zoh_discretize's expm of [[-1/T, 1/T], [0, 0]] ts in closed form: e^(-ts/T) and
+        # 1 - e^(-ts/T) (expm1, as exact as the Pade approximant; scipy's batched expm was 0.4 s
+        # per 16k rows)
+        self.phi = np.exp(-ts / time_constant)
+        self.gamma = -np.expm1(-ts / time_constant)
         # PositionActuator's mean over a step of an unclipped first-order move: T/ts (1 - e^(-ts/T))
         self.mean_c = time_constant / ts * (1.0 - np.exp(-ts / time_constant))
         self.position = np.zeros(time_constant.size)
@@ -193,7 +236,10 @@ def zoh_first_order(time_constant: float, ts: float) -> tuple[float, float]:
 class BatchSensors:
     """The yaw-rate, steering-angle and speed sensors per row (``sensors.Sensors``)."""
 
-    BLOCK = 500  # noise drawn this many steps at a time per row (the scalar's stream, in blocks)
+    #: Noise drawn this many steps at a time per row (the scalar's stream, in blocks): each row's
+    #: draw fills its own contiguous row of a (rows, BLOCK) array, a step reads one strided column
+    #: (cheaper than transposing, and the per-call cost of the generator is paid every 1024 steps).
+    BLOCK = 1024
 
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
                  config: SensorConfig = SensorConfig()) -> None:
@@ -208,8 +254,10 @@ class BatchSensors:
         self.zi = lfilter_zi(b, a).tolist()
         self.q_yaw, self.q_steer, self.q_speed = (dbc_resolution(q) for q in ("yaw_rate", "steer", "speed"))
         # Sensors.reset's SeedSequence(seed).spawn(3)[0], the yaw-rate stream, made directly
-        self._rngs = [np.random.default_rng(np.random.SeedSequence(s, spawn_key=(0,))) for s in seeds.tolist()]
-        self._noise = np.zeros((0, seeds.size))
+        # (Generator(PCG64(...)) is default_rng's stream without its dispatch)
+        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s, spawn_key=(0,))))
+                      for s in seeds.tolist()]
+        self._noise = np.empty((seeds.size, self.BLOCK))
         self._k = 0
         self._z: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -217,9 +265,10 @@ class BatchSensors:
         """This step's standard normal per row, from each row's stream in the scalar's order."""
         j = self._k % self.BLOCK
         if j == 0:
-            self._noise = np.stack([g.standard_normal(self.BLOCK) for g in self._rngs], axis=1)
+            for g, row in zip(self._rngs, self._noise):
+                g.standard_normal(out=row)
         self._k += 1
-        return self._noise[j]
+        return self._noise[:, j]
 
     def yaw_rate(self, r: np.ndarray) -> np.ndarray:
         noisy = r + self.bias + self.sigma * self._draw()

@@ -49,12 +49,17 @@ class BatchLaw:
         ``fault_flags`` per row as the scalar ``State`` has them."""
         c = self.c
         # |x| <= max is -max <= x <= max, NaN failing both
-        flags = np.where(np.abs(delta_driver) <= c.driver_angle_max, 0, mr.FAULT_DRIVER_ANGLE)
-        flags |= np.where(np.abs(yaw_rate) <= c.yaw_rate_max, 0, mr.FAULT_YAW_RATE)
-        flags |= np.where((0.0 <= speed) & (speed <= c.speed_max), 0, mr.FAULT_SPEED)
-        self.fault_flags = flags.astype(np.int8)
-        idle = (flags != 0) | (speed < c.speed_active_min)
+        ok_driver = np.abs(delta_driver) <= c.driver_angle_max
+        ok_yaw = np.abs(yaw_rate) <= c.yaw_rate_max
+        ok_speed = (0.0 <= speed) & (speed <= c.speed_max)
+        ok = ok_driver & ok_yaw & ok_speed
+        idle = ~ok | (speed < c.speed_active_min)
         any_idle = bool(idle.any())
+        if any_idle or self.fault_flags.any():  # the flags of a row with every input in range are 0
+            flags = np.where(ok_driver, 0, mr.FAULT_DRIVER_ANGLE)
+            flags |= np.where(ok_yaw, 0, mr.FAULT_YAW_RATE)
+            flags |= np.where(ok_speed, 0, mr.FAULT_SPEED)
+            self.fault_flags = flags.astype(np.int8)
 
         u_prev = self.u_prev
         fs = c.fade_step
@@ -89,7 +94,7 @@ class BatchLaw:
         self.needs_init = idle | (self.needs_init & ~init)
         out = np.where(idle, faded, u)
         self.u_prev = out
-        self.status = np.where(idle, np.where(flags != 0, mr.STATUS_FAULT, mr.STATUS_INACTIVE),
+        self.status = np.where(idle, np.where(~ok, mr.STATUS_FAULT, mr.STATUS_INACTIVE),
                                active_status).astype(np.int8)
         return out
 
@@ -152,28 +157,39 @@ class BatchLaw:
 
 class _Schedule:
     """The law's coefficient set (a, g_w0, g_w1, g_r0, g_r1, q0) at each row's speed, with
-    ``model_regulator.step``'s interpolation: linear between breakpoints, held outside."""
+    ``model_regulator.step``'s interpolation: linear between breakpoints, held outside.
+
+    The six tables are one (6, n) array and their differences t[j+1] - t[j] are taken once
+    (the same subtraction ``step()`` makes each period, so the same values): one gather per
+    step instead of three per table.  A row's speed that has not changed since the last step
+    (a constant-speed scenario) gets the coefficients it had."""
 
     def __init__(self, c: mr.Coefficients) -> None:
         self.const = None
         self.n = c.n_sched
         self.v = np.asarray(c.sched_v)
         self.inv_dv = np.asarray(c.sched_inv_dv + (0.0,))
-        self.tables = [np.asarray(t) for t in (c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0, c.sched_g_r1,
-                                               c.sched_q0)]
+        self.tables = np.array([c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0, c.sched_g_r1, c.sched_q0])
+        self.diffs = np.zeros_like(self.tables)
+        self.diffs[:, :-1] = self.tables[:, 1:] - self.tables[:, :-1]
+        self._speed: np.ndarray | None = None
+        self._law: tuple[np.ndarray, ...] = ()
         if self.n == 1:
             self.const = tuple(t[0] + 0.0 * (t[0] - t[0]) for t in self.tables)
 
     def at(self, speed: np.ndarray):
         if self.const is not None:
             return self.const
+        if self._speed is not None and np.array_equal(speed, self._speed):
+            return self._law
         n, sv = self.n, self.v
-        j = np.zeros(speed.size, dtype=np.int64)
-        for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
-            j += speed >= sv[i]
+        # the last breakpoint at or below the speed (ascending): the count of sv[1..n-2] <= speed
+        j = np.searchsorted(sv[1:n - 1], speed, side="right")
         inside = (speed > sv[0]) & (speed < sv[n - 1])
         top = (speed > sv[0]) & (speed >= sv[n - 1])
         j = np.where(inside, j, np.where(top, n - 1, 0))
-        j1 = np.where(inside, j + 1, j)
         f = np.where(inside, (speed - sv[j]) * self.inv_dv[j], 0.0)
-        return tuple(t[j] + f * (t[j1] - t[j]) for t in self.tables)
+        # outside the breakpoints step() adds 0 (t[j] - t[j]); here 0 times the (finite) next difference
+        law = self.tables[:, j] + f * self.diffs[:, j]
+        self._speed, self._law = speed.copy(), tuple(law)
+        return self._law

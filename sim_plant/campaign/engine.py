@@ -24,13 +24,14 @@ integrated, each axle's two wheels on their own mu with one shared tyre curve); 
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
-from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors
+from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
 from sim_plant.campaign.batch_law import BatchLaw
+from sim_plant.campaign.batch_monitor import BatchAuthority
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
 
@@ -94,6 +95,11 @@ class _Group:
         self.car = BatchCar(s["v"], s["mu"], s["mass"], ts)
         self.loads = GripLoads(s, self.car) if grip else IntactLoads(s)
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
+        # The actuator's own authority limit (actuator.Actuator): size and rate, the controller's
+        # status saying every check runs (no monitor in the batch yet: docs/campaigns.md).
+        self.authority = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)),
+                                        self.mass.size)
+        self.checked = np.zeros(self.mass.size, dtype=np.int64)
         self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts)
         self.law = BatchLaw(config, len(s)) if config is not None else None
         self.panic_until = s["onset"] + s["reaction_time"]
@@ -113,7 +119,8 @@ class _Group:
         correction = np.zeros(rows)
         pending = np.zeros(rows)  # the command in flight (one step of loop delay)
         limit = math.radians(ACTUATOR_LIMIT_DEG)
-        peak_r, peak_beta, peak_u = np.zeros(rows), np.zeros(rows), np.zeros(rows)
+        peaks, magnitude = np.zeros((2, rows)), np.empty((2, rows))  # |beta|, |r|: car.x's first two rows
+        peak_u = np.zeros(rows)
         at_limit, faults = np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=np.int64)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command")} if self.record else {}
         for k0 in range(0, n, BLOCK):
@@ -122,15 +129,15 @@ class _Group:
             for j in range(t_block.shape[0]):
                 k = k0 + j
                 t = k * ts
-                r = car.r
-                np.maximum(peak_r, np.abs(r), out=peak_r)
-                np.maximum(peak_beta, np.abs(car.beta), out=peak_beta)
+                r = car.r  # (a view: read before the car advances)
+                np.maximum(peaks, np.abs(car.x[:2], out=magnitude), out=peaks)
                 # The driver: frozen until panic_until once the event has fired, else correcting.
                 steering = (t >= self.panic_until) | (self.onset > t + EVENT_SLACK)
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
                 correction = np.where(steering, correction - self.gain_step * r / nominal, correction)
                 driver = np.maximum(-DRIVER_LIMIT, np.minimum(DRIVER_LIMIT, 0.0 + correction))
-                handled = np.minimum(limit, np.maximum(-limit, pending))  # actuator.Actuator.apply, fresh
+                # actuator.Actuator.apply, fresh: its authority limit, then its range
+                handled = np.minimum(limit, np.maximum(-limit, self.authority.step(pending, self.checked)))
                 yaw = self.sensors.yaw_rate(r)
                 u, status = self._command(self.sensors.steer(driver), yaw, self.sensors.speed(car.v))
                 np.maximum(peak_u, np.abs(u), out=peak_u)
@@ -140,14 +147,15 @@ class _Group:
                 self.actuator.step(handled)
                 applied = self.actuator.mean  # the car gets the position's mean over the step
                 if self.record:
-                    traces["r"][k], traces["beta"][k], traces["command"][k] = r, car.beta, u
+                    traces["r"][k], traces["beta"][k], traces["command"][k] = car.r, car.beta, u
                 m_z = block["m_z"][j]
                 f_y = block["f_y"][j] if block["f_y"] is not None else None
                 if self.grip:
-                    wheels = [tuple(x if np.ndim(x) == 1 else x[j] for x in w) for w in block["wheels"]]
-                    car.advance(driver + applied, m_z, f_y, block["a_x"][j], wheels, block["mu_max"][j])
+                    b = block["b"]
+                    tyres = Tyres(b[j if b.shape[0] > 1 else 0], block["d"][j])
+                    car.advance(driver + applied, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
                 else:
                     car.advance(driver + applied, m_z, f_y, None, None, car.mu)
-        return {"peak_yaw_rate": peak_r, "peak_side_slip": np.degrees(peak_beta), "time_at_limit": at_limit * ts,
+        return {"peak_yaw_rate": peaks[1], "peak_side_slip": np.degrees(peaks[0]), "time_at_limit": at_limit * ts,
                 "fault_steps": faults, "peak_command": np.degrees(peak_u), "final_yaw_rate": car.r.copy(),
                 "final_speed": car.v.copy(), **traces}

@@ -27,7 +27,11 @@ def ramp(t: np.ndarray, start: np.ndarray, duration: float) -> np.ndarray:
     """``disturbances._ramp``: 0 up to ``start``, 1 after ``start + duration``, 1 - cos between."""
     if duration <= 0.0:
         return np.where(t <= start, 0.0, 1.0)
-    mid = 0.5 * (1.0 - np.cos(np.pi * (t - start) / duration))
+    # 0.5 (1 - cos x) = tan^2(x/2) / (1 + tan^2(x/2)): numpy's float64 tan is vectorised, its cos
+    # is not; x kept within [0, pi] (the other times take the branches' 0 and 1)
+    half = np.tan((0.5 * np.pi) * (np.clip(t - start, 0.0, duration) / duration))
+    half *= half
+    mid = half / (1.0 + half)
     return np.where(t <= start, 0.0, np.where(t >= start + duration, 1.0, mid))
 
 
@@ -91,19 +95,25 @@ class GripLoads:
         a_blow = np.where(blow_on, drag / self.mass, 0.0)
         stiffness = 1.0 - k * bl.stiffness_loss
         peak = 1.0 - k * bl.peak_loss
-        mu_left = self.mu
+        mu_left = np.broadcast_to(self.mu, t.shape[:1] + self.mu.shape)
         mu_right = np.where(split_on, self.mu_right, self.mu)
+        car, steps = self.car, t.shape[0]
+        common = {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
+                  "mu_max": np.maximum(self.mu, mu_right)}
         if self.shared:  # B stiffness / peak with both fractions 1 is B itself
-            car = self.car
-            wheels = [(car.b_f, 0.5 * 1.0 * mu_left * car.f_zf, 0.5 * 1.0 * mu_right * car.f_zf),
-                      (car.b_r, 0.5 * 1.0 * mu_left * car.f_zr, 0.5 * 1.0 * mu_right * car.f_zr)]
-            return {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
-                    "wheels": wheels, "mu_max": np.maximum(self.mu, mu_right)}
-        wheels = []
-        for w in range(4):
+            b = np.stack([car.b_f, car.b_r])[None, :, None]  # (1, axle, 1, rows)
+            d = np.empty((steps, 2, 2, self.mu.size))  # (step, axle, wheel, rows)
+            for a, f_z in enumerate((car.f_zf, car.f_zr)):
+                d[:, a, 0] = 0.5 * 1.0 * mu_left * f_z
+                d[:, a, 1] = 0.5 * 1.0 * mu_right * f_z
+            return {**common, "b": b, "d": d}
+        b, d = (np.empty((steps, 2, 2, self.mu.size)) for _ in range(2))
+        for w in range(4):  # fl, fr, rl, rr: AxleTyre.wheel_force's (B stiffness / peak, 0.5 peak mu F_z)
             hit = self.blown[w] & blow_on
             st = np.where(hit, stiffness, 1.0)
             pk = np.where(hit, peak, 1.0)
-            wheels.append(self.car.wheel(w <= 1, st, pk, mu_left if w % 2 == 0 else mu_right))
-        return {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
-                "wheels": wheels, "mu_max": np.maximum(self.mu, mu_right)}
+            front = w <= 1
+            b_axle, f_z = (car.b_f, car.f_zf) if front else (car.b_r, car.f_zr)
+            b[:, 1 - front, w % 2] = b_axle * st / pk
+            d[:, 1 - front, w % 2] = 0.5 * pk * (mu_left if w % 2 == 0 else mu_right) * f_z
+        return {**common, "b": b, "d": d}

@@ -61,6 +61,10 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         u = ctrl.step(steer, yaw, speed) if ctrl is not None else 0.0
         pipeline.append(u)
         handling.command_received()  # lockstep: the answer arrived
+        # The controller's status as a clean monitor sends it: every check running, none tripped
+        # (the actuator's authority limit then bounds only size and rate; the batch engine has
+        # neither the monitor nor this second limit yet: docs/campaigns.md).
+        handling.status_received(0)
         handling.tick()
         position.step(handling.applied)
         r_hist[k], beta_hist[k], u_hist[k] = x[1], x[0], u

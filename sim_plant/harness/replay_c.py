@@ -1,7 +1,8 @@
-"""The C port's law on a replay's inputs: ``ports/c/mrs_replay`` (``mrsteer replay --impl c``).
+"""The C port's law and its guards on a replay's inputs: ``ports/c/mrs_replay`` (``mrsteer replay
+--impl c``): ``mrs_step``, the plausibility monitor and the authority limiter, as the node runs them.
 
 The Python replay (``replay.replay``) has already decoded the frames, run the receive checks,
-the freshness rule and the trigger, and kept what went into ``step()`` at every cycle.  Those
+the freshness rule and the trigger, and kept what went into ``step()`` and the monitor at every cycle.  Those
 inputs go to the C driver with the node's effective calibration (a calibration file,
 ``firmware_py.calibration_file``); its ``mrs_step`` outputs are put in the command's DBC encoding
 (so an angle is compared at the resolution the bus carries) and compared with the recorded
@@ -48,10 +49,12 @@ def build() -> Path:
     return PORT / DRIVER
 
 
-def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
-    """(u, status, fault_flags) of the C port at every non-final step of ``result``."""
+def run_driver(result: ReplayResult) -> list[tuple[float, int, int, int]]:
+    """(u, reported state, fault_flags, plausibility bits) of the C port at every non-final step
+    of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r}\n" for s in result.steps if s.kind != "final" for d, r, v in [s.inputs[:3]])
+    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r}\n" for s in result.steps if s.kind != "final"
+                     for d, r, v, lat, d2 in [s.inputs])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
         cfg.write_text(calibration_file.dumps(result.config))
@@ -60,8 +63,8 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int]]:
         raise PortError(f"{DRIVER} failed: {proc.stderr.strip()}")
     rows = []
     for line in proc.stdout.splitlines():
-        u, status, flags = line.split()
-        rows.append((float(u), int(status), int(flags)))
+        u, status, flags, plausibility = line.split()
+        rows.append((float(u), int(status), int(flags), int(plausibility)))
     return rows
 
 
@@ -76,13 +79,13 @@ def replay_c(result: ReplayResult, contract: mrsteer_dbc.Contract | None = None)
             outs.append(step.out)
             statuses.append(step.status)
             continue
-        u, status, flags = next(rows)
+        u, status, flags, plausibility = next(rows)
         d = c.decode(c.frame_id(MSG_CMD), c.encode(MSG_CMD, {SIG_CMD_STATE: status, SIG_CMD_ANGLE: u,
                                                             SIG_CMD_MEAS: step.out.meas or 0}, 0))
         assert d is not None
         outs.append(replace(step.out, angle=float(d.signals[SIG_CMD_ANGLE]), state=status))
         statuses.append(None if step.status is None else replace(step.status, state=status, flags=flags, cause=None,
-                                                                 rejected=None))
+                                                                 rejected=None, plausibility=plausibility))
     found, worst = compare(result.steps, result.recorded_statuses, c.frame_id(MSG_CMD), c.frame_id(MSG_STATUS),
                            outs, statuses)
     steps = [replace(s, out=o) for s, o in zip(result.steps, outs)]

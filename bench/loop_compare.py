@@ -1,0 +1,175 @@
+"""The Python and the C controller side by side on the same bus, quiet and under a bounded load.
+
+``compare`` runs ``loop.loop_timing`` four times at one rate on a private fallback bus: the
+Python controller, then the C node (``ports/c/build/mrs_node``, built first), once on the
+machine as it is ("quiet") and once with ``CpuLoad`` (``procs`` busy loops, started before the
+run and stopped after it). Each condition also times an empty deadline loop in the bench
+process, the machine's own scheduling noise at that moment, and records the load average, the
+CPU time by kind (busy, niced, steal) and the other real-time processes (``machine_state``),
+since a shared machine is never really quiet. ``format_table`` prints the
+figures with the Python/C ratio and the C node's targets of issue 16 (lateness p99 <= 100 us,
+no missed cycle, latency p99 <= 500 us). Figures, not pass/fail: nothing here asserts timing.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, ContextManager
+
+from mrsteer_bench import loop, machine_state as ms
+from mrsteer_bench.cpu_load import CpuLoad
+from sim_plant.harness import launch
+
+CONDITIONS = ("quiet", "loaded")
+IMPLS = ("python", "c")
+# (result key, table label); the ratio is Python over C for each
+METRICS = (("lateness_p50_us", "lateness p50 (us)"), ("lateness_p99_us", "lateness p99 (us)"),
+           ("lateness_max_us", "lateness max (us)"), ("missed_cycles", "missed cycles"),
+           ("latency_p50_us", "latency p50 (us)"), ("latency_p99_us", "latency p99 (us)"))
+C_TARGETS = {"lateness_p99_us": 100.0, "missed_cycles": 0.0, "latency_p99_us": 500.0}  # each: value <= target
+BUS = "fallback bus (mrsteer broker, Unix SOCK_SEQPACKET), private channel per run"
+LOAD_MARGIN_S = 240.0  # the load's own time bound beyond the run: process starts on a loaded machine
+BASELINE_MAX_S = 5.0
+
+Measure = Callable[..., dict[str, Any]]
+Baseline = Callable[[float, float, bool], dict[str, dict[str, Any]]]
+LoadFactory = Callable[[int, float], ContextManager[Any]]
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    rate_hz: float
+    seconds: float  # each controller, each condition
+    load_procs: int  # busy loops for the loaded condition; 0: no loaded condition
+    pin: bool = True  # the controller on the last CPU (as loop_timing does), SCHED_FIFO 50 both ways
+
+
+def empty_loops(rate_hz: float, seconds: float, pin: bool) -> dict[str, dict[str, Any]]:
+    """The two baselines: an empty deadline loop in the bench process (no real-time set-up), and
+    one with the controllers' SCHED_FIFO priority and CPU, what the kernel gives any such loop."""
+    return {"no_rt": loop.bare_loop_lateness(rate_hz, seconds), "rt": loop.rt_loop_lateness(rate_hz, seconds, pin)}
+
+
+def ratio(python: float, c: float) -> float | None:
+    """Python's figure over C's; None where C's is zero (or either is not a number)."""
+    if c != c or python != python or c <= 0:
+        return None
+    return python / c
+
+
+def judge_c(run: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Each C target: its bound, the C node's value and whether the value is within it."""
+    out = {}
+    for key, bound in C_TARGETS.items():
+        value = float(run[key])
+        out[key] = {"target": bound, "value": value, "met": bool(value <= bound)}
+    return out
+
+
+def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...] | None],
+               measure: Measure, baseline: Baseline, say: Callable[[str], None]) -> dict[str, Any]:
+    out: dict[str, Any] = {"loadavg_before": ms.load_average()}
+    cpu0, rt0 = ms.cpu_times(), ms.realtime_processes()
+    for impl in IMPLS:
+        say(f"loop {name}: {impl} controller at {s.rate_hz:g} Hz for {s.seconds:g} s ...")
+        out[impl] = measure(s.rate_hz, s.seconds, pin=s.pin, program=programs[impl], baseline=False)
+    say(f"loop {name}: empty deadline loops, without and with the real-time set-up ...")
+    out["empty_loop"] = baseline(s.rate_hz, min(s.seconds, BASELINE_MAX_S), s.pin)
+    out["loadavg_after"] = ms.load_average()
+    out["cpu_percent"] = ms.usage_percent(cpu0, ms.cpu_times())
+    # seen before and after the runs, when none of the bench's controllers is running
+    rt = {p["pid"]: p for p in rt0 + ms.realtime_processes()}
+    out["other_realtime_processes"] = list(rt.values())
+    return out
+
+
+def compare(s: CompareSettings, say: Callable[[str], None], *, measure: Measure = loop.loop_timing,
+            baseline: Baseline = empty_loops, load: LoadFactory = CpuLoad,
+            programs: dict[str, tuple[str, ...] | None] | None = None) -> dict[str, Any]:
+    """Both controllers, quiet then loaded (when ``load_procs`` > 0); the load is stopped on
+    leaving its condition, also on an error or Ctrl-C. ``measure``, ``baseline``, ``load`` and
+    ``programs`` are the real ones unless given (tests give fakes)."""
+    if programs is None:
+        say("building the C node (make -C ports/c node) ...")
+        programs = {"python": None, "c": launch.controller_program("c")}
+    conditions = CONDITIONS if s.load_procs > 0 else CONDITIONS[:1]
+    runs: dict[str, Any] = {}
+    for name in conditions:
+        if name == "loaded":
+            # bounded in time too: the whole condition, with room for slow process starts
+            bound = len(IMPLS) * (s.seconds + LOAD_MARGIN_S)
+            with load(s.load_procs, bound):
+                runs[name] = _condition(name, s, programs, measure, baseline, say)
+        else:
+            runs[name] = _condition(name, s, programs, measure, baseline, say)
+    return {
+        "settings": asdict(s), "bus": BUS,
+        "load": {"procs": s.load_procs, "kind": "busy-loop processes", "nice": os.nice(0),
+                 "cpus": os.cpu_count()},
+        "machine": {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()},
+        "runs": runs,
+        "ratios": {c: {k: ratio(float(r["python"][k]), float(r["c"][k])) for k, _ in METRICS} for c, r in runs.items()},
+        "c_targets": {c: judge_c(r["c"]) for c, r in runs.items()},
+    }
+
+
+def _num(value: float) -> str:
+    return "nan" if value != value else f"{value:.0f}"
+
+
+def _ratio(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
+def _target(key: str, seconds: float) -> str:
+    bound = C_TARGETS.get(key)
+    if bound is None:
+        return ""
+    return f"0 in {seconds:g} s" if key == "missed_cycles" else f"<= {bound:g}"
+
+
+def format_table(res: dict[str, Any]) -> str:
+    """The side-by-side table: per condition Python, C and Python/C; the C target and whether met."""
+    s, runs = res["settings"], res["runs"]
+    conds = list(runs)
+    head = f"{'':<30}" + "".join(f"{c + ': python':>16}{'c':>9}{'py/c':>7}" for c in conds)
+    lines = [f"loop, Python and C controllers side by side: {s['rate_hz']:g} Hz, {s['seconds']:g} s each, {res['bus']}",
+             head + f"   {'C target':<12}met ({'/'.join(conds)})", "-" * (len(head) + 30)]
+    for key, label in METRICS:
+        row = f"{label:<30}"
+        for c in conds:
+            row += f"{_num(float(runs[c]['python'][key])):>16}{_num(float(runs[c]['c'][key])):>9}"
+            row += f"{_ratio(res['ratios'][c][key]):>7}"
+        met = "/".join("yes" if res["c_targets"][c][key]["met"] else "NO" for c in conds) if key in C_TARGETS else ""
+        lines.append(row + f"   {_target(key, s['seconds']):<12}{met}")
+    rows = [("cycles", lambda r, i: str(r[i]["cycles"])),
+            ("latency samples", lambda r, i: str(r[i]["latency_samples"]))]
+    for label, cell in rows:
+        lines.append(f"{label:<30}" + "".join(f"{cell(runs[c], 'python'):>16}{cell(runs[c], 'c'):>9}{'':>7}"
+                                              for c in conds))
+    for kind, label in (("no_rt", "empty loop, no RT (us)"), ("rt", "empty loop, RT+pin (us)")):
+        lines.append(f"{label:<30}" + "".join(
+            ("/".join(_num(runs[c]["empty_loop"][kind][k]) for k in ("p50_us", "p99_us", "max_us"))
+             + f", {runs[c]['empty_loop'][kind]['missed_cycles']} missed").rjust(32) for c in conds))
+    lines.append(f"{'load average 1 min before/after':<30}" + "".join(
+        "/".join(f"{r[k][0]:.2f}" if r[k] else "?" for k in ("loadavg_before", "loadavg_after")).rjust(32)
+        for r in (runs[c] for c in conds)))
+    lines.append(f"{'CPU busy/niced/steal (%)':<30}" + "".join(
+        ("/".join(f"{r['cpu_percent'][k]:.0f}" for k in ("busy", "niced", "steal")) if r.get("cpu_percent")
+         else "?").rjust(32) for r in (runs[c] for c in conds)))
+    lines.append(f"{'other SCHED_FIFO/RR processes':<30}" + "".join(
+        str(len(runs[c].get("other_realtime_processes", []))).rjust(32) for c in conds))
+    py = runs[conds[0]]["python"]
+    rtp = py.get("rt_priority") or f"denied ({py.get('rt_priority_denied')})"
+    ld = res["load"]
+    lines.append(f"controllers: SCHED_FIFO {rtp}, CPU affinity {py.get('cpu_affinity')}; machine: "
+                 f"{res['machine']['cpus']} CPUs, {res['machine']['platform']}")
+    if "loaded" in runs:
+        kind = ld["kind"] if ld["procs"] != 1 else ld["kind"].replace("processes", "process")
+        lines.append(f"loaded: {ld['procs']} {kind} at nice {ld['nice']}, started before and stopped after "
+                     "the loaded runs; quiet: the machine as it was (see its load average)")
+    lines.append("empty loops: p50/p99/max lateness of an empty deadline loop, in the bench process (no RT) and "
+                 "with the controllers' SCHED_FIFO priority and CPU (RT+pin)")
+    return "\n".join(lines)

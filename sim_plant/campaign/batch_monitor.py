@@ -1,0 +1,229 @@
+"""Issue 18's safety layer vectorised over a batch, for the batch engine: the authority limiter
+(``firmware_py.authority.authority_step``) and the plausibility monitor
+(``firmware_py.plausibility.monitor_step``) for N rows at once.
+
+``BatchAuthority.step`` and ``BatchMonitor.step`` are the scalar functions statement for
+statement on arrays: each branch of the scalar code a mask in its order, the counters and the
+latched bits int arrays, the state one array per slot of the scalar state (``AuthorityState``,
+``MonitorState``).  The coefficients are the firmware's own (``configure_authority``,
+``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds both equal to the scalar
+code row by row and period by period: the bits, the flags, the counters, the residuals.
+
+Not done yet (docs/campaigns.md, "Not yet in the batch engine"): the car's a_y and the redundant
+sensors in the batch, the oracle ``reference.run`` as the node, and both wired into ``engine``
+after the law.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_py import authority as au
+from firmware_py import plausibility as pl
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT
+
+
+class BatchAuthority:
+    """N instances of the authority limiter configured with one ``AuthorityConfig``."""
+
+    def __init__(self, config: au.AuthorityConfig, n: int) -> None:
+        self.c = au.configure_authority(config)
+        self.u = np.zeros(n)
+        self.engaged = np.zeros(n, dtype=np.int64)
+        self.quiet = np.zeros(n, dtype=np.int64)
+        self.flags = np.zeros(n, dtype=np.int64)
+
+    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
+        """The command allowed this period per row (rad) for the law's ``u_request`` and the
+        monitor's ``plaus_bits``."""
+        c = self.c
+        finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
+        fault = ((plaus_bits & PLAUS_FAULT) != 0) | ~finite
+        timed_out = ~fault & (self.engaged >= c.window_steps) & ((plaus_bits & PLAUS_DEGRADED) != 0)
+        fading = fault | timed_out
+        flags = np.where(fault, au.AUTH_FAULT, 0) | np.where(timed_out, au.AUTH_TIME, 0)
+        # the request clamped to +-u_max (a fading row's target is 0; its request may be NaN)
+        request = np.where(fading, 0.0, u_request)
+        over, under = request > c.u_max, request < -c.u_max
+        target = np.where(over, c.u_max, np.where(under, -c.u_max, request))
+        flags |= np.where(~fading & (over | under), au.AUTH_MAGNITUDE, 0)
+        du = np.where(fading, c.fade_step, c.du_max)
+        d = target - self.u
+        up, down = d > du, d < -du
+        d = np.where(up, du, np.where(down, -du, d))
+        flags |= np.where((up | down) & (du == c.du_max), au.AUTH_RATE, 0)
+        u = self.u + d
+        acting = (u > c.engage) | (u < -c.engage)
+        self.engaged = np.where(acting & (self.engaged < c.window_steps), self.engaged + 1, self.engaged)
+        quiet = np.where(acting, 0, np.where(self.quiet < c.rearm_steps, self.quiet + 1, self.quiet))
+        self.engaged = np.where(~acting & (quiet >= c.rearm_steps), 0, self.engaged)
+        self.quiet = quiet
+        self.u = u
+        self.flags = flags
+        return u
+
+
+def _count(count: np.ndarray, over: np.ndarray, runs: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A net counter of ``monitor_step``: +1 over the bound (held at ``steps``), else -1 down to
+    0, in the rows where the check ``runs``; the new counts and the rows it trips in."""
+    up = runs & over
+    down = runs & ~over & (count > 0)
+    count = np.where(up, count + 1, np.where(down, count - 1, count))
+    trip = up & (count >= steps)
+    return np.where(trip, steps, count), trip
+
+
+def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A frozen-value counter: +1 (held at ``steps``) where the partner ``moved``; trips at steps."""
+    same = np.where(moved & (same < steps), same + 1, same)
+    return same, moved & (same >= steps)
+
+
+_FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
+           "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev")
+_INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
+         "flags", "bits", "kin_idx", "kin_n", "since")
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok")
+
+
+class BatchMonitor:
+    """N plausibility monitors (``monitor_step``) configured with one ``PlausibilityConfig``:
+    one array per ``MonitorState`` slot (the kinematic windows (KIN_WINDOW, N)), every branch of
+    the scalar code a mask in its order."""
+
+    def __init__(self, config: pl.PlausibilityConfig, n: int) -> None:
+        self.c = pl.configure(config)
+        for name in _FLOATS:
+            setattr(self, name, np.zeros(n))
+        for name in _INTS:
+            setattr(self, name, np.zeros(n, dtype=np.int64))
+        for name in _BOOLS:
+            setattr(self, name, np.zeros(n, dtype=bool))
+        self.kin_raw = np.zeros((pl.KIN_WINDOW, n))
+        self.kin_comp = np.zeros((pl.KIN_WINDOW, n))
+        self._cols = np.arange(n)
+
+    def _set(self, name: str, rows: np.ndarray, value) -> None:
+        setattr(self, name, np.where(rows, value, getattr(self, name)))
+
+    def step(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
+             aux: np.ndarray) -> np.ndarray:
+        """``monitor_step(c, s, delta_driver=d, delta_driver_redundant=d2, yaw_rate=r,
+        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits."""
+        c = self.c
+        with np.errstate(all="ignore"):  # a paused row's arithmetic (NaN, 1/0) is computed and dropped
+            flags = self.latched.copy()
+            act = ((-1e3 < d) & (d < 1e3) & (-1e3 < r) & (r < 1e3) & (c.speed_min <= v) & (v < 1e3)
+                   & (-1e3 < aux) & (aux < 1e3))
+            lat_ok = (-1e3 < lat) & (lat < 1e3)
+            st2_ok = (-1e3 < d2) & (d2 < 1e3)
+            missing = ~(lat_ok & st2_ok)
+            flags |= np.where(missing, pl.MISSING, 0)
+            self._set("kin_n", missing, 0)
+            self._set("have_sample", missing, False)
+            paused = ~act
+            for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
+                         "kin_n"):
+                self._set(name, paused, 0)
+            self._set("started", paused, False)
+            self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
+            flags |= self.latched
+        bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
+                | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
+                | np.where((flags & pl.MISSING) != 0, pl.PLAUS_DEGRADED, 0))
+        self.flags, self.bits = flags, bits
+        return bits
+
+    # The active rows' part of monitor_step, in its order (model, kinematic and pair at a new
+    # redundant sample, frozen); long because it is the scalar's four checks inline.
+    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux) -> None:
+        c = self.c
+        inv_v = 1.0 / v
+        r_kin = np.where(lat_ok, lat * inv_v, 0.0)
+        delta = d + aux
+        r_ss = delta * v / (c.wheelbase + c.k_us * v * v)
+        init = act & ~self.started
+        for name, value in (("r_model", r_ss), ("kin_n", 0), ("kin_idx", 0), ("since", 0), ("have_sample", False),
+                            ("lat_prev", lat), ("steer2_prev", d2), ("yaw_last", r), ("lat_last", lat),
+                            ("st_last", d), ("st2_last", d2), ("yaw_ref", r_kin), ("lat_ref", r), ("st_ref", d2),
+                            ("st2_ref", d), ("yaw_ref_ok", False), ("st_ref_ok", False), ("started", True)):
+            self._set(name, init, value)
+        self._set("r_model", act, self.r_model + c.model_alpha * (r_ss - self.r_model))
+        e = np.abs(r - self.r_model)
+        bound = c.model_margin + c.model_rel * np.abs(self.r_model)
+        self._set("model_err", act, e / bound)
+        self.model_count, trip = _count(self.model_count, e > bound, act, c.model_steps)
+        self.latched |= np.where(trip, pl.CHECK_MODEL, 0)
+        self._set("since", act & (self.since < 1000000), self.since + 1)
+
+        new = act & lat_ok & st2_ok & ((lat != self.lat_prev) | (d2 != self.steer2_prev))
+        raw = r_kin - r
+        beta = (c.moment_m * inv_v * inv_v * r + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * v
+        into = new & self.have_sample
+        mid = 0.5 * (raw + self.raw_prev)
+        i, cols = self.kin_idx, self._cols
+        self.kin_raw[i, cols] = np.where(into, mid, self.kin_raw[i, cols])
+        comp_now = mid - (beta - self.beta_prev) / (self.since * c.ts)
+        self.kin_comp[i, cols] = np.where(into, comp_now, self.kin_comp[i, cols])
+        self._set("kin_idx", into, np.where(i + 1 >= pl.KIN_WINDOW, 0, i + 1))
+        self._set("kin_n", into & (self.kin_n < pl.KIN_WINDOW), self.kin_n + 1)
+        self._set("have_sample", new, True)
+        self._set("raw_prev", new, raw)
+        self._set("beta_prev", new, beta)
+        self._set("since", new, 0)
+        kr, kc = self.kin_raw, self.kin_comp
+        raw_avg = np.abs((kr[0] + kr[1] + kr[2] + kr[3]) * (1.0 / pl.KIN_WINDOW)) * c.inv_yaw_raw_fraction
+        comp = np.abs((kc[0] + kc[1] + kc[2] + kc[3]) * (1.0 / pl.KIN_WINDOW))
+        e = np.where(comp < raw_avg, comp, raw_avg)
+        e = np.where(self.kin_n < pl.KIN_WINDOW, 0.0, e)
+        bound = c.yaw_bound + c.yaw_rel * np.abs(r_kin)
+        self._set("kin_err", new, e / bound)
+        self.kin_count, trip = _count(self.kin_count, e > bound, new, c.yaw_count)
+        self.latched |= np.where(trip, pl.CHECK_KINEMATIC, 0)
+        e = np.abs(d - d2)
+        self._set("pair_err", new, e * c.inv_steer_bound)
+        self.pair_count, trip = _count(self.pair_count, e > c.steer_bound, new, c.steer_count)
+        self.latched |= np.where(trip, pl.CHECK_STEER_PAIR, 0)
+        self._set("lat_prev", act & lat_ok, lat)
+        self._set("steer2_prev", act & st2_ok, d2)
+        self._frozen_checks(act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin)
+
+    def _frozen_checks(self, act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin) -> None:
+        c = self.c
+        steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
+        changed = act & (r != self.yaw_last)  # the yaw rate against a_y / v
+        take = act & ~changed & new & ~self.yaw_ref_ok
+        check = act & ~changed & ~take & lat_ok & self.yaw_ref_ok
+        self._set("yaw_last", changed, r)
+        self._set("yaw_same", changed, 0)
+        self._set("yaw_ref_ok", changed, False)
+        self._set("yaw_ref", take, r_kin)
+        self._set("yaw_ref_ok", take, True)
+        self.yaw_same, trip = _frozen(self.yaw_same, check & (np.abs(r_kin - self.yaw_ref) > move_yaw), steps)
+        self.latched |= np.where(trip, pl.FROZEN_YAW, 0)
+        on = act & lat_ok  # a_y against the yaw rate
+        changed = on & (lat != self.lat_last)
+        self._set("lat_last", changed, lat)
+        self._set("lat_same", changed, 0)
+        self._set("lat_ref", changed, r)
+        moved = on & ~changed & (np.abs(r - self.lat_ref) > move_yaw)
+        self.lat_same, trip = _frozen(self.lat_same, moved, steps)
+        self.latched |= np.where(trip, pl.FROZEN_LAT, 0)
+        on = act & st2_ok  # each steering channel against the other
+        changed = on & (d != self.st_last)
+        take = on & ~changed & new & ~self.st_ref_ok
+        check = on & ~changed & ~take & self.st_ref_ok
+        self._set("st_last", changed, d)
+        self._set("st_same", changed, 0)
+        self._set("st_ref_ok", changed, False)
+        self._set("st_ref", take, d2)
+        self._set("st_ref_ok", take, True)
+        self.st_same, trip = _frozen(self.st_same, check & (np.abs(d2 - self.st_ref) > move_st), steps)
+        self.latched |= np.where(trip, pl.FROZEN_STEER, 0)
+        changed = on & (d2 != self.st2_last)
+        self._set("st2_last", changed, d2)
+        self._set("st2_same", changed, 0)
+        self._set("st2_ref", changed, d)
+        moved = on & ~changed & (np.abs(d - self.st2_ref) > move_st)
+        self.st2_same, trip = _frozen(self.st2_same, moved, steps)
+        self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
