@@ -72,6 +72,7 @@ class Drive:
     seconds: float = 1.6
     stuck_yaw: bool = False
     redundant: bool = True
+    jitter: bool = False  # every 3rd redundant frame 10 periods late, the yaw frame of every 4th's period lost
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -79,6 +80,7 @@ class Drive:
                  for m in (names.MSG_STEER, names.MSG_SPEED, names.MSG_REDUNDANT, names.MSG_YAW)}
         gain = V / (2.54 + 0.0023 * V * V)  # close to the nominal car's K_n(v); the monitor's bounds are wide
         alive = dict.fromkeys(every, 0)
+        late: dict[int, list[tuple[int, bytes]]] = {}
         out = []
         for k in range(int(self.seconds * RATE_HZ)):
             t = k / RATE_HZ
@@ -92,9 +94,16 @@ class Drive:
             for msg, n in every.items():
                 if k % n or (msg == names.MSG_REDUNDANT and not self.redundant):
                     continue
-                period.append((contract.frame_id(msg), contract.encode(msg, values[msg], alive[msg])))
+                frame = (contract.frame_id(msg), contract.encode(msg, values[msg], alive[msg]))
+                sample = k // every[names.MSG_REDUNDANT]
                 alive[msg] = (alive[msg] + 1) % 15
-            out.append(period)
+                if self.jitter and msg == names.MSG_REDUNDANT and sample % 3 == 1:
+                    late.setdefault(k + 10, []).append(frame)  # a stalled sender
+                    continue
+                if self.jitter and msg == names.MSG_YAW and k % every[names.MSG_REDUNDANT] == 0 and sample % 4 == 2:
+                    continue  # this period's yaw-rate frame lost
+                period.append(frame)
+            out.append(late.pop(k, []) + period)
         return out
 
 
@@ -188,6 +197,16 @@ def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in
     k_dist = int(DIST_T * RATE_HZ)
     assert abs(cmds[k_dist + int(0.5 * RATE_HZ)][names.SIG_CMD_ANGLE]) > 1e-3
     assert all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[-int(0.3 * RATE_HZ):])
+
+
+def test_redundant_samples_off_time_are_withheld_as_in_python(secoc_check: Path) -> None:
+    # A late redundant frame (a stalled sender) and one whose period lost its yaw-rate frame are
+    # withheld from the monitor for their hold: DEGRADED then, never a fault.
+    cmds, statuses = _run(secoc_check, Drive(seconds=2.0, jitter=True))
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    assert pl.PLAUS_DEGRADED in plaus and 0 in plaus[5:]
+    assert not any(p & pl.PLAUS_FAULT for p in plaus)
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds[50:]}
 
 
 STUCK_SCENARIO = """

@@ -293,3 +293,21 @@ def test_steering_channels_that_disagree_fault_with_the_steering_bit(rig: Rig) -
             break
     assert k <= 300 and rig.node.plausibility & names.PLAUS_STEER
     assert not rig.node.plausibility & names.PLAUS_YAW
+
+
+def test_a_redundant_sample_off_its_alive_counters_time_is_withheld_from_the_monitor(rig: Rig) -> None:
+    # The monitor differentiates over the periods between samples and pairs each with the yaw
+    # rate of its cycle: a sample that a stall delivered late (its counter says 50 ms, the node
+    # counted 70) would read as a side slip, so it is withheld (NaN: DEGRADED) for its hold.
+    for _ in range(300):
+        rig.cycle(yaw=0.0, redundant=(0.0, 0.0))
+    assert not math.isnan(rig.node.redundant_inputs()[0]) and rig.node.plausibility == 0
+    rig.k -= 30  # the next redundant frame comes 30 periods late (its counter one on)
+    seen = []
+    for _ in range(140):
+        rig.cycle(yaw=0.0, redundant=(0.0, 0.0))
+        seen.append(math.isnan(rig.node.redundant_inputs()[0]))
+    assert not any(seen[:30])  # the last sample in time, still held
+    assert all(seen[30:80])  # the late one (80 periods after it), for its whole hold
+    assert not any(seen[80:])  # the next, 50 periods on: in time again
+    assert rig.node.plausibility == 0 and rig.node.cause == 0  # DEGRADED came and went, no fault

@@ -11,7 +11,11 @@ Each cycle, in this order (the scheduling contract a port must keep):
 4. the plausibility monitor (``firmware_py.plausibility``) checks the inputs against each other,
    against ``MRS_RedundantSensors`` (lateral acceleration, the second steering channel; NaN when
    missing, which makes it report DEGRADED) and against the nominal car, given the command sent
-   the period before; the authority limiter (``firmware_py.authority``) bounds ``step()``'s
+   the period before.  The monitor compares a redundant sample with the yaw rate of the cycle it
+   arrives in and differentiates over the periods between samples, so a sample is withheld (NaN
+   until the next one) when that pairing is off: the yaw-rate frame of its cycle missing, or its
+   arrival more than ``REDUNDANT_JITTER_CYCLES`` periods from what its alive counter says
+   (delta x 50 ms): a stalled sender or receiver, whose bursts would read as a side slip; the authority limiter (``firmware_py.authority``) bounds ``step()``'s
    command in magnitude, rate and time and fades it to zero on a plausibility fault, which the
    node reports as state FAULT with ``CAUSE_PLAUSIBILITY``;
 5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
@@ -52,6 +56,7 @@ from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG
                                            SYNC_WINDOW, phase_correction)
 from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
+from mrsteer_dbc.e2e import COUNTER_MODULO
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
 from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, CAUSE_RANGE,
                                CAUSE_SPEED_MISSING, CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD,
@@ -62,6 +67,9 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_YAW_RATE)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
+# Control periods a redundant sample's arrival may differ from its alive counter's account of
+# the time (delta x its DBC cycle) before the node withholds it from the monitor.
+REDUNDANT_JITTER_CYCLES = 2
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
 TRIGGERS = ("clock", "sensors")
 
@@ -120,6 +128,11 @@ class ControllerNode:
         }
         self._by_name = {inp.name: inp for inp in self.inputs.values()}
         self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
+        self.redundant_id = c.frame_id(MSG_REDUNDANT)
+        self._red_expected = (c.cycle_time_s(MSG_REDUNDANT, period) or period) / period  # periods per sample
+        self._red_cycles = 0  # control periods since the last accepted redundant frame
+        self._red_counter = -1  # its alive counter; -1 before the first
+        self._red_usable = False  # the held redundant sample is paired in time (see redundant_inputs)
         self.yaw_id = c.frame_id(MSG_YAW)
         keyed = config.secoc_key is not None
         self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
@@ -181,12 +194,36 @@ class ControllerNode:
         inp.value = got.signals[inp.signal]
         if inp.second_signal is not None:
             inp.second_value = got.signals[inp.second_signal]
+        if frame_id == self.redundant_id:
+            self._time_redundant(got.counter)
         inp.last_counter = got.counter
         inp.age = 0
         if frame_id == self.yaw_id:
             self._yaw_stamp = msg.timestamp or 0.0
             return True
         return False
+
+    def _time_redundant(self, counter: int) -> None:
+        """A redundant sample is in time when it arrived within ``REDUNDANT_JITTER_CYCLES`` periods
+        of what its alive counter says elapsed since the one before (the first one is)."""
+        if self._red_counter >= 0:
+            expected = ((counter - self._red_counter) % COUNTER_MODULO) * self._red_expected
+            self._red_usable = abs(self._red_cycles - expected) <= REDUNDANT_JITTER_CYCLES
+        else:
+            self._red_usable = True
+        self._red_counter = counter
+        self._red_cycles = 0
+
+    def redundant_inputs(self) -> tuple[float, float]:
+        """(lateral acceleration, second steering channel) for the monitor this cycle: NaN when
+        ``MRS_RedundantSensors`` is not fresh, or its sample is not paired in time (it arrived
+        off its alive counter's time, or, in the cycle it arrived, without this cycle's yaw-rate
+        frame).  Pure: ``control()`` keeps the verdict for the sample's hold."""
+        red = self._redundant
+        usable = self._red_usable and not (red.age == 0 and self._yaw.age != 0)
+        if usable and red.age <= red.limit and red.rejects < self.cfg.e2e_fail_max:
+            return red.value, red.second_value
+        return math.nan, math.nan
 
     def drain(self) -> bool:
         got_yaw = False
@@ -204,18 +241,18 @@ class ControllerNode:
         cause = 0
         values = []
         fail_max = self.cfg.e2e_fail_max
+        red = self._redundant
+        lat, steer_2 = self.redundant_inputs()  # before the ages move on
+        if red.age == 0 and self._yaw.age != 0:
+            self._red_usable = False  # withheld for its whole hold, not taken up a cycle late
+        red.age += 1
+        self._red_cycles += 1
         for inp in (self._steer, self._yaw, self._speed):
             ok = inp.age <= inp.limit and inp.rejects < fail_max
             if not ok:
                 cause |= inp.missing_cause if inp.rejects < fail_max else inp.bad_cause
             values.append(inp.value if ok else math.nan)
             inp.age += 1
-        red = self._redundant
-        if red.age <= red.limit and red.rejects < fail_max:
-            lat, steer_2 = red.value, red.second_value
-        else:
-            lat = steer_2 = math.nan
-        red.age += 1
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2])

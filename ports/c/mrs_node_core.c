@@ -110,6 +110,11 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     n->status_every = every < 1.0 ? 1u : (uint64_t)every;
     n->cmd_alive = MRS_E2E_COUNTER_MODULO - 1u;
     n->answers = MRS_MEAS_NONE;
+    {
+        const mrs_msg_t *rm = &mrs_messages[MRS_MSG_REDUNDANT];
+        n->red_expected = ((rm->control_loop || rm->cycle_s == 0.0) ? n->period : rm->cycle_s) / n->period;
+    }
+    n->red_counter = -1;
     return 0;
 }
 
@@ -158,6 +163,23 @@ static rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, const
     return RX_OK;
 }
 
+/* A redundant sample is in time when it arrived within MRS_REDUNDANT_JITTER_CYCLES periods of
+ * what its alive counter says elapsed since the one before (the first one is): node.py's
+ * _time_redundant. */
+static void time_redundant(mrs_node_t *n, unsigned counter)
+{
+    if (n->red_counter >= 0) {
+        const unsigned delta =
+            (counter + MRS_E2E_COUNTER_MODULO - (unsigned)n->red_counter) % MRS_E2E_COUNTER_MODULO;
+        const double expected = (double)delta * n->red_expected;
+        n->red_usable = fabs((double)n->red_cycles - expected) <= (double)MRS_REDUNDANT_JITTER_CYCLES;
+    } else {
+        n->red_usable = 1;
+    }
+    n->red_counter = (int)counter;
+    n->red_cycles = 0;
+}
+
 int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
 {
     double phys[MRS_MAX_SIGNALS];
@@ -204,6 +226,9 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
     }
     in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
     in->age = 0;
+    if (in->msg == MRS_MSG_REDUNDANT) {
+        time_redundant(n, in->last_counter);
+    }
     if (in->msg == MRS_MSG_YAW) {
         n->yaw_stamp = f->stamp;
         return 1;
@@ -292,6 +317,18 @@ int mrs_node_control(mrs_node_t *n)
     mrs_real_t values[3];
     double lat = NAN, steer2 = NAN, u_req;
     int i, fault;
+    mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
+    /* node.py's redundant_inputs, before the ages move on: withheld when not paired in time. */
+    const int unpaired = red->age == 0 && n->in[1].age != 0;
+    const int in_time = n->red_usable && !unpaired;
+    if (fresh(n, red) && in_time) {
+        lat = red->value;
+        steer2 = red->value2;
+    }
+    if (unpaired) {
+        n->red_usable = 0; /* withheld for its whole hold, not taken up a cycle late */
+    }
+    ++n->red_cycles;
     for (i = 0; i < 3; ++i) {
         mrs_input_t *in = &n->in[i];
         const int ok = fresh(n, in);
@@ -299,10 +336,6 @@ int mrs_node_control(mrs_node_t *n)
             cause |= in->rejects < n->e2e_fail_max ? in->missing_cause : in->bad_cause;
         }
         values[i] = ok ? (mrs_real_t)in->value : (mrs_real_t)NAN;
-    }
-    if (fresh(n, &n->in[MRS_IN_REDUNDANT])) {
-        lat = n->in[MRS_IN_REDUNDANT].value;
-        steer2 = n->in[MRS_IN_REDUNDANT].value2;
     }
     /* Which measurement this command answers; NONE when no valid yaw rate went into it. */
     n->answers = isnan(values[1]) ? MRS_MEAS_NONE : n->in[1].last_counter;

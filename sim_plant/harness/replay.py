@@ -48,7 +48,7 @@ from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
 from mrsteer_dbc.e2e import E2EStatus
-from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
+from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
                                SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
                                SIG_STATUS_PLAUS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
 from sim_plant.nodes.candump_log import LogError, read_candump_messages
@@ -208,16 +208,15 @@ class _Replayer:
 
     def _inputs(self) -> tuple[float, float, float, float, float]:
         """What ``control()`` is about to pass to ``step()`` and the monitor: the node's freshness
-        rule, read from its public input records; ``cycle`` checks the node's command against it."""
+        rule, read from its public input records (and ``redundant_inputs``); ``cycle`` checks the
+        node's command against it."""
         e2e_max = self.node.cfg.e2e_fail_max
         vals = []
-        for name in (MSG_STEER, MSG_YAW, MSG_SPEED, MSG_REDUNDANT):
+        for name in (MSG_STEER, MSG_YAW, MSG_SPEED):
             inp = self.node.input(name)
-            valid = inp.valid(e2e_max)
-            vals.append(inp.value if valid else math.nan)
-            if name == MSG_REDUNDANT:
-                vals.append(inp.second_value if valid else math.nan)
-        return vals[0], vals[1], vals[2], vals[3], vals[4]
+            vals.append(inp.value if inp.valid(e2e_max) else math.nan)
+        lat, steer_2 = self.node.redundant_inputs()
+        return vals[0], vals[1], vals[2], lat, steer_2
 
     def _shadow(self, inputs: tuple[float, float, float, float, float]) -> float:
         """The command the node should send for ``inputs``: step(), monitor and authority limiter
