@@ -16,7 +16,6 @@ models (same seed, same streams), so it is the fault's own contribution, noise e
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
