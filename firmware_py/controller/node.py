@@ -15,9 +15,10 @@ Each cycle, in this order (the scheduling contract a port must keep):
    arrives in and differentiates over the periods between samples, so a sample is withheld (NaN
    until the next one) when that pairing is off: the yaw-rate frame of its cycle missing, or its
    arrival more than ``REDUNDANT_JITTER_CYCLES`` periods from what its alive counter says
-   (delta x 50 ms): a stalled sender or receiver, whose bursts would read as a side slip; the authority limiter (``firmware_py.authority``) bounds ``step()``'s
-   command in magnitude, rate and time and fades it to zero on a plausibility fault, which the
-   node reports as state FAULT with ``CAUSE_PLAUSIBILITY``;
+   (delta x 50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The
+   authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
+   and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
+   with ``CAUSE_PLAUSIBILITY``;
 5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
 
 Every frame goes through the node's links (``mrsteer_dbc.link``): ``RxLink`` checks a received
@@ -220,10 +221,13 @@ class ControllerNode:
         off its alive counter's time, or, in the cycle it arrived, without this cycle's yaw-rate
         frame).  Pure: ``control()`` keeps the verdict for the sample's hold."""
         red = self._redundant
-        usable = self._red_usable and not (red.age == 0 and self._yaw.age != 0)
-        if usable and red.age <= red.limit and red.rejects < self.cfg.e2e_fail_max:
+        if self._red_usable and not self._red_unpaired() and red.valid(self.cfg.e2e_fail_max):
             return red.value, red.second_value
         return math.nan, math.nan
+
+    def _red_unpaired(self) -> bool:
+        """The redundant sample arrived this cycle, and no yaw-rate frame with it."""
+        return self._redundant.age == 0 and self._yaw.age != 0
 
     def drain(self) -> bool:
         got_yaw = False
@@ -243,7 +247,7 @@ class ControllerNode:
         fail_max = self.cfg.e2e_fail_max
         red = self._redundant
         lat, steer_2 = self.redundant_inputs()  # before the ages move on
-        if red.age == 0 and self._yaw.age != 0:
+        if self._red_unpaired():
             self._red_usable = False  # withheld for its whole hold, not taken up a cycle late
         red.age += 1
         self._red_cycles += 1
