@@ -73,6 +73,7 @@ class Drive:
     stuck_yaw: bool = False
     redundant: bool = True
     jitter: bool = False  # every 3rd redundant frame 10 periods late, the yaw frame of every 4th's period lost
+    slow: int = 1  # the sender steps once every `slow` control periods (a plant behind real time)
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -104,6 +105,7 @@ class Drive:
                     continue  # this period's yaw-rate frame lost
                 period.append(frame)
             out.append(late.pop(k, []) + period)
+            out += [[] for _ in range(self.slow - 1)]  # the sender's step took this many periods more
         return out
 
 
@@ -207,6 +209,16 @@ def test_redundant_samples_off_time_are_withheld_as_in_python(secoc_check: Path)
     assert pl.PLAUS_DEGRADED in plaus and 0 in plaus[5:]
     assert not any(p & pl.PLAUS_FAULT for p in plaus)
     assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds[50:]}
+
+
+def test_a_sender_slower_than_the_loop_keeps_the_monitors_clock_as_in_python(secoc_check: Path) -> None:
+    # The plant two periods per step (a VM's): the monitor steps on the yaw-rate samples, so the
+    # redundant frames, 25 samples apart by their counters, stay in time and nothing is withheld
+    # (counted in control periods they would be 50 apart: DEGRADED for good).
+    cmds, statuses = _run(secoc_check, Drive(seconds=2.0, slow=2))
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    assert set(plaus[1:]) == {0}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
 
 
 STUCK_SCENARIO = """

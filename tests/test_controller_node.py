@@ -311,3 +311,39 @@ def test_a_redundant_sample_off_its_alive_counters_time_is_withheld_from_the_mon
     assert all(seen[30:80])  # the late one (80 periods after it), for its whole hold
     assert not any(seen[80:])  # the next, 50 periods on: in time again
     assert rig.node.plausibility == 0 and rig.node.cause == 0  # DEGRADED came and went, no fault
+
+
+def test_the_monitor_steps_on_the_yaw_rate_samples_not_on_the_cycles(rig: Rig) -> None:
+    # A sender two periods per step (a plant behind real time): the monitor must run once per
+    # yaw-rate sample, as a monitor fed the samples alone does, and hold its verdict between them;
+    # stepped every cycle its lag filter and windows would run twice as fast as the car.
+    from firmware_py import plausibility as pl
+
+    node = rig.node
+    ref_c, ref_s = pl.configure(pl.PlausibilityConfig(ts=node.period)), pl.MonitorState()
+    for j in range(600):
+        t = j * node.period  # the sender's time: one period per sample
+        yaw = 0.05 * math.sin(2 * math.pi * t)
+        steer = 0.01 * math.sin(2 * math.pi * t)
+        rig.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
+        if j % 10 == 0:
+            rig.send(names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})
+        if j % 50 == 0:
+            rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 20.0 * yaw + 0.001 * ((j // 50) % 2),
+                                           names.SIG_STEER_ANGLE_2: steer})
+        rig.send(names.MSG_YAW, {"YawRate_YawRate": yaw})
+        node.drain()
+        assert node.monitor_due()
+        d, r, v = (node.input(n).value for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED))
+        lat, d2 = node.redundant_inputs()
+        expected = pl.monitor_step(ref_c, ref_s, d, d2, r, lat, v, node.command)
+        node.control()
+        assert node.plausibility == expected
+        held = (node.plausibility, node.monitor.r_model, node.monitor.kin_err)
+        node.control()  # the period with no new sample
+        assert not node.monitor_due() and (node.plausibility, node.monitor.r_model, node.monitor.kin_err) == held
+        while rig.sensors.recv(0.0) is not None:
+            pass
+    assert ref_s.kin_n == pl.KIN_WINDOW  # the kinematic check ran on full windows
+    for slot in ("r_model", "kin_err", "model_err", "kin_raw", "kin_comp", "flags", "kin_count", "model_count"):
+        assert getattr(node.monitor, slot) == getattr(ref_s, slot), slot

@@ -11,12 +11,15 @@ Each cycle, in this order (the scheduling contract a port must keep):
 4. the plausibility monitor (``firmware_py.plausibility``) checks the inputs against each other,
    against ``MRS_RedundantSensors`` (lateral acceleration, the second steering channel; NaN when
    missing, which makes it report DEGRADED) and against the nominal car, given the command sent
-   the period before.  The monitor compares a redundant sample with the yaw rate of the cycle it
-   arrives in and differentiates over the periods between samples, so a sample is withheld (NaN
-   until the next one) when that pairing is off: the yaw-rate frame of its cycle missing, or its
-   arrival more than ``REDUNDANT_JITTER_CYCLES`` periods from what its alive counter says
-   (delta x 50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The
-   authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
+   the period before.  Its clock is the yaw-rate sensor's: it steps only in a cycle that
+   received a new yaw-rate frame (``monitor_due``) and holds its verdict otherwise, so that a
+   sender slower than the loop (a plant that cannot keep real time) does not stretch its
+   filters, windows and derivatives.  It compares a redundant sample with the yaw rate of the
+   cycle it arrives in and differentiates over the yaw-rate samples between two of them, so a
+   sample is withheld (NaN until the next one) when that pairing is off: the yaw-rate frame of
+   its cycle missing, or more than ``REDUNDANT_JITTER_CYCLES`` yaw-rate samples away from what
+   its alive counter says elapsed (delta x 50 ms): a stalled sender or receiver, whose bursts
+   would read as a side slip.  The authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
    and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
    with ``CAUSE_PLAUSIBILITY``;
 5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
@@ -68,8 +71,8 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_YAW_RATE)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
-# Control periods a redundant sample's arrival may differ from its alive counter's account of
-# the time (delta x its DBC cycle) before the node withholds it from the monitor.
+# Yaw-rate samples (the monitor's steps) a redundant sample's arrival may differ from its alive
+# counter's account of the time (delta x its DBC cycle) before the node withholds it from the monitor.
 REDUNDANT_JITTER_CYCLES = 2
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
 TRIGGERS = ("clock", "sensors")
@@ -131,7 +134,7 @@ class ControllerNode:
         self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
         self.redundant_id = c.frame_id(MSG_REDUNDANT)
         self._red_expected = (c.cycle_time_s(MSG_REDUNDANT, period) or period) / period  # periods per sample
-        self._red_cycles = 0  # control periods since the last accepted redundant frame
+        self._red_cycles = 0  # monitor steps (yaw-rate samples) since the last accepted redundant frame
         self._red_counter = -1  # its alive counter; -1 before the first
         self._red_usable = False  # the held redundant sample is paired in time (see redundant_inputs)
         self.yaw_id = c.frame_id(MSG_YAW)
@@ -205,8 +208,8 @@ class ControllerNode:
         return False
 
     def _time_redundant(self, counter: int) -> None:
-        """A redundant sample is in time when it arrived within ``REDUNDANT_JITTER_CYCLES`` periods
-        of what its alive counter says elapsed since the one before (the first one is)."""
+        """A redundant sample is in time when it arrived within ``REDUNDANT_JITTER_CYCLES`` monitor
+        steps of what its alive counter says elapsed since the one before (the first one is)."""
         if self._red_counter >= 0:
             expected = ((counter - self._red_counter) % COUNTER_MODULO) * self._red_expected
             self._red_usable = abs(self._red_cycles - expected) <= REDUNDANT_JITTER_CYCLES
@@ -224,6 +227,11 @@ class ControllerNode:
         if self._red_usable and not self._red_unpaired() and red.valid(self.cfg.e2e_fail_max):
             return red.value, red.second_value
         return math.nan, math.nan
+
+    def monitor_due(self) -> bool:
+        """The plausibility monitor steps in this cycle: a yaw-rate frame was accepted since the
+        last one.  Pure, like ``redundant_inputs``."""
+        return self._yaw.age == 0
 
     def _red_unpaired(self) -> bool:
         """The redundant sample arrived this cycle, and no yaw-rate frame with it."""
@@ -247,10 +255,12 @@ class ControllerNode:
         fail_max = self.cfg.e2e_fail_max
         red = self._redundant
         lat, steer_2 = self.redundant_inputs()  # before the ages move on
+        due = self.monitor_due()
         if self._red_unpaired():
             self._red_usable = False  # withheld for its whole hold, not taken up a cycle late
         red.age += 1
-        self._red_cycles += 1
+        if due:
+            self._red_cycles += 1
         for inp in (self._steer, self._yaw, self._speed):
             ok = inp.age <= inp.limit and inp.rejects < fail_max
             if not ok:
@@ -268,8 +278,10 @@ class ControllerNode:
             self._sync_age += 1
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
-        bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat, values[2],
-                               self.command)
+        bits = self.plausibility  # held between yaw-rate samples
+        if due:
+            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
+                                   values[2], self.command)
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits)
         state = self.state.status
         if bits & pl.PLAUS_FAULT:

@@ -163,7 +163,7 @@ static rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, const
     return RX_OK;
 }
 
-/* A redundant sample is in time when it arrived within MRS_REDUNDANT_JITTER_CYCLES periods of
+/* A redundant sample is in time when it arrived within MRS_REDUNDANT_JITTER_CYCLES monitor steps of
  * what its alive counter says elapsed since the one before (the first one is): node.py's
  * _time_redundant. */
 static void time_redundant(mrs_node_t *n, unsigned counter)
@@ -319,7 +319,8 @@ int mrs_node_control(mrs_node_t *n)
     int i, fault;
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
     /* node.py's redundant_inputs, before the ages move on: withheld when not paired in time. */
-    const int unpaired = red->age == 0 && n->in[1].age != 0;
+    const int due = n->in[1].age == 0; /* node.py's monitor_due: a new yaw-rate sample */
+    const int unpaired = red->age == 0 && !due;
     const int in_time = n->red_usable && !unpaired;
     if (fresh(n, red) && in_time) {
         lat = red->value;
@@ -328,7 +329,9 @@ int mrs_node_control(mrs_node_t *n)
     if (unpaired) {
         n->red_usable = 0; /* withheld for its whole hold, not taken up a cycle late */
     }
-    ++n->red_cycles;
+    if (due) {
+        ++n->red_cycles;
+    }
     for (i = 0; i < 3; ++i) {
         mrs_input_t *in = &n->in[i];
         const int ok = fresh(n, in);
@@ -352,10 +355,13 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    /* The monitor sees the command sent last period (n->command: 0 before the first); the
-     * limiter bounds this period's request with the monitor's verdict. */
-    n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
-                                (double)values[2], n->command);
+    /* The monitor steps on the yaw-rate sensor's samples and holds its verdict between them; it
+     * sees the command sent last period (n->command: 0 before the first); the limiter bounds this
+     * period's request with the monitor's verdict. */
+    if (due) {
+        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
+                                    (double)values[2], n->command);
+    }
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus);
     state = n->state.status;
     if (n->plaus & MRS_PLAUS_FAULT) {

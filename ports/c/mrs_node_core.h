@@ -22,8 +22,9 @@
 #define MRS_SYNC_STALE_CYCLES 3 /* MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH */
 #define MRS_N_INPUTS 4 /* driver angle, yaw rate, speed, the redundant sensors */
 #define MRS_IN_REDUNDANT 3 /* its index in mrs_node_t.in */
-/* Control periods a redundant sample's arrival may differ from its alive counter's account of
- * the time before it is withheld from the monitor (node.py's REDUNDANT_JITTER_CYCLES). */
+/* Yaw-rate samples (the monitor's steps) a redundant sample's arrival may differ from its alive
+ * counter's account of the time before it is withheld from the monitor (node.py's
+ * REDUNDANT_JITTER_CYCLES). */
 #define MRS_REDUNDANT_JITTER_CYCLES 2
 
 /* Receive state of one sensor input (firmware_py/controller/inputs.py). */
@@ -72,9 +73,9 @@ typedef struct {
     mrs_monitor_state_t mon_s;
     mrs_authority_coeffs_t auth_c;
     mrs_authority_state_t auth_s;
-    uint8_t plaus; /* the monitor's CtrlStatus_Plausibility bits of the latest period */
+    uint8_t plaus; /* the monitor's CtrlStatus_Plausibility bits of its latest step */
     double red_expected; /* control periods per redundant sample (its DBC cycle) */
-    long red_cycles; /* control periods since the last accepted redundant frame */
+    long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
     int red_usable; /* the held redundant sample is paired in time (node.py's redundant_inputs) */
     unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */

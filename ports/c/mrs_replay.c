@@ -5,11 +5,13 @@
  *
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
  * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
- * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2]" (rad, rad/s,
- * m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant pair absent
- * counts as invalid), as sim_plant/harness/replay.py extracts them from the frames. Each cycle
- * runs as mrs_node_control does: u_req = mrs_step(...), the monitor on the inputs and the
- * previous line's command, the limiter on u_req; each output line is
+ * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [MONITORED]]"
+ * (rad, rad/s, m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant
+ * pair absent counts as invalid; MONITORED 1 when the cycle had a new yaw-rate sample, so the
+ * monitor steps, 0 when it holds its verdict; absent counts as 1), as
+ * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
+ * does: u_req = mrs_step(...), the monitor (when it steps) on the inputs and the previous line's
+ * command, the limiter on u_req; each output line is
  * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
  * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
  * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
@@ -44,6 +46,7 @@ int main(int argc, char **argv)
     mrs_authority_coeffs_t auth_c;
     mrs_authority_state_t auth_s;
     double u_prev = 0.0;
+    uint8_t plaus = 0u; /* the monitor's bits, held while it does not step */
     char err[256];
     char line[LINE_MAX_LEN];
     FILE *in = stdin;
@@ -76,18 +79,17 @@ int main(int argc, char **argv)
     }
     mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
-        double v[5] = {0.0, 0.0, 0.0, NAN, NAN};
+        double v[6] = {0.0, 0.0, 0.0, NAN, NAN, 1.0};
         char *p = line, *end;
         int k;
         double u_req;
-        uint8_t bits;
         unsigned state;
         ++n;
-        for (k = 0; k < 5; ++k) {
+        for (k = 0; k < 6; ++k) {
             const double x = strtod(p, &end);
             if (end == p) {
                 if (k < 3) {
-                    fprintf(stderr, "mrs_replay: line %ld: expected three or five numbers\n", n);
+                    fprintf(stderr, "mrs_replay: line %ld: expected three, five or six numbers\n", n);
                     return 2;
                 }
                 break;
@@ -95,15 +97,17 @@ int main(int argc, char **argv)
             v[k] = x;
             p = end;
         }
-        if (k == 4) {
-            fprintf(stderr, "mrs_replay: line %ld: expected three or five numbers\n", n);
+        if (k == 4 || (k == 6 && v[5] != 0.0 && v[5] != 1.0)) {
+            fprintf(stderr, "mrs_replay: line %ld: expected three, five or six numbers (the sixth 0 or 1)\n", n);
             return 2;
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
-        bits = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev);
-        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, bits);
-        state = (bits & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
-        printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)bits);
+        if (v[5] != 0.0) {
+            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev);
+        }
+        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus);
+        state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
+        printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
     }
     if (in != stdin) {
         fclose(in);
