@@ -6,8 +6,10 @@ bounds what the command may do whatever computed it.
 
 Structure (as ``model_regulator``): ``PlausibilityConfig`` (calibration) -> ``configure()``
 (every coefficient once: the only divisions by calibration values and the only ``exp``) ->
-``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per control period: scalar
-arithmetic on ``c`` and ``s`` only, no allocation, no calls.  The bounded authority that acts on
+``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per yaw-rate sample (the
+controller node calls it in each period that received one, so ``ts`` is the sensor's sample
+time, equal to the control period by the DBC's ``MRS_ControlLoop``): scalar arithmetic on ``c``
+and ``s`` only, no allocation, no calls.  The bounded authority that acts on
 its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to
 ``ports/c/mrs_monitor.c``.
 
@@ -95,6 +97,9 @@ class PlausibilityConfig:
     nominal_mass: float = NOMINAL_MASS
     nominal_c_f: float = NOMINAL_C_F
     nominal_c_r: float = NOMINAL_C_R
+    # s without a usable redundant sample after which the kinematic window restarts; a shorter
+    # gap (one sample withheld or lost: 100 ms between two used ones) keeps it (docs/controller.md)
+    kin_gap: float = 0.15
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +117,7 @@ class MonitorCoefficients:
     model_alpha: float  # first-order lag per period: 1 - exp(-ts / model_tau)
     model_steps: int
     frozen_steps: int
+    kin_gap_steps: int
     frozen_move_yaw: float
     frozen_move_steer: float
     wheelbase: float  # K_n(v) = v / (wheelbase + k_us v^2), eq. (15) at mu = 1
@@ -167,7 +173,7 @@ def reset_monitor(s: MonitorState) -> None:
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
-                          "nominal_mass", "nominal_c_f", "nominal_c_r"))
+                          "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap"))
     for name in ("model_rel", "yaw_rel"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
@@ -185,7 +191,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         yaw_count=cfg.yaw_count, steer_bound=cfg.steer_bound, inv_steer_bound=1.0 / cfg.steer_bound,
         steer_count=cfg.steer_count, model_margin=cfg.model_margin, model_rel=cfg.model_rel,
         model_alpha=1.0 - math.exp(-cfg.ts / cfg.model_tau), model_steps=max(1, round(cfg.model_time / cfg.ts)),
-        frozen_steps=max(1, round(cfg.frozen_time / cfg.ts)), frozen_move_yaw=cfg.frozen_move_yaw,
+        frozen_steps=max(1, round(cfg.frozen_time / cfg.ts)), kin_gap_steps=max(1, round(cfg.kin_gap / cfg.ts)),
+        frozen_move_yaw=cfg.frozen_move_yaw,
         frozen_move_steer=cfg.frozen_move_steer, wheelbase=wheelbase, k_us=k_us, ts=cfg.ts,
         inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
@@ -216,8 +223,9 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     st2_ok = -1e3 < delta_driver_redundant < 1e3
     if not (lat_ok and st2_ok):
         flags |= MISSING
-        s.kin_n = 0  # the kinematic window restarts when the frame is back
-        s.have_sample = False
+        s.have_sample = False  # no difference across the gap: the next sample starts one
+        if s.since >= c.kin_gap_steps:
+            s.kin_n = 0  # a long gap: the kinematic window restarts when the frame is back
     if not primary_ok:
         # Paused (too slow, or step() faults on the input): restart the windows, keep the latch.
         s.kin_count = s.pair_count = s.model_count = 0

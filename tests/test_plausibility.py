@@ -56,6 +56,32 @@ def test_fault_free_straight_driving_is_quiet_and_a_yaw_bias_trips_the_kinematic
     assert set(_straight(mon, 300, yaw=lambda k: 0.0)) == {0}
 
 
+def _first_fault_with_a_gap(gap: range) -> int:
+    """Periods from a 2.9 deg/s yaw-rate bias's onset (after 1000 clean ones) to PLAUS_YAW, with
+    the redundant pair missing (NaN: withheld or lost) over ``gap`` (periods from the onset)."""
+    mon = pl.PlausibilityMonitor()
+    _straight(mon, 1000)
+    held = (0.0, 0.0)
+    for k in range(1000, 1600):
+        if k % 25 == 0:
+            held = (1e-3 * ((k // 25) % 3 - 1), 2.5e-5 * ((k // 25) % 2))
+        lat, d2 = (math.nan, math.nan) if k - 1000 in gap else held
+        if mon.step(0.0, d2, 0.05, lat, 20.0, 0.0) & pl.PLAUS_YAW:
+            return k - 1000
+    raise AssertionError("no fault")
+
+
+def test_one_missing_redundant_sample_keeps_the_kinematic_window_and_a_long_gap_restarts_it() -> None:
+    # The node withholds a sample that came off time (a stalled plant): that must cost the
+    # detection that sample, not the 200 ms of a window refilled from nothing.
+    clean = _first_fault_with_a_gap(range(0))
+    one = _first_fault_with_a_gap(range(25, 50))  # the second sample after the onset
+    assert clean < one <= clean + 50  # the sample and the difference it would have closed
+    gap = round(pl.PlausibilityConfig().kin_gap / TS)
+    long = _first_fault_with_a_gap(range(25, 25 + gap + 25))
+    assert long >= 25 + gap + 25 + pl.KIN_WINDOW * 25  # restarted: a full window after the gap
+
+
 def test_the_two_steering_channels_disagreeing_trips_the_pair_check() -> None:
     mon = pl.PlausibilityMonitor()
     bits = _straight(mon, 400, steer=lambda k: 0.01, steer2=lambda k: 0.01 - 0.006 * (k >= 100),

@@ -39,10 +39,10 @@ static void print_defaults(void)
     mrs_monitor_default_config(&m);
     mrs_authority_default_config(&a);
     printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g\n",
+           "%.17g %.17g\n",
            m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
-           m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r);
+           m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r, m.kin_gap);
     printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
            a.panic_window, a.engage, a.rearm_time);
 }
@@ -50,7 +50,7 @@ static void print_defaults(void)
 int main(void)
 {
     char line[LINE_MAX_LEN];
-    double v[20];
+    double v[21];
     mrs_monitor_config_t mg;
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
@@ -65,7 +65,7 @@ int main(void)
         print_defaults();
         return 0;
     }
-    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 20) != 0) {
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 21) != 0) {
         return 2;
     }
     mg.ts = v[0];
@@ -88,6 +88,7 @@ int main(void)
     mg.nominal_mass = v[17];
     mg.nominal_c_f = v[18];
     mg.nominal_c_r = v[19];
+    mg.kin_gap = v[20];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 7) != 0) {
         return 2;
@@ -102,9 +103,9 @@ int main(void)
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %d %d\n", mc.model_alpha, mc.k_us,
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d\n", mc.model_alpha, mc.k_us,
            (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m, mc.moment_m, mc.cf_m,
-           ac.du_max, ac.fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps);
+           ac.du_max, ac.fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps, (int)mc.kin_gap_steps);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);
     while (fgets(line, sizeof line, stdin) != NULL) {

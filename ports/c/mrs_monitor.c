@@ -27,6 +27,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->nominal_mass = 1296.0;
     cfg->nominal_c_f = 84000.0;
     cfg->nominal_c_r = 96000.0;
+    cfg->kin_gap = 0.15;
 }
 
 static int positive(double x)
@@ -45,7 +46,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
 {
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
-                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r};
+                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -71,6 +72,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->model_alpha = 1.0 - exp(-g->ts / g->model_tau);
     c->model_steps = steps_of(g->model_time, g->ts);
     c->frozen_steps = steps_of(g->frozen_time, g->ts);
+    c->kin_gap_steps = steps_of(g->kin_gap, g->ts);
     c->frozen_move_yaw = g->frozen_move_yaw;
     c->frozen_move_steer = g->frozen_move_steer;
     c->wheelbase = wheelbase;
@@ -171,8 +173,10 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
 
     if (!(lat_ok && st2_ok)) {
         flags |= MRS_MISSING;
-        s->kin_n = 0;
-        s->have_sample = 0u;
+        s->have_sample = 0u; /* no difference across the gap: the next sample starts one */
+        if (s->since >= c->kin_gap_steps) {
+            s->kin_n = 0; /* a long gap: the kinematic window restarts */
+        }
     }
     if (!primary_ok) {
         s->kin_count = s->pair_count = s->model_count = 0;

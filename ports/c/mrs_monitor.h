@@ -47,6 +47,7 @@ typedef struct {
     int steer_count;
     double model_margin, model_rel, model_tau, model_time, frozen_time, frozen_move_yaw, frozen_move_steer;
     double nominal_l_f, nominal_l_r, nominal_mass, nominal_c_f, nominal_c_r;
+    double kin_gap; /* s without a usable redundant sample before the kinematic window restarts */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -55,7 +56,7 @@ typedef struct {
     double steer_bound, inv_steer_bound;
     int32_t steer_count;
     double model_margin, model_rel, model_alpha;
-    int32_t model_steps, frozen_steps;
+    int32_t model_steps, frozen_steps, kin_gap_steps;
     double frozen_move_yaw, frozen_move_steer, wheelbase, k_us, ts, inv_cs_m, moment_m, cf_m;
 } mrs_monitor_coeffs_t;
 
