@@ -7,7 +7,7 @@ bounds what the command may do whatever computed it.
 Structure (as ``model_regulator``): ``PlausibilityConfig`` (calibration) -> ``configure()``
 (every coefficient once: the only divisions by calibration values and the only ``exp``) ->
 ``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per yaw-rate sample (the
-controller node calls it in each period that received one, so ``ts`` is the sensor's sample
+controller node counts them by the frames' alive counter, so ``ts`` is the sensor's sample
 time, equal to the control period by the DBC's ``MRS_ControlLoop``): scalar arithmetic on ``c``
 and ``s`` only, no allocation, no calls.  The bounded authority that acts on
 its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to

@@ -314,36 +314,47 @@ def test_a_redundant_sample_off_its_alive_counters_time_is_withheld_from_the_mon
 
 
 def test_the_monitor_steps_on_the_yaw_rate_samples_not_on_the_cycles(rig: Rig) -> None:
-    # A sender two periods per step (a plant behind real time): the monitor must run once per
-    # yaw-rate sample, as a monitor fed the samples alone does, and hold its verdict between them;
-    # stepped every cycle its lag filter and windows would run twice as fast as the car.
+    # A sender two periods per step (a plant behind real time) that also loses a frame now and
+    # then: the monitor must step once per yaw-rate sample by the frames' alive counter (a lost
+    # sample at the next one's values), as a monitor fed the samples alone does, and hold its
+    # verdict between them; stepped every cycle its lag filter and windows would run twice as
+    # fast as the car, stepped once per frame they would skip the lost samples.
     from firmware_py import plausibility as pl
 
     node = rig.node
     ref_c, ref_s = pl.configure(pl.PlausibilityConfig(ts=node.period)), pl.MonitorState()
+    lost = 0
     for j in range(600):
-        t = j * node.period  # the sender's time: one period per sample
-        yaw = 0.05 * math.sin(2 * math.pi * t)
-        steer = 0.01 * math.sin(2 * math.pi * t)
-        rig.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
-        if j % 10 == 0:
-            rig.send(names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})
-        if j % 50 == 0:
-            rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 20.0 * yaw + 0.001 * ((j // 50) % 2),
-                                           names.SIG_STEER_ANGLE_2: steer})
-        rig.send(names.MSG_YAW, {"YawRate_YawRate": yaw})
-        node.drain()
-        assert node.monitor_due()
-        d, r, v = (node.input(n).value for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED))
-        lat, d2 = node.redundant_inputs()
-        expected = pl.monitor_step(ref_c, ref_s, d, d2, r, lat, v, node.command)
+        if j % 7 == 3:  # this sample's frames are lost: its yaw-rate counter value is skipped
+            rig.counters[names.MSG_YAW].next()
+            node.drain()
+            assert node.monitor_steps() == 0
+            lost += 1
+        else:
+            t = j * node.period  # the sender's time: one period per sample
+            yaw = 0.05 * math.sin(2 * math.pi * t)
+            steer = 0.01 * math.sin(2 * math.pi * t)
+            rig.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
+            if j % 10 == 0:
+                rig.send(names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})
+            if j % 50 == 0:
+                rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 20.0 * yaw + 0.001 * ((j // 50) % 2),
+                                               names.SIG_STEER_ANGLE_2: steer})
+            rig.send(names.MSG_YAW, {"YawRate_YawRate": yaw})
+            node.drain()
+            steps = 2 if j % 7 == 4 else 1
+            assert node.monitor_steps() == steps
+            d, r, v = (node.input(n).value for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED))
+            lat, d2 = node.redundant_inputs()
+            for _ in range(steps):
+                expected = pl.monitor_step(ref_c, ref_s, d, d2, r, lat, v, node.command)
         node.control()
         assert node.plausibility == expected
         held = (node.plausibility, node.monitor.r_model, node.monitor.kin_err)
         node.control()  # the period with no new sample
-        assert not node.monitor_due() and (node.plausibility, node.monitor.r_model, node.monitor.kin_err) == held
+        assert node.monitor_steps() == 0 and (node.plausibility, node.monitor.r_model, node.monitor.kin_err) == held
         while rig.sensors.recv(0.0) is not None:
             pass
-    assert ref_s.kin_n == pl.KIN_WINDOW  # the kinematic check ran on full windows
+    assert lost > 50 and ref_s.kin_n == pl.KIN_WINDOW  # the kinematic check ran on full windows
     for slot in ("r_model", "kin_err", "model_err", "kin_raw", "kin_comp", "flags", "kin_count", "model_count"):
         assert getattr(node.monitor, slot) == getattr(ref_s, slot), slot

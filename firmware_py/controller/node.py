@@ -11,10 +11,12 @@ Each cycle, in this order (the scheduling contract a port must keep):
 4. the plausibility monitor (``firmware_py.plausibility``) checks the inputs against each other,
    against ``MRS_RedundantSensors`` (lateral acceleration, the second steering channel; NaN when
    missing, which makes it report DEGRADED) and against the nominal car, given the command sent
-   the period before.  Its clock is the yaw-rate sensor's: it steps only in a cycle that
-   received a new yaw-rate frame (``monitor_due``) and holds its verdict otherwise, so that a
-   sender slower than the loop (a plant that cannot keep real time) does not stretch its
-   filters, windows and derivatives.  It compares a redundant sample with the yaw rate of the
+   the period before.  Its clock is the yaw-rate sensor's: it steps once for each yaw-rate
+   sample since the last cycle, counted by the frames' alive counter (``monitor_steps``: a lost
+   or rejected frame's sample counts, at the next one's values), and holds its verdict in a
+   cycle without one; with the yaw rate timed out it steps once to pause.  So a sender slower
+   than the loop (a plant that cannot keep real time) does not stretch its filters, windows
+   and derivatives, and a burst or a lost frame does not shorten them.  It compares a redundant sample with the yaw rate of the
    cycle it arrives in and differentiates over the yaw-rate samples between two of them, so a
    sample is withheld (NaN until the next one) when that pairing is off: the yaw-rate frame of
    its cycle missing, or more than ``REDUNDANT_JITTER_CYCLES`` yaw-rate samples away from what
@@ -137,6 +139,8 @@ class ControllerNode:
         self._red_cycles = 0  # monitor steps (yaw-rate samples) since the last accepted redundant frame
         self._red_counter = -1  # its alive counter; -1 before the first
         self._red_usable = False  # the held redundant sample is paired in time (see redundant_inputs)
+        self._yaw_counter = -1  # alive counter of the newest accepted yaw-rate frame; -1 before the first
+        self._yaw_samples = 0  # yaw-rate samples since the last cycle, by that counter
         self.yaw_id = c.frame_id(MSG_YAW)
         keyed = config.secoc_key is not None
         self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
@@ -204,6 +208,8 @@ class ControllerNode:
         inp.age = 0
         if frame_id == self.yaw_id:
             self._yaw_stamp = msg.timestamp or 0.0
+            self._yaw_samples += 1 if self._yaw_counter < 0 else (got.counter - self._yaw_counter) % COUNTER_MODULO
+            self._yaw_counter = got.counter
             return True
         return False
 
@@ -228,14 +234,18 @@ class ControllerNode:
             return red.value, red.second_value
         return math.nan, math.nan
 
-    def monitor_due(self) -> bool:
-        """The plausibility monitor steps in this cycle: a yaw-rate frame was accepted since the
-        last one.  Pure, like ``redundant_inputs``."""
-        return self._yaw.age == 0
+    def monitor_steps(self) -> int:
+        """How many yaw-rate samples the plausibility monitor steps over in this cycle: those
+        since the last cycle by the accepted frames' alive counter, at most the yaw rate's
+        timeout (a longer gap times the input out); 1 with the yaw rate invalid (the monitor's
+        pause), else 0 without a new frame.  Pure, like ``redundant_inputs``."""
+        if self._yaw_samples:
+            return min(self._yaw_samples, self._yaw.limit)
+        return 0 if self._yaw.valid(self.cfg.e2e_fail_max) else 1
 
     def _red_unpaired(self) -> bool:
         """The redundant sample arrived this cycle, and no yaw-rate frame with it."""
-        return self._redundant.age == 0 and self._yaw.age != 0
+        return self._redundant.age == 0 and self._yaw_samples == 0
 
     def drain(self) -> bool:
         got_yaw = False
@@ -255,12 +265,12 @@ class ControllerNode:
         fail_max = self.cfg.e2e_fail_max
         red = self._redundant
         lat, steer_2 = self.redundant_inputs()  # before the ages move on
-        due = self.monitor_due()
+        steps = self.monitor_steps()
         if self._red_unpaired():
             self._red_usable = False  # withheld for its whole hold, not taken up a cycle late
         red.age += 1
-        if due:
-            self._red_cycles += 1
+        self._red_cycles += min(self._yaw_samples, self._yaw.limit)
+        self._yaw_samples = 0
         for inp in (self._steer, self._yaw, self._speed):
             ok = inp.age <= inp.limit and inp.rejects < fail_max
             if not ok:
@@ -279,7 +289,7 @@ class ControllerNode:
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
         bits = self.plausibility  # held between yaw-rate samples
-        if due:
+        for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
                                    values[2], self.command)
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits)

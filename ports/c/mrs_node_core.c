@@ -115,6 +115,8 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         n->red_expected = ((rm->control_loop || rm->cycle_s == 0.0) ? n->period : rm->cycle_s) / n->period;
     }
     n->red_counter = -1;
+    n->yaw_counter = -1;
+    n->yaw_samples = 0;
     return 0;
 }
 
@@ -231,6 +233,10 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
     }
     if (in->msg == MRS_MSG_YAW) {
         n->yaw_stamp = f->stamp;
+        n->yaw_samples += n->yaw_counter < 0 ? 1L
+                                             : (long)((in->last_counter + MRS_E2E_COUNTER_MODULO - (unsigned)n->yaw_counter) %
+                                                      MRS_E2E_COUNTER_MODULO);
+        n->yaw_counter = (int)in->last_counter;
         return 1;
     }
     return 0;
@@ -318,10 +324,16 @@ int mrs_node_control(mrs_node_t *n)
     double lat = NAN, steer2 = NAN, u_req;
     int i, fault;
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
-    /* node.py's redundant_inputs, before the ages move on: withheld when not paired in time. */
-    const int due = n->in[1].age == 0; /* node.py's monitor_due: a new yaw-rate sample */
-    const int unpaired = red->age == 0 && !due;
+    /* node.py's monitor_steps and redundant_inputs, before the ages move on: the yaw-rate
+     * samples since the last period (at most its timeout; one to pause with the yaw rate
+     * invalid), and the redundant sample withheld when not paired in time. */
+    const mrs_input_t *yaw = &n->in[1];
+    const long samples = n->yaw_samples < yaw->limit ? n->yaw_samples : yaw->limit;
+    const int yaw_valid = yaw->age <= yaw->limit && yaw->rejects < n->e2e_fail_max;
+    const long steps = samples > 0 ? samples : (yaw_valid ? 0 : 1);
+    const int unpaired = red->age == 0 && samples == 0;
     const int in_time = n->red_usable && !unpaired;
+    long k;
     if (fresh(n, red) && in_time) {
         lat = red->value;
         steer2 = red->value2;
@@ -329,9 +341,8 @@ int mrs_node_control(mrs_node_t *n)
     if (unpaired) {
         n->red_usable = 0; /* withheld for its whole hold, not taken up a cycle late */
     }
-    if (due) {
-        ++n->red_cycles;
-    }
+    n->red_cycles += samples;
+    n->yaw_samples = 0;
     for (i = 0; i < 3; ++i) {
         mrs_input_t *in = &n->in[i];
         const int ok = fresh(n, in);
@@ -355,10 +366,10 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    /* The monitor steps on the yaw-rate sensor's samples and holds its verdict between them; it
-     * sees the command sent last period (n->command: 0 before the first); the limiter bounds this
-     * period's request with the monitor's verdict. */
-    if (due) {
+    /* The monitor steps on the yaw-rate sensor's samples (a lost one at the newest values) and
+     * holds its verdict between them; it sees the command sent last period (n->command: 0 before
+     * the first); the limiter bounds this period's request with the monitor's verdict. */
+    for (k = 0; k < steps; ++k) {
         n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
                                     (double)values[2], n->command);
     }

@@ -78,6 +78,8 @@ typedef struct {
     long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
     int red_usable; /* the held redundant sample is paired in time (node.py's redundant_inputs) */
+    int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
+    long yaw_samples; /* yaw-rate samples since the last period, by that counter */
     unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */
     int keyed;
     mrs_cmac_t *cmac;

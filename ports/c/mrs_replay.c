@@ -5,12 +5,12 @@
  *
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
  * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
- * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [MONITORED]]"
+ * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS]]"
  * (rad, rad/s, m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant
- * pair absent counts as invalid; MONITORED 1 when the cycle had a new yaw-rate sample, so the
- * monitor steps, 0 when it holds its verdict; absent counts as 1), as
+ * pair absent counts as invalid; STEPS the monitor's steps in the cycle, 0 to MRS_REPLAY_MAX_STEPS:
+ * node.py's monitor_steps, 0 when it holds its verdict; absent counts as 1), as
  * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
- * does: u_req = mrs_step(...), the monitor (when it steps) on the inputs and the previous line's
+ * does: u_req = mrs_step(...), the monitor (STEPS times) on the inputs and the previous line's
  * command, the limiter on u_req; each output line is
  * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
  * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
@@ -27,6 +27,7 @@
 #include "mrs_monitor.h"
 
 #define LINE_MAX_LEN 4096
+#define MRS_REPLAY_MAX_STEPS 100 /* more than any input's timeout in cycles */
 
 static int fail(const char *what, const char *arg)
 {
@@ -97,12 +98,12 @@ int main(int argc, char **argv)
             v[k] = x;
             p = end;
         }
-        if (k == 4 || (k == 6 && v[5] != 0.0 && v[5] != 1.0)) {
-            fprintf(stderr, "mrs_replay: line %ld: expected three, five or six numbers (the sixth 0 or 1)\n", n);
+        if (k == 4 || !(v[5] >= 0.0 && v[5] <= (double)MRS_REPLAY_MAX_STEPS && v[5] == floor(v[5]))) {
+            fprintf(stderr, "mrs_replay: line %ld: expected three, five or six numbers (the sixth a count of steps)\n", n);
             return 2;
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
-        if (v[5] != 0.0) {
+        for (k = 0; k < (int)v[5]; ++k) {
             plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev);
         }
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus);

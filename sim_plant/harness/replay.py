@@ -118,7 +118,7 @@ class Step:
     status: StatusOut | None = None  # the status frame sent in this cycle
     recorded: Out | None = None
     recorded_status: StatusOut | None = None
-    monitored: bool = True  # the monitor stepped (a new yaw-rate sample); else its verdict held
+    monitor_steps: int = 1  # yaw-rate samples the monitor stepped over (0: its verdict held)
 
 
 @dataclass(frozen=True)
@@ -219,22 +219,22 @@ class _Replayer:
         lat, steer_2 = self.node.redundant_inputs()
         return vals[0], vals[1], vals[2], lat, steer_2
 
-    def _shadow(self, inputs: tuple[float, float, float, float, float], monitored: bool) -> float:
-        """The command the node should send for ``inputs``: step(), monitor (when it steps: else
-        its held bits) and authority limiter run on copies of the node's states."""
+    def _shadow(self, inputs: tuple[float, float, float, float, float], monitor_steps: int) -> float:
+        """The command the node should send for ``inputs``: step(), the monitor's ``monitor_steps``
+        steps (none: its held bits) and the authority limiter, run on copies of the node's states."""
         node = self.node
         d, r, v, lat, d2 = inputs
         u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v)
-        bits = node.plausibility
-        if monitored:
-            bits = pl.monitor_step(node.monitor_coeffs, copy.deepcopy(node.monitor), d, d2, r, lat, v, node.command)
+        bits, monitor = node.plausibility, copy.deepcopy(node.monitor)
+        for _ in range(monitor_steps):
+            bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node
         inputs = self._inputs()
-        monitored = node.monitor_due()
-        shadow = self._shadow(inputs, monitored)
+        monitor_steps = node.monitor_steps()
+        shadow = self._shadow(inputs, monitor_steps)
         before = len(self.bus.sent)
         if kind == "final":
             node.finish()
@@ -249,7 +249,8 @@ class _Replayer:
             else:
                 status = self._status(msg, line, t)
         assert out is not None
-        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status, monitored=monitored)
+        step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status,
+                    monitor_steps=monitor_steps)
         self.steps.append(step)
         return step
 

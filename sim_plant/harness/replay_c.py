@@ -53,7 +53,7 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int, int]]:
     """(u, reported state, fault_flags, plausibility bits) of the C port at every non-final step
     of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {int(s.monitored)}\n" for s in result.steps
+    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {s.monitor_steps}\n" for s in result.steps
                      if s.kind != "final" for d, r, v, lat, d2 in [s.inputs])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
