@@ -204,6 +204,10 @@ def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in
 def test_redundant_samples_off_time_are_withheld_as_in_python(secoc_check: Path) -> None:
     # A late redundant frame (a stalled sender) and one whose period lost its yaw-rate frame are
     # withheld from the monitor for their hold: DEGRADED then, never a fault.
+    from firmware_py.controller.sample_clock import REDUNDANT_JITTER_CYCLES
+
+    header = (ROOT / "ports" / "c" / "mrs_node_core.h").read_text()
+    assert f"#define MRS_REDUNDANT_JITTER_CYCLES {REDUNDANT_JITTER_CYCLES}\n" in header
     cmds, statuses = _run(secoc_check, Drive(seconds=2.0, jitter=True))
     plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
     assert pl.PLAUS_DEGRADED in plaus and 0 in plaus[5:]

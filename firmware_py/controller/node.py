@@ -19,7 +19,7 @@ Each cycle, in this order (the scheduling contract a port must keep):
    and derivatives, and a burst or a lost frame does not shorten them.  It compares a redundant sample with the yaw rate of the
    cycle it arrives in and differentiates over the yaw-rate samples between two of them, so a
    sample is withheld (NaN until the next one) when that pairing is off: the yaw-rate frame of
-   its cycle missing, or more than ``REDUNDANT_JITTER_CYCLES`` yaw-rate samples away from what
+   its cycle missing, or more than ``REDUNDANT_JITTER_CYCLES`` (``sample_clock``) yaw-rate samples away from what
    its alive counter says elapsed (delta x 50 ms): a stalled sender or receiver, whose bursts
    would read as a side slip.  The authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
    and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
@@ -57,12 +57,12 @@ from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from firmware_py.controller.inputs import Input
+from firmware_py.controller.sample_clock import SampleClock
 from firmware_py.controller.stats import LoopStats
 from firmware_py.controller.timing import (DEFAULT_SYNC_OFFSET, SENSORS_WATCHDOG_S, STOP_POLL_S, SYNC_POLL_S,
                                            SYNC_WINDOW, phase_correction)
 from firmware_py.platform.realtime import rss_kb
 from mrsteer_dbc import secoc
-from mrsteer_dbc.e2e import COUNTER_MODULO
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
 from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, CAUSE_RANGE,
                                CAUSE_SPEED_MISSING, CAUSE_STEER_MISSING, CAUSE_YAW_MISSING, MEAS_NONE, MSG_CMD,
@@ -73,9 +73,6 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_YAW_RATE)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
-# Yaw-rate samples (the monitor's steps) a redundant sample's arrival may differ from its alive
-# counter's account of the time (delta x its DBC cycle) before the node withholds it from the monitor.
-REDUNDANT_JITTER_CYCLES = 2
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
 TRIGGERS = ("clock", "sensors")
 
@@ -135,12 +132,8 @@ class ControllerNode:
         self._by_name = {inp.name: inp for inp in self.inputs.values()}
         self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
         self.redundant_id = c.frame_id(MSG_REDUNDANT)
-        self._red_expected = (c.cycle_time_s(MSG_REDUNDANT, period) or period) / period  # periods per sample
-        self._red_cycles = 0  # monitor steps (yaw-rate samples) since the last accepted redundant frame
-        self._red_counter = -1  # its alive counter; -1 before the first
-        self._red_usable = False  # the held redundant sample is paired in time (see redundant_inputs)
-        self._yaw_counter = -1  # alive counter of the newest accepted yaw-rate frame; -1 before the first
-        self._yaw_samples = 0  # yaw-rate samples since the last cycle, by that counter
+        # The monitor's clock: yaw-rate samples (one per period by MRS_ControlLoop) per redundant one.
+        self.clock = SampleClock((c.cycle_time_s(MSG_REDUNDANT, period) or period) / period, self._yaw.limit)
         self.yaw_id = c.frame_id(MSG_YAW)
         keyed = config.secoc_key is not None
         self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
@@ -203,26 +196,14 @@ class ControllerNode:
         if inp.second_signal is not None:
             inp.second_value = got.signals[inp.second_signal]
         if frame_id == self.redundant_id:
-            self._time_redundant(got.counter)
+            self.clock.redundant_frame(got.counter)
         inp.last_counter = got.counter
         inp.age = 0
         if frame_id == self.yaw_id:
             self._yaw_stamp = msg.timestamp or 0.0
-            self._yaw_samples += 1 if self._yaw_counter < 0 else (got.counter - self._yaw_counter) % COUNTER_MODULO
-            self._yaw_counter = got.counter
+            self.clock.yaw_frame(got.counter)
             return True
         return False
-
-    def _time_redundant(self, counter: int) -> None:
-        """A redundant sample is in time when it arrived within ``REDUNDANT_JITTER_CYCLES`` monitor
-        steps of what its alive counter says elapsed since the one before (the first one is)."""
-        if self._red_counter >= 0:
-            expected = ((counter - self._red_counter) % COUNTER_MODULO) * self._red_expected
-            self._red_usable = abs(self._red_cycles - expected) <= REDUNDANT_JITTER_CYCLES
-        else:
-            self._red_usable = True
-        self._red_counter = counter
-        self._red_cycles = 0
 
     def redundant_inputs(self) -> tuple[float, float]:
         """(lateral acceleration, second steering channel) for the monitor this cycle: NaN when
@@ -230,7 +211,7 @@ class ControllerNode:
         off its alive counter's time, or, in the cycle it arrived, without this cycle's yaw-rate
         frame).  Pure: ``control()`` keeps the verdict for the sample's hold."""
         red = self._redundant
-        if self._red_usable and not self._red_unpaired() and red.valid(self.cfg.e2e_fail_max):
+        if self.clock.redundant_in_time and not self._red_unpaired() and red.valid(self.cfg.e2e_fail_max):
             return red.value, red.second_value
         return math.nan, math.nan
 
@@ -239,13 +220,13 @@ class ControllerNode:
         since the last cycle by the accepted frames' alive counter, at most the yaw rate's
         timeout (a longer gap times the input out); 1 with the yaw rate invalid (the monitor's
         pause), else 0 without a new frame.  Pure, like ``redundant_inputs``."""
-        if self._yaw_samples:
-            return min(self._yaw_samples, self._yaw.limit)
+        if self.clock.samples:
+            return self.clock.samples
         return 0 if self._yaw.valid(self.cfg.e2e_fail_max) else 1
 
     def _red_unpaired(self) -> bool:
         """The redundant sample arrived this cycle, and no yaw-rate frame with it."""
-        return self._redundant.age == 0 and self._yaw_samples == 0
+        return self._redundant.age == 0 and self.clock.samples == 0
 
     def drain(self) -> bool:
         got_yaw = False
@@ -267,10 +248,9 @@ class ControllerNode:
         lat, steer_2 = self.redundant_inputs()  # before the ages move on
         steps = self.monitor_steps()
         if self._red_unpaired():
-            self._red_usable = False  # withheld for its whole hold, not taken up a cycle late
+            self.clock.withhold()  # for its whole hold, not taken up a cycle late
         red.age += 1
-        self._red_cycles += min(self._yaw_samples, self._yaw.limit)
-        self._yaw_samples = 0
+        self.clock.tick()
         for inp in (self._steer, self._yaw, self._speed):
             ok = inp.age <= inp.limit and inp.rejects < fail_max
             if not ok:

@@ -167,7 +167,7 @@ static rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, const
 
 /* A redundant sample is in time when it arrived within MRS_REDUNDANT_JITTER_CYCLES monitor steps of
  * what its alive counter says elapsed since the one before (the first one is): node.py's
- * _time_redundant. */
+ * SampleClock.redundant_frame (firmware_py/controller/sample_clock.py). */
 static void time_redundant(mrs_node_t *n, unsigned counter)
 {
     if (n->red_counter >= 0) {

@@ -23,8 +23,8 @@
 #define MRS_N_INPUTS 4 /* driver angle, yaw rate, speed, the redundant sensors */
 #define MRS_IN_REDUNDANT 3 /* its index in mrs_node_t.in */
 /* Yaw-rate samples (the monitor's steps) a redundant sample's arrival may differ from its alive
- * counter's account of the time before it is withheld from the monitor (node.py's
- * REDUNDANT_JITTER_CYCLES). */
+ * counter's account of the time before it is withheld from the monitor
+ * (firmware_py/controller/sample_clock.py's REDUNDANT_JITTER_CYCLES). */
 #define MRS_REDUNDANT_JITTER_CYCLES 2
 
 /* Receive state of one sensor input (firmware_py/controller/inputs.py). */
@@ -77,7 +77,7 @@ typedef struct {
     double red_expected; /* control periods per redundant sample (its DBC cycle) */
     long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
-    int red_usable; /* the held redundant sample is paired in time (node.py's redundant_inputs) */
+    int red_usable; /* the held redundant sample is paired in time (SampleClock.redundant_in_time) */
     int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
     long yaw_samples; /* yaw-rate samples since the last period, by that counter */
     unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */
