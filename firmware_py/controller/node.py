@@ -16,12 +16,12 @@ Each cycle, in this order (the scheduling contract a port must keep):
    or rejected frame's sample counts, at the next one's values), and holds its verdict in a
    cycle without one; with the yaw rate timed out it steps once to pause.  So a sender slower
    than the loop (a plant that cannot keep real time) does not stretch its filters, windows
-   and derivatives, and a burst or a lost frame does not shorten them.  It compares a redundant sample with the yaw rate of the
-   cycle it arrives in and differentiates over the yaw-rate samples between two of them, so a
-   sample is withheld (NaN until the next one) when that pairing is off: the yaw-rate frame of
-   its cycle missing, or more than ``REDUNDANT_JITTER_CYCLES`` (``sample_clock``) yaw-rate samples away from what
-   its alive counter says elapsed (delta x 50 ms): a stalled sender or receiver, whose bursts
-   would read as a side slip.  The authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
+   and derivatives, and a burst or a lost frame does not shorten them.  A redundant sample goes
+   to the monitor with the next yaw-rate sample (the plant sends the two in the same step), and
+   the monitor differentiates over the yaw-rate samples between two of them, so a sample is
+   withheld (NaN until the next one) when it arrived more than ``REDUNDANT_JITTER_CYCLES``
+   (``sample_clock``) yaw-rate samples away from what its alive counter says elapsed (delta x
+   50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
    and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
    with ``CAUSE_PLAUSIBILITY``;
 5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
@@ -207,11 +207,10 @@ class ControllerNode:
 
     def redundant_inputs(self) -> tuple[float, float]:
         """(lateral acceleration, second steering channel) for the monitor this cycle: NaN when
-        ``MRS_RedundantSensors`` is not fresh, or its sample is not paired in time (it arrived
-        off its alive counter's time, or, in the cycle it arrived, without this cycle's yaw-rate
-        frame).  Pure: ``control()`` keeps the verdict for the sample's hold."""
+        ``MRS_RedundantSensors`` is not fresh, or its sample arrived off its alive counter's
+        time (``SampleClock.redundant_in_time``, kept for the sample's hold).  Pure."""
         red = self._redundant
-        if self.clock.redundant_in_time and not self._red_unpaired() and red.valid(self.cfg.e2e_fail_max):
+        if self.clock.redundant_in_time and red.valid(self.cfg.e2e_fail_max):
             return red.value, red.second_value
         return math.nan, math.nan
 
@@ -223,10 +222,6 @@ class ControllerNode:
         if self.clock.samples:
             return self.clock.samples
         return 0 if self._yaw.valid(self.cfg.e2e_fail_max) else 1
-
-    def _red_unpaired(self) -> bool:
-        """The redundant sample arrived this cycle, and no yaw-rate frame with it."""
-        return self._redundant.age == 0 and self.clock.samples == 0
 
     def drain(self) -> bool:
         got_yaw = False
@@ -247,8 +242,6 @@ class ControllerNode:
         red = self._redundant
         lat, steer_2 = self.redundant_inputs()  # before the ages move on
         steps = self.monitor_steps()
-        if self._red_unpaired():
-            self.clock.withhold()  # for its whole hold, not taken up a cycle late
         red.age += 1
         self.clock.tick()
         for inp in (self._steer, self._yaw, self._speed):

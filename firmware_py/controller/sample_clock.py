@@ -33,7 +33,7 @@ class SampleClock:
         self.yaw_samples = 0  # yaw-rate samples since the last tick, by that counter
         self.red_counter = -1  # alive counter of the newest accepted redundant frame; -1 before the first
         self.red_samples = 0  # yaw-rate samples counted since it arrived
-        self.redundant_in_time = False  # the held redundant sample is paired in time
+        self.redundant_in_time = False  # the held redundant sample arrived in time
 
     @property
     def samples(self) -> int:
@@ -54,10 +54,6 @@ class SampleClock:
             self.redundant_in_time = True
         self.red_counter = counter
         self.red_samples = 0
-
-    def withhold(self) -> None:
-        """The held redundant sample is not paired in time after all (for its whole hold)."""
-        self.redundant_in_time = False
 
     def tick(self) -> None:
         """End of the cycle's reading: the samples counted move to the redundant frame's count."""

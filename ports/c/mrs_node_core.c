@@ -326,20 +326,15 @@ int mrs_node_control(mrs_node_t *n)
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
     /* node.py's monitor_steps and redundant_inputs, before the ages move on: the yaw-rate
      * samples since the last period (at most its timeout; one to pause with the yaw rate
-     * invalid), and the redundant sample withheld when not paired in time. */
+     * invalid), and the redundant sample withheld when it came off its counter's time. */
     const mrs_input_t *yaw = &n->in[1];
     const long samples = n->yaw_samples < yaw->limit ? n->yaw_samples : yaw->limit;
     const int yaw_valid = yaw->age <= yaw->limit && yaw->rejects < n->e2e_fail_max;
     const long steps = samples > 0 ? samples : (yaw_valid ? 0 : 1);
-    const int unpaired = red->age == 0 && samples == 0;
-    const int in_time = n->red_usable && !unpaired;
     long k;
-    if (fresh(n, red) && in_time) {
+    if (fresh(n, red) && n->red_usable) {
         lat = red->value;
         steer2 = red->value2;
-    }
-    if (unpaired) {
-        n->red_usable = 0; /* withheld for its whole hold, not taken up a cycle late */
     }
     n->red_cycles += samples;
     n->yaw_samples = 0;

@@ -77,7 +77,7 @@ typedef struct {
     double red_expected; /* control periods per redundant sample (its DBC cycle) */
     long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
-    int red_usable; /* the held redundant sample is paired in time (SampleClock.redundant_in_time) */
+    int red_usable; /* the held redundant sample arrived in time (SampleClock.redundant_in_time) */
     int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
     long yaw_samples; /* yaw-rate samples since the last period, by that counter */
     unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */
