@@ -236,7 +236,8 @@ def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
                           cwd=ROOT, timeout=300, env=os.environ.copy())
     assert proc.returncode == 0, proc.stderr
     log = tmp_path / "traffic.log"
-    code, doc, _ = _replay(capsys, str(log), "--trigger", "clock")
+    code, doc, _ = _replay(capsys, str(log))  # the trigger and rate from the run's summary.json
+    assert doc["replays"][0]["trigger"] == "clock" and "summary.json" in doc["recorded_run"]
     assert code == 0 and doc["replays"][0]["commands_recorded"] > 300, doc["replays"][0]["all_mismatches"][:5]
     lines = _lines(log)
     i = _command_lines(lines, after=250)[0]
@@ -247,6 +248,18 @@ def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
     # the replayed node's alive counter is one behind from the next command on (nxt: one line up now)
     assert code == 1 and s["first_mismatch"]["line"] == nxt, s["all_mismatches"][:5]
     assert any(m["line"] == nxt and m["what"].startswith("counter") for m in s["all_mismatches"])
+
+
+def test_a_log_without_a_summary_beside_it_replays_with_the_defaults_or_as_told(
+        clean_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    alone = tmp_path / "elsewhere.log"
+    alone.write_bytes(clean_log.read_bytes())
+    code, doc, _ = _replay(capsys, str(alone))
+    assert code == 0 and doc["replays"][0]["trigger"] == "sensors" and "defaults" in doc["recorded_run"]
+    code, doc, _ = _replay(capsys, str(alone), "--trigger", "sensors", "--rate-hz", "250")  # told wrong
+    assert code == 1 and doc["replays"][0]["trigger"] == "sensors" and doc["recorded_run"] == "as given"
+    code, doc, _ = _replay(capsys, str(clean_log))  # a lockstep run's summary says sensors
+    assert code == 0 and doc["replays"][0]["trigger"] == "sensors" and "summary.json" in doc["recorded_run"]
 
 
 def test_help_and_an_out_that_is_a_file(clean_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

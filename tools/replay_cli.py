@@ -38,11 +38,12 @@ def add_parsers(sub: Any) -> None:
                    help="the calibration the log was recorded with (.cfg; default: the shipped one)")
     p.add_argument("--impl", choices=IMPLS, default="python",
                    help="python (default), c (the C port's step() through ports/c/mrs_replay) or both")
-    p.add_argument("--rate-hz", type=number("rate", 1.0, 10000.0), default=DEFAULT_RATE_HZ, metavar="HZ",
-                   help=f"the recorded controller's rate (default {DEFAULT_RATE_HZ:g}); a calibration's ts is "
-                   "replaced by it")
-    p.add_argument("--trigger", choices=TRIGGERS, default="sensors",
-                   help="the recorded controller's trigger: sensors (lockstep runs, default) or clock (realtime)")
+    p.add_argument("--rate-hz", type=number("rate", 1.0, 10000.0), metavar="HZ",
+                   help="the recorded controller's rate; a calibration's ts is replaced by it (default: the "
+                   f"summary.json of the hil run beside LOG, else {DEFAULT_RATE_HZ:g})")
+    p.add_argument("--trigger", choices=("auto", *TRIGGERS), default="auto",
+                   help="the recorded controller's trigger: sensors (lockstep runs) or clock (realtime); auto "
+                   "(default): the mode in the summary.json of the hil run beside LOG, else sensors")
     p.add_argument("--timeout-cycles", type=count, default=10, metavar="N",
                    help="the recorded controller's --timeout-cycles (default 10)")
     add_secoc_args(p)
@@ -71,6 +72,25 @@ def _calibration(path: Path | None, flag: str, rate_hz: float) -> mr.ControllerC
     return cfg
 
 
+def _recorded_run(args: argparse.Namespace) -> tuple[str, float, str]:
+    """The recorded controller's trigger and rate: as given, else from the hil run's summary.json
+    beside the log, else the defaults; and where they came from."""
+    from sim_plant.harness.hil_report import recorded_controller
+
+    found_trigger, found_rate = recorded_controller(args.log)
+    trigger = args.trigger if args.trigger != "auto" else (found_trigger or "sensors")
+    rate_hz = args.rate_hz if args.rate_hz is not None else (found_rate or DEFAULT_RATE_HZ)
+    used = [what for what, given, found in (("trigger", args.trigger != "auto", found_trigger),
+                                              ("rate", args.rate_hz is not None, found_rate)) if not given and found]
+    if used:
+        source = f"{' and '.join(used)} from {args.log.parent / 'summary.json'}"
+    elif args.trigger == "auto" or args.rate_hz is None:
+        source = "no summary.json beside the log: defaults where not given"
+    else:
+        source = "as given"
+    return trigger, rate_hz, source
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         return _run(args)
@@ -89,10 +109,11 @@ def _run(args: argparse.Namespace) -> int:
         key = secoc_key(args)
     except ValueError as exc:
         raise _BadInput(str(exc)) from None
-    recorded = _calibration(args.recorded_calibration, "--recorded-calibration", args.rate_hz)
-    settings = rp.ReplaySettings(rate_hz=args.rate_hz, trigger=args.trigger, timeout_cycles=args.timeout_cycles,
+    trigger, rate_hz, source = _recorded_run(args)
+    recorded = _calibration(args.recorded_calibration, "--recorded-calibration", rate_hz)
+    settings = rp.ReplaySettings(rate_hz=rate_hz, trigger=trigger, timeout_cycles=args.timeout_cycles,
                                  controller=recorded, secoc_key=key)
-    new = _calibration(args.calibration, "--calibration", args.rate_hz) if args.calibration else None
+    new = _calibration(args.calibration, "--calibration", rate_hz) if args.calibration else None
     try:
         result = rp.replay(args.log, settings)
     except rp.LogError as exc:
@@ -109,18 +130,19 @@ def _run(args: argparse.Namespace) -> int:
             print(f"mrsteer replay: error: {exc}", file=sys.stderr)
             return 1
     what = report.whatif(rp.replay(args.log, replace(settings, controller=new))) if new is not None else None
-    doc: dict[str, Any] = {"replays": summaries}
+    doc: dict[str, Any] = {"replays": summaries, "recorded_run": source}
     if what is not None:
         doc["whatif"] = {"calibration": str(args.calibration), **report.whatif_summary(what)}
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
+        print(f"recorded controller: {trigger} trigger, {rate_hz:g} Hz ({source})")
         for s in summaries:
             print("\n".join(report.text(s)))
         if what is not None:
             print("\n".join(report.whatif_text(doc["whatif"], str(args.calibration))))
     if args.out is not None:
-        _write(args.out, doc, result, what, 1.0 / args.rate_hz)
+        _write(args.out, doc, result, what, 1.0 / rate_hz)
     return 0 if all(s["agrees"] for s in summaries) else 1
 
 

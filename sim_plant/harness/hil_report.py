@@ -201,3 +201,16 @@ def _signals_csv(rows: list[dict[str, Any]]) -> bytes:
         w.writerow({k: (f"{v:.6f}" if k == "t_s" else f"{v:.9g}" if isinstance(v, float) else v)
                     for k, v in r.items()})
     return buf.getvalue().encode()
+
+
+def recorded_controller(log: Path) -> tuple[str | None, float | None]:
+    """(trigger, rate in Hz) of the controller that a ``hil run``'s ``summary.json`` beside
+    ``log`` describes (lockstep mode: the ``sensors`` trigger, realtime: ``clock``); (None, None)
+    for a log with no readable summary beside it (a ``candump -L`` from elsewhere)."""
+    try:
+        summary = json.loads((log.parent / "summary.json").read_text())
+        mode, rate = summary["mode"], float(summary["rate_hz"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None, None
+    trigger = {"lockstep": "sensors", "realtime": "clock"}.get(mode)
+    return trigger, (rate if trigger is not None and math.isfinite(rate) and rate > 0.0 else None)
