@@ -200,7 +200,8 @@ def test_controller_filters_are_installed_in_the_kernel() -> None:
 # matrix runs at 100 Hz (with the calibration tuned for 100 Hz), its times stretched 4x, with 20 s
 # more for the restarted controller to come up.  Every check is the same as on the fallback bus.
 # About 17 min with the 34 rows; tools/vcan-vm-test runs it only with MRSTEER_VCAN_MATRIX=1 (the
-# plausibility monitor false-alarms when the plant is late in nearly every step, as it is here).
+# plant is late in nearly every step here, so the closed loop is not the car's and the
+# plausibility monitor raises alarms: docs/faults.md, "State on real SocketCAN").
 VM_SETUP = dict(rate_hz=100.0, time_scale=4.0, startup_s=20.0)
 
 
