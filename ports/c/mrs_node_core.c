@@ -1,4 +1,4 @@
-/* One controller on one bus: see mrs_node_core.h. */
+/* One controller on one bus: see mrs_node_core.h (its receive chain is mrs_node_rx.c). */
 #include "mrs_node_core.h"
 
 #include <math.h>
@@ -7,14 +7,6 @@
 
 #include "mrs_contract.h"
 
-/* Why a frame was refused, with the CtrlStatus_Cause bit it stands for (mrsteer_dbc.link.Rejected). */
-typedef enum { RX_OK, RX_LENGTH, RX_CRC, RX_COUNTER_VALUE, RX_RANGE, RX_MAC, RX_REPEATED, RX_SEQUENCE } rx_verdict_t;
-
-static unsigned cause_of(rx_verdict_t v)
-{
-    return v == RX_RANGE ? MRS_CAUSE_RANGE : v == RX_MAC ? MRS_CAUSE_AUTH : MRS_CAUSE_E2E;
-}
-
 /* `cycles` of the message's own cycle time in controller periods, rounded up (the 1e-9 keeps
  * 3 * 0.1 / 1e-3 = 300.00000000000006 at 300), at least 1: node.py's limit(). */
 static long limit_cycles(const mrs_msg_t *m, double period, int cycles)
@@ -22,19 +14,6 @@ static long limit_cycles(const mrs_msg_t *m, double period, int cycles)
     const double cycle = (m->control_loop || m->cycle_s == 0.0) ? period : m->cycle_s;
     const double x = ceil((double)cycles * cycle / period - 1e-9);
     return x < 1.0 ? 1L : (long)x;
-}
-
-size_t mrs_node_filter_ids(int keyed, uint32_t ids[8])
-{
-    size_t n = 0u;
-    ids[n++] = mrs_messages[MRS_MSG_STEER].frame_id;
-    ids[n++] = mrs_messages[MRS_MSG_YAW].frame_id;
-    ids[n++] = mrs_messages[MRS_MSG_SPEED].frame_id;
-    ids[n++] = mrs_messages[MRS_MSG_REDUNDANT].frame_id;
-    if (keyed) {
-        ids[n++] = mrs_messages[MRS_MSG_SYNC].frame_id;
-    }
-    return n;
 }
 
 int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, char *err, size_t err_len)
@@ -126,49 +105,11 @@ void mrs_node_free(mrs_node_t *n)
     n->cmac = NULL;
 }
 
-/* The checks of RxLink.accept after the ID: length, CRC, counter value, range, MAC, sequence. */
-static rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, const mrs_frame_t *f, double *phys)
-{
-    const mrs_msg_t *m = &mrs_messages[msg];
-    if (f->len != m->length) {
-        return RX_LENGTH;
-    }
-    if (m->e2e && f->data[m->crc_byte] != mrs_e2e_crc(m->data_id, f->data, f->len, m->crc_byte)) {
-        return RX_CRC;
-    }
-    if (m->unpack(phys, f->data, f->len) != 0) {
-        return RX_LENGTH;
-    }
-    if (m->e2e && phys[m->counter] >= (double)MRS_E2E_COUNTER_MODULO) {
-        return RX_COUNTER_VALUE;
-    }
-    if (!mrs_in_range(m, phys)) {
-        return RX_RANGE;
-    }
-    /* Authenticate before the counter check: a forged frame must not advance the sequence. */
-    if (n->keyed) {
-        const int ok = msg == MRS_MSG_SYNC ? mrs_signer_accept_sync(&n->signer, n->cmac, m, phys)
-                                           : mrs_sensor_verify(&n->verifier, n->cmac, msg, f->data, phys);
-        if (!ok) {
-            return RX_MAC;
-        }
-    }
-    if (seq != NULL) {
-        const mrs_e2e_status_t st = mrs_e2e_check_counter(seq, (uint8_t)phys[m->counter]);
-        if (st == MRS_E2E_REPEATED) {
-            return RX_REPEATED;
-        }
-        if (st == MRS_E2E_WRONG_SEQUENCE) {
-            return RX_SEQUENCE;
-        }
-    }
-    return RX_OK;
-}
-
 /* A redundant sample is in time when it arrived within MRS_REDUNDANT_JITTER_CYCLES monitor steps of
  * what its alive counter says elapsed since the one before (the first one is): node.py's
- * SampleClock.redundant_frame (firmware_py/controller/sample_clock.py). */
-static void time_redundant(mrs_node_t *n, unsigned counter)
+ * SampleClock.redundant_frame (firmware_py/controller/sample_clock.py); the receive chain
+ * (mrs_node_rx.c) calls it on each accepted one. */
+void mrs_node_time_redundant(mrs_node_t *n, unsigned counter)
 {
     if (n->red_counter >= 0) {
         const unsigned delta =
@@ -182,64 +123,15 @@ static void time_redundant(mrs_node_t *n, unsigned counter)
     n->red_cycles = 0;
 }
 
-int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f)
+/* The yaw-rate samples since the last period, by the accepted frames' alive counter (a lost
+ * or rejected frame's sample counts): SampleClock.yaw_frame; the receive chain calls it on each
+ * accepted yaw-rate frame. */
+void mrs_node_count_yaw(mrs_node_t *n, unsigned counter)
 {
-    double phys[MRS_MAX_SIGNALS];
-    mrs_input_t *in = NULL;
-    rx_verdict_t v;
-    int i, is_sync;
-    for (i = 0; i < MRS_N_INPUTS; ++i) {
-        if (f->id == mrs_messages[n->in[i].msg].frame_id) {
-            in = &n->in[i];
-        }
-    }
-    is_sync = n->keyed && f->id == mrs_messages[MRS_MSG_SYNC].frame_id;
-    if ((in == NULL && !is_sync) || (f->flags & MRS_FRAME_EXTENDED)) {
-        return 0; /* outside the receive filters: never reaches the node, as with python-can */
-    }
-    ++n->stats.rx_frames;
-    if (f->flags & (MRS_FRAME_REMOTE | MRS_FRAME_ERROR)) {
-        ++n->stats.rx_ignored;
-        return 0;
-    }
-    v = check(n, is_sync ? MRS_MSG_SYNC : in->msg, is_sync ? NULL : &in->seq, f, phys);
-    if (is_sync) {
-        if (v != RX_OK) {
-            ++n->stats.syncs_rejected;
-            return 0;
-        }
-        n->sync_age = 0;
-        mrs_sensor_adopt(&n->verifier, n->signer.epoch);
-        return 0;
-    }
-    if (v != RX_OK) {
-        ++n->stats.rx_rejected;
-        if (v == RX_MAC) {
-            ++n->stats.rx_auth_failed;
-        }
-        ++in->rejects;
-        in->bad_cause = cause_of(v);
-        return 0;
-    }
-    in->rejects = 0;
-    in->value = phys[in->sig];
-    if (in->sig2 >= 0) {
-        in->value2 = phys[in->sig2];
-    }
-    in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
-    in->age = 0;
-    if (in->msg == MRS_MSG_REDUNDANT) {
-        time_redundant(n, in->last_counter);
-    }
-    if (in->msg == MRS_MSG_YAW) {
-        n->yaw_stamp = f->stamp;
-        n->yaw_samples += n->yaw_counter < 0 ? 1L
-                                             : (long)((in->last_counter + MRS_E2E_COUNTER_MODULO - (unsigned)n->yaw_counter) %
-                                                      MRS_E2E_COUNTER_MODULO);
-        n->yaw_counter = (int)in->last_counter;
-        return 1;
-    }
-    return 0;
+    n->yaw_samples += n->yaw_counter < 0
+                          ? 1L
+                          : (long)((counter + MRS_E2E_COUNTER_MODULO - (unsigned)n->yaw_counter) % MRS_E2E_COUNTER_MODULO);
+    n->yaw_counter = (int)counter;
 }
 
 int mrs_node_build_frame(mrs_node_t *n, int msg, double *phys, uint8_t data[8])

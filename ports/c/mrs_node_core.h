@@ -98,11 +98,36 @@ typedef struct {
 int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, char *err, size_t err_len);
 void mrs_node_free(mrs_node_t *n);
 
+/* ---- The receive chain (mrs_node_rx.c): the only path a received frame takes. ---- */
+
+/* A frame's verdict: accepted, or the first check that refused it (mrsteer_dbc.link.Rejected,
+ * in its order). */
+typedef enum {
+    MRS_RX_ACCEPTED = 0,
+    MRS_RX_IGNORED = 1, /* not the node's: another ID, an extended ID, a remote or error frame */
+    MRS_RX_LENGTH = 2,
+    MRS_RX_CRC = 3,
+    MRS_RX_COUNTER_VALUE = 4,
+    MRS_RX_RANGE = 5,
+    MRS_RX_MAC = 6,
+    MRS_RX_REPEATED = 7,
+    MRS_RX_WRONG_SEQUENCE = 8
+} mrs_rx_verdict_t;
+
 /* The IDs the node receives (its receive filters); returns how many. */
 size_t mrs_node_filter_ids(int keyed, uint32_t ids[8]);
 
-/* Check one frame and store it: 1 if it was an accepted yaw-rate frame, else 0. */
+/* Check one frame through the whole chain and store it (the input's value, counter and age, or
+ * its rejects and cause; a sync's epoch): the verdict. */
+mrs_rx_verdict_t mrs_node_accept(mrs_node_t *n, const mrs_frame_t *f);
+
+/* mrs_node_accept: 1 if it was an accepted yaw-rate frame, else 0. */
 int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f);
+
+/* The redundant sample's timing and the yaw-rate sample count (mrs_node_core.c: the monitor's
+ * clock), for the receive chain on each accepted frame of that message. */
+void mrs_node_time_redundant(mrs_node_t *n, unsigned counter);
+void mrs_node_count_yaw(mrs_node_t *n, unsigned counter);
 
 /* Freshness, step, plausibility monitor, authority limiter, command (and status at its cycle),
  * as ControllerNode.control: 0, or -1 when the bus failed. */

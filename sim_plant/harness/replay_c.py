@@ -12,7 +12,7 @@ cause bits are not the law's either; the C node (``mrs_node``) has its own, so t
 not compare them.
 
 Why the decoding stays in Python: the receive path is the node's concern (the C node has its
-own, ``mrs_rx``), and keeping it out of this driver means a mismatch here is the port's
+own, ``mrs_node_rx``), and keeping it out of this driver means a mismatch here is the port's
 ``step()`` and nothing else.
 """
 
