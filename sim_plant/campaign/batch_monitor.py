@@ -36,6 +36,8 @@ class BatchAuthority:
     def step(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
         """The command allowed this period per row (rad) for the law's ``u_request`` and the
         monitor's ``plaus_bits``."""
+        if _within(u_request) and not plaus_bits.any():
+            return self._clean(u_request)
         c = self.c
         finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
         fault = ((plaus_bits & PLAUS_FAULT) != 0) | ~finite
@@ -52,6 +54,23 @@ class BatchAuthority:
         up, down = d > du, d < -du
         d = np.where(up, du, np.where(down, -du, d))
         flags |= np.where((up | down) & (du == c.du_max), au.AUTH_RATE, 0)
+        self.flags = flags
+        return self._move(d)
+
+    def _clean(self, u_request: np.ndarray) -> np.ndarray:
+        """``step`` with no bit set and every request finite: no fault and no time-out (that
+        needs DEGRADED), so only the magnitude and the rate bound (the same values: min and max
+        are the scalar's comparisons for finite numbers)."""
+        c = self.c
+        target = np.minimum(np.maximum(u_request, -c.u_max), c.u_max)
+        d = target - self.u
+        bounded = np.minimum(np.maximum(d, -c.du_max), c.du_max)
+        self.flags = np.where(target != u_request, au.AUTH_MAGNITUDE, 0) | np.where(bounded != d, au.AUTH_RATE, 0)
+        return self._move(bounded)
+
+    def _move(self, d: np.ndarray) -> np.ndarray:
+        """The command moved by ``d``, and the intervention's window counted."""
+        c = self.c
         u = self.u + d
         acting = (u > c.engage) | (u < -c.engage)
         self.engaged = np.where(acting & (self.engaged < c.window_steps), self.engaged + 1, self.engaged)
@@ -59,7 +78,6 @@ class BatchAuthority:
         self.engaged = np.where(~acting & (quiet >= c.rearm_steps), 0, self.engaged)
         self.quiet = quiet
         self.u = u
-        self.flags = flags
         return u
 
 
@@ -102,6 +120,13 @@ class BatchMonitor:
         self.kin_raw = np.zeros((pl.KIN_WINDOW, n))
         self.kin_comp = np.zeros((pl.KIN_WINDOW, n))
         self._cols = np.arange(n)
+        self._pair: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the last period's lat, d2
+        self._steady_ok = False  # every row started and the pair present after the last full period
+        self.steady_periods = 0  # periods that took the shortcut (``step``)
+        #: the CtrlStatus_Plausibility bits of each value of the detailed flags
+        self._bits_of = np.array([(pl.PLAUS_YAW if f & pl.YAW_CHECKS else 0) | (pl.PLAUS_STEER if f & pl.STEER_CHECKS
+                                                                               else 0)
+                                  | (pl.PLAUS_DEGRADED if f & pl.MISSING else 0) for f in range(256)], dtype=np.int64)
 
     def _set(self, name: str, rows: np.ndarray, value) -> None:
         setattr(self, name, np.where(rows, value, getattr(self, name)))
@@ -109,7 +134,25 @@ class BatchMonitor:
     def step(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
              aux: np.ndarray) -> np.ndarray:
         """``monitor_step(c, s, delta_driver=d, delta_driver_redundant=d2, yaw_rate=r,
-        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits."""
+        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits.
+
+        A caller that holds the redundant pair between its samples (the node's 50 ms frame)
+        passes the very same two arrays, unmodified, until the next sample.  A period in which
+        they are the arrays of the period before, every row's checks run (started, primary
+        inputs in range) and the pair is present, takes ``_steady``: the scalar's branches for
+        a period without a new sample, and nothing else."""
+        if (lat is self._pair[0] and d2 is self._pair[1] and self._steady_ok
+                and _within(v, self.c.speed_min, closed=True) and _within(d) and _within(r) and _within(aux)):
+            self.steady_periods += 1
+            return self._steady(d, d2, r, lat, v, aux)
+        bits = self._full(d, d2, r, lat, v, aux)
+        self._pair = (lat, d2)
+        self._steady_ok = bool(self.started.all()) and not (self.flags & pl.MISSING).any()
+        return bits
+
+    def _full(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
+              aux: np.ndarray) -> np.ndarray:
+        """Every branch of ``monitor_step`` as a mask, in its order."""
         c = self.c
         with np.errstate(all="ignore"):  # a paused row's arithmetic (NaN, 1/0) is computed and dropped
             flags = self.latched.copy()
@@ -227,3 +270,60 @@ class BatchMonitor:
         moved = on & ~changed & (np.abs(d - self.st2_ref) > move_st)
         self.st2_same, trip = _frozen(self.st2_same, moved, steps)
         self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
+
+    # monitor_step's path for a period without a new redundant sample, every row checking: the
+    # model check, the count since the last sample and the four frozen checks with new_sample
+    # False (``kin_*``, ``pair_*``, ``lat_prev``, ``steer2_prev`` keep their values: the scalar
+    # writes the value they hold).  Long because it is those checks inline.
+    def _steady(self, d, d2, r, lat, v, aux) -> np.ndarray:
+        c, latched = self.c, self.latched
+        inv_v = 1.0 / v
+        r_kin = lat * inv_v
+        delta = d + aux
+        r_ss = delta * v / (c.wheelbase + c.k_us * v * v)
+        self.r_model = self.r_model + c.model_alpha * (r_ss - self.r_model)
+        e = np.abs(r - self.r_model)
+        bound = c.model_margin + c.model_rel * np.abs(self.r_model)
+        self.model_err = e / bound
+        over = e > bound
+        count = np.where(over, np.minimum(self.model_count + 1, c.model_steps), np.maximum(self.model_count - 1, 0))
+        self.model_count = count
+        np.bitwise_or(latched, pl.CHECK_MODEL, out=latched, where=over & (count >= c.model_steps))
+        self.since = np.minimum(self.since + 1, 1000000)
+        steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
+        # the yaw rate against a_y / v
+        same = r == self.yaw_last
+        check = same & self.yaw_ref_ok
+        self.yaw_last = np.where(same, self.yaw_last, r)
+        self.yaw_ref_ok = check
+        moved = check & (np.abs(r_kin - self.yaw_ref) > move_yaw)
+        self.yaw_same = _frozen_held(np.where(same, self.yaw_same, 0), moved, steps, latched, pl.FROZEN_YAW)
+        # a_y against the yaw rate (a_y held: unchanged)
+        moved = np.abs(r - self.lat_ref) > move_yaw
+        self.lat_same = _frozen_held(self.lat_same, moved, steps, latched, pl.FROZEN_LAT)
+        # each steering channel against the other (the second held: unchanged)
+        same = d == self.st_last
+        check = same & self.st_ref_ok
+        self.st_last = np.where(same, self.st_last, d)
+        self.st_ref_ok = check
+        moved = check & (np.abs(d2 - self.st_ref) > move_st)
+        self.st_same = _frozen_held(np.where(same, self.st_same, 0), moved, steps, latched, pl.FROZEN_STEER)
+        moved = np.abs(d - self.st2_ref) > move_st
+        self.st2_same = _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
+        self.flags = latched.copy()
+        self.bits = self._bits_of[self.flags]
+        return self.bits
+
+
+def _within(x: np.ndarray, lo: float = -1e3, closed: bool = False) -> bool:
+    """Every entry of ``x`` in (lo, 1e3), or in [lo, 1e3) when ``closed``: the scalar's range
+    checks for all rows at once.  False for any NaN (min and max propagate it)."""
+    x_lo, x_hi = x.min(), x.max()
+    return bool((x_lo >= lo if closed else x_lo > lo) and x_hi < 1e3)
+
+
+def _frozen_held(same: np.ndarray, moved: np.ndarray, steps: int, latched: np.ndarray, bit: int) -> np.ndarray:
+    """``_frozen`` on a fresh ``same`` (written in place), its trip latched into ``latched``."""
+    same += moved & (same < steps)
+    np.bitwise_or(latched, bit, out=latched, where=moved & (same >= steps))
+    return same
