@@ -67,6 +67,9 @@ def _compare(s: SampleSet, config: mr.ControllerConfig | None) -> dict[str, np.n
         assert res["plausibility_bits"][i] == np.bitwise_or.reduce(ref.bits)
         assert res["authority_steps"][i] == np.count_nonzero(ref.authority)
         assert res["final_speed"][i] == pytest.approx(ref.final_speed, abs=TOL)
+        assert res["false_alarms"][i] == ref.false_alarms
+        assert res["detection_time"][i] == pytest.approx(ref.detection_time, abs=TOL)
+        assert res["fault_yaw_rate"][i] == pytest.approx(ref.fault_yaw_rate, abs=TOL)
     return res
 
 
@@ -104,6 +107,29 @@ def test_batch_equals_scalar_where_the_monitor_faults_and_the_limiter_fades() ->
     tripped = (res["plausibility_bits"] & pl.PLAUS_FAULT) != 0
     assert tripped[:4].all(), res["plausibility_bits"]
     assert (res["fault_steps"][:4] > 0).all() and (res["authority_steps"][:4] > 0).all()
+
+
+FAULTS = WIDE + """fault_sensor = {{ choice = ["none", "yaw_rate", "lat_accel", "steer", "steer_redundant"] }}
+fault_kind = {{ choice = ["stuck", "offset", "gain", "drift"] }}
+fault_onset = {{ uniform = [0.2, 1.0] }}
+fault_size = {{ uniform = [0.5, 4.0] }}
+"""
+
+
+@pytest.mark.parametrize("seed", [3, 41])
+def test_batch_equals_scalar_with_sampled_sensor_faults(seed: int) -> None:
+    """Sampled sensor faults of every channel and kind: the error each makes, its detection,
+    the yaw rate the command asks while faulted and the alarms before the onset, against the
+    reference's scalar sensors (a faulted and a clean copy) and ``MonitorRun``."""
+    from sim_plant.campaign.params import FAULT_CHANNELS
+
+    c = spec.parse(FAULTS.format(seed=seed), "faults.toml")
+    s = sampling.samples(c, np.random.default_rng(seed).choice(c.samples, 12, replace=False))
+    s["v"][:] = np.maximum(s["v"], 12.0)
+    res = _compare(s, mr.ControllerConfig())
+    faulted = s["fault_sensor"] != FAULT_CHANNELS.index("none")
+    assert faulted.sum() >= 6 and np.isfinite(res["detection_time"][faulted]).any()
+    assert (res["detection_time"][faulted] > 0).any() or (res["fault_steps"][faulted] > 0).any()
 
 
 @pytest.mark.parametrize("name", ["previous", "paper", "../tests/vectors/previous_500hz.cfg"])

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.car.nonlinear import MAX_STEP_RATE, STOP_SPEED
 from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
 from sim_plant.car.sensors import G as G_SENSOR
@@ -306,8 +307,14 @@ class BatchSensors:
     noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
 
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
-                 config: SensorConfig = SensorConfig()) -> None:
+                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None) -> None:
         fs = 1.0 / ts
+        self.ts, self.faults = ts, faults
+        #: per row, its faulted channel's reading less the same sensor's without the fault (the
+        #: last step that read it), as ``plausibility_runs.run`` measures the fault's error
+        self.error = np.zeros(seeds.size)
+        tracked = set(faults.rows) if faults is not None else set()
+        self.tracked = tracked
         self.sigma = np.radians(noise_density) * math.sqrt(fs / 2.0)
         self.bias = np.radians(bias_deg_s)
         lat, steer2 = config.lat_accel, config.steer_redundant
@@ -316,6 +323,9 @@ class BatchSensors:
         self.steer2_sigma = math.radians(steer2.noise)
         self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
         self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
+        # the same filters on the fault-free input, for the error of a faulted channel
+        self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
+        self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
         self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
             dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
         # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
@@ -324,28 +334,53 @@ class BatchSensors:
         self._k = 0
 
     def at(self, k: int) -> None:
-        """The step of the next readings."""
+        """The step of the next readings (t = k ts for the faults)."""
         self._k = k
+        self._t = k * self.ts
+
+    def _input(self, channel: str, x: np.ndarray) -> np.ndarray:
+        return x if self.faults is None else self.faults.input(channel, self._t, x)
+
+    def _error(self, channel: str, faulted: np.ndarray, clean: np.ndarray) -> None:
+        assert self.faults is not None
+        self.error = np.where(self.faults.rows[channel], faulted - clean, self.error)
 
     def yaw_rate(self, r: np.ndarray) -> np.ndarray:
-        noisy = r + self.bias + self.sigma * self._yaw_noise.at(self._k)
-        return np.round(self._yaw_lpf(noisy) / self.q_yaw) * self.q_yaw
+        noise = self.sigma * self._yaw_noise.at(self._k)
+        q = self.q_yaw
+        y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
+        if self._yaw_clean is not None:
+            self._error("yaw_rate", y, np.round(self._yaw_clean(r + self.bias + noise) / q) * q)
+        return y
 
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
         """The lateral acceleration's filter output, unquantised: the filter runs every step,
         and ``quantised_lat`` makes the value of a step whose reading is sent."""
-        return self._lat_lpf(a_y + self.lat_bias + self.lat_sigma * self._lat_noise.at(self._k))
+        noise = self.lat_sigma * self._lat_noise.at(self._k)
+        y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
+        if self._lat_clean is not None:
+            clean = self._lat_clean(a_y + self.lat_bias + noise)
+            self._error("lat_accel", self.quantised_lat(y), self.quantised_lat(clean))
+        return y
 
     def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
         return np.round(filtered / self.q_lat) * self.q_lat
 
     def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
-        """The second steering channel (no filter: only a step whose reading is sent needs it)."""
-        noisy = delta + 0.0 + self.steer2_sigma * self._steer2_noise.at(self._k)
-        return np.round(noisy / self.q_steer2) * self.q_steer2
+        """The second steering channel (no filter: only a step whose reading is sent needs it,
+        and, for its error, every step of a row that faults it)."""
+        noise = self.steer2_sigma * self._steer2_noise.at(self._k)
+        q = self.q_steer2
+        y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
+        if "steer_redundant" in self.tracked:
+            self._error("steer_redundant", y, np.round((delta + 0.0 + noise) / q) * q)
+        return y
 
     def steer(self, delta: np.ndarray) -> np.ndarray:
-        return np.round(delta / self.q_steer) * self.q_steer
+        y = np.round(self._input("steer", delta) / self.q_steer) * self.q_steer
+        if "steer" in self.tracked:
+            self._error("steer", y, np.round(delta / self.q_steer) * self.q_steer)
+        return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:
         return np.round(v / self.q_speed) * self.q_speed

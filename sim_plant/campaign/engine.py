@@ -40,6 +40,7 @@ import numpy as np
 from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
+from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
 from sim_plant.campaign.batch_law import BatchLaw
 from sim_plant.campaign.batch_monitor import BatchAuthority, BatchMonitor
@@ -57,6 +58,11 @@ METRICS = {
     "false_alarm_steps": ("", "steps the monitor reported PLAUS_FAULT or PLAUS_DEGRADED"),
     "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
+    "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
+    "detection_time": ("s", "first PLAUS_FAULT less when the fault's error left its bound for 0.3 s (0: it never "
+                            "did, or was reported before; inf: never reported)"),
+    "fault_yaw_rate": ("rad/s", "largest K_n(v) |command| from the sensor fault's onset: the yaw rate the command "
+                                "asks of the nominal car (0 without a fault)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
     "final_yaw_rate": ("rad/s", "r at the end"),
     "final_speed": ("m/s", "v at the end"),
@@ -114,7 +120,8 @@ class _Group:
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
         # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
         self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
-        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts)
+        self.faults = BatchFaults(s) if bool((s["fault_sensor"] != 0).any()) else None
+        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults)
         self.every = cycles(ts)
         if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
             raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
@@ -155,6 +162,7 @@ class _Group:
         zeros = np.zeros(rows, dtype=np.int64)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
+        figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
@@ -182,6 +190,8 @@ class _Group:
                 sample = k % red_every == 0
                 if sample:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
+                elif figures is not None and "steer_redundant" in sensors.tracked:
+                    sensors.steer_redundant(driver)  # its error, every step
                 if k % speed_every == 0:
                     held["speed"] = sensors.speed(car.v)
                 steer = sensors.steer(driver)
@@ -196,6 +206,8 @@ class _Group:
                     ored |= bits
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
+                    if figures is not None:
+                        figures.step(k, sensors.error, bits, r, held["speed"], u, self.monitor.c)
                 else:
                     u, status, bits = np.zeros(rows), np.full(rows, mr.STATUS_INACTIVE), zeros
                 np.maximum(peak_u, np.abs(u), out=peak_u)
@@ -216,4 +228,7 @@ class _Group:
                 "time_at_limit": counts["at_limit"] * ts, "fault_steps": counts["faults"],
                 "false_alarm_steps": counts["alarms"], "plausibility_bits": ored,
                 "authority_steps": counts["authority"], "peak_command": np.degrees(peak_u),
+                **(figures.result() if figures is not None else
+                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows),
+                    "fault_yaw_rate": np.zeros(rows)}),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}

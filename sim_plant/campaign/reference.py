@@ -26,6 +26,7 @@ campaign`` times it as the scalar firmware loop the engine is measured against.
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,8 @@ from sim_plant.car.actuator import Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, Sensors
-from sim_plant.offline.plausibility_runs import cycles
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.offline.plausibility_runs import MonitorRun, cycles, error_bound
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,9 @@ class ReferenceRun:
     bits: np.ndarray
     authority: np.ndarray
     final_speed: float
+    false_alarms: int  # steps with a plausibility bit before the sensor fault's onset (all, without one)
+    detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun
+    fault_yaw_rate: float
 
 
 def status_cycle(ts: float) -> int:
@@ -75,6 +80,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     car = Car(sc.plant, scene.params(), ts)
     position = PositionActuator(sc.actuator, ts)
     sensors = Sensors(sc.sensor_config, ts)
+    fault = sc.sensor_config.faults[0] if sc.sensor_config.faults else None
+    clean = Sensors(sc.sensors, ts) if fault is not None else None  # the same sensors without the fault
     handling = Actuator(ActuatorConfig(), ts)
     ctrl = mr.ModelRegulator(config) if config is not None else None
     mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
@@ -85,6 +92,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     n = int(round(sc.duration / ts)) + 1
     r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
     status, bits_hist, auth = (np.zeros(n, dtype=np.int64) for _ in range(3))
+    error, speed_seen = np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
     command = 0.0  # the command sent the period before: what acts on the car now
     in_flight: int | None = None  # a status frame's plausibility bits, not yet read by the plant
@@ -105,9 +113,13 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                  "steer_redundant": driver}
         sensors.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        if fault is not None and clean is not None:
+            clean.at(t)
+            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
         for ch in CHANNELS:
             if k % every[ch] == 0:
                 held[ch] = read[ch]
+        speed_seen[k] = held["speed"]
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
         if ctrl is not None and ac is not None:
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"])
@@ -126,5 +138,24 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         status[k], bits_hist[k], auth[k] = state, bits, ast.flags
         car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
-    return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v)
+    return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen))
+
+
+def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
+                  error: np.ndarray, speed: np.ndarray) -> tuple[int, float, float]:
+    """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
+    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection."""
+    t = np.arange(bits.size) * ts
+    after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
+    false_alarms = int(np.count_nonzero((bits != 0) & ~after))
+    if fault is None:
+        return false_alarms, 0.0, 0.0
+    cfg = pl.PlausibilityConfig(ts=ts)
+    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed}, np.zeros(bits.size))
+    exceeded, reported = run.exceeded_time(error_bound(fault.sensor, cfg, run)), run.fault_time
+    detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
+    c = pl.configure(cfg)
+    gain = speed / (c.wheelbase + c.k_us * speed * speed)
+    return false_alarms, detection, float(np.max(np.where(after, gain * np.abs(command), 0.0)))
 
