@@ -80,8 +80,8 @@ HOLD = 0.3
 
 class FaultFigures:
     """The figures of a batch's sensor faults, one engine step at a time: ``false_alarms``
-    (alarms before the fault's onset, or in the whole run without one), ``detection_time`` and
-    ``fault_yaw_rate`` (``engine.METRICS``)."""
+    (alarms before the fault's onset, or in the whole run without one) and ``detection_time``
+    (``engine.METRICS``; ``fault_yaw_rate`` is the engine's, from a fault-free twin)."""
 
     def __init__(self, faults: BatchFaults, n: int, ts: float) -> None:
         rows = faults.onset.size
@@ -95,12 +95,10 @@ class FaultFigures:
         self.reported = np.zeros(rows, dtype=bool)
         self.report_step = np.full(rows, -1, dtype=np.int64)
         self.alarms = np.zeros(rows, dtype=np.int64)
-        self.yaw = np.zeros(rows)
 
-    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, speed: np.ndarray,
-             command: np.ndarray, c: pl.MonitorCoefficients) -> None:
+    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, speed: np.ndarray) -> None:
         """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate, the speed
-        the controller saw, the command it sent."""
+        the controller saw."""
         after = self.faulted & (self.faults.onset <= k * self.ts)
         self.alarms += (bits != 0) & ~after
         fault = (bits & pl.PLAUS_FAULT) != 0
@@ -111,11 +109,8 @@ class FaultFigures:
         bound = self.cfg.yaw_bound + self.cfg.yaw_rel * np.abs(r_true)
         bound = np.where(self.lat, bound * speed, np.where(self.steer, self.cfg.steer_bound, bound))
         self.tracker.step(k, np.abs(error) > bound, first)
-        gain = speed / (c.wheelbase + c.k_us * speed * speed)
-        self.yaw = np.maximum(self.yaw, np.where(after, gain * np.abs(command), 0.0))
 
     def result(self) -> dict[str, np.ndarray]:
         ex, rep, ts = self.tracker.exceeded, self.report_step, self.ts
         late = np.where(rep < 0, np.inf, np.maximum(0.0, rep * ts - ex * ts))
-        return {"false_alarms": self.alarms, "detection_time": np.where(~self.faulted | (ex < 0), 0.0, late),
-                "fault_yaw_rate": self.yaw}
+        return {"false_alarms": self.alarms, "detection_time": np.where(~self.faulted | (ex < 0), 0.0, late)}

@@ -61,8 +61,9 @@ METRICS = {
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
     "detection_time": ("s", "first PLAUS_FAULT less when the fault's error left its bound for 0.3 s (0: it never "
                             "did, or was reported before; inf: never reported)"),
-    "fault_yaw_rate": ("rad/s", "largest K_n(v) |command| from the sensor fault's onset: the yaw rate the command "
-                                "asks of the nominal car (0 without a fault)"),
+    "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
+                                "the fault makes the command cause, its fade included (0 without a fault or a "
+                                "controller)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
     "final_yaw_rate": ("rad/s", "r at the end"),
     "final_speed": ("m/s", "v at the end"),
@@ -88,31 +89,49 @@ def nominal_gain(v: np.ndarray, mass: np.ndarray) -> np.ndarray:
 def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: float, ts: float = 0.002,
              record: bool = False) -> dict[str, np.ndarray]:
     """Every row in closed loop with ``config`` (None: no controller); ``METRICS`` per row, and
-    with ``record`` the traces ``r``, ``beta``, ``command`` (steps x rows) as well."""
+    with ``record`` the traces ``r``, ``beta``, ``command``, ``bits`` (steps x rows) as well.
+
+    A row with a sensor fault runs beside a twin without it (the same sample, noise and all), so
+    that ``fault_yaw_rate`` is the yaw rate the fault makes the command cause: the largest
+    difference of their true yaw rates from the fault's onset."""
     if config is not None and abs(config.ts - ts) > 1e-15:
         raise ValueError(f"the calibration's step {config.ts:g} s differs from the campaign's {ts:g} s")
+    n = len(samples)
+    faulted = np.flatnonzero(samples["fault_sensor"] != 0) if config is not None else np.zeros(0, dtype=np.int64)
+    twin_of = np.full(n + faulted.size, -1)
+    if faulted.size:
+        twins = samples.take(faulted)
+        twins["fault_sensor"] = np.zeros(faulted.size)
+        samples = SampleSet({k: np.concatenate([v, twins[k]]) for k, v in samples.items()})
+        twin_of[faulted] = n + np.arange(faulted.size)
     kind = samples["disturbance"]
     grip = (kind == SPLIT) | (kind == BLOWOUT)
     out: dict[str, np.ndarray] = {}
+    local = np.full(len(samples), -1)
     for rows in (np.flatnonzero(~grip), np.flatnonzero(kind == SPLIT), np.flatnonzero(kind == BLOWOUT)):
         if rows.size == 0:
             continue
-        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record)
+        local[rows] = np.arange(rows.size)  # a twin has its row's kind: the same group
+        twin = np.where(twin_of[rows] >= 0, local[np.maximum(twin_of[rows], 0)], -1)
+        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin)
         res = part.run(steps_of(duration, ts))
         for name, values in res.items():
             if name not in out:
                 shape = (len(samples),) if values.ndim == 1 else (values.shape[0], len(samples))
                 out[name] = np.empty(shape, dtype=values.dtype)
             out[name][..., rows] = values
-    return out
+    return {name: values[..., :n] for name, values in out.items()}
 
 
 class _Group:
     """Rows that share their tyre and speed treatment, run together."""
 
     def __init__(self, s: SampleSet, config: mr.ControllerConfig | None, ts: float, grip: bool,
-                 record: bool) -> None:
+                 record: bool, twin: np.ndarray) -> None:
         self.ts, self.grip, self.record = ts, grip, record
+        self.pairs = np.flatnonzero(twin >= 0)  # the rows with a fault-free twin, and their twins
+        self.twins = twin[self.pairs]
+        self.fault_onset = s["fault_onset"][self.pairs]
         self.mass = s["mass"]
         n = self.mass.size
         self.car = BatchCar(s["v"], s["mu"], s["mass"], ts)
@@ -163,6 +182,7 @@ class _Group:
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
         figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
+        fault_yaw = np.zeros(self.pairs.size)
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
@@ -207,7 +227,10 @@ class _Group:
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
                     if figures is not None:
-                        figures.step(k, sensors.error, bits, r, held["speed"], u, self.monitor.c)
+                        figures.step(k, sensors.error, bits, r, held["speed"])
+                    if self.pairs.size:
+                        caused = np.abs(r[self.pairs] - r[self.twins])
+                        np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
                 else:
                     u, status, bits = np.zeros(rows), np.full(rows, mr.STATUS_INACTIVE), zeros
                 np.maximum(peak_u, np.abs(u), out=peak_u)
@@ -229,6 +252,12 @@ class _Group:
                 "false_alarm_steps": counts["alarms"], "plausibility_bits": ored,
                 "authority_steps": counts["authority"], "peak_command": np.degrees(peak_u),
                 **(figures.result() if figures is not None else
-                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows),
-                    "fault_yaw_rate": np.zeros(rows)}),
+                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows)}),
+                "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+
+
+def _scatter(rows: int, at: np.ndarray, values: np.ndarray) -> np.ndarray:
+    out = np.zeros(rows)
+    out[at] = values
+    return out

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -81,7 +81,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     position = PositionActuator(sc.actuator, ts)
     sensors = Sensors(sc.sensor_config, ts)
     fault = sc.sensor_config.faults[0] if sc.sensor_config.faults else None
-    clean = Sensors(sc.sensors, ts) if fault is not None else None  # the same sensors without the fault
+    clean = Sensors(replace(sc.sensors, faults=()), ts) if fault is not None else None  # the same, fault-free
     handling = Actuator(ActuatorConfig(), ts)
     ctrl = mr.ModelRegulator(config) if config is not None else None
     mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
@@ -138,12 +138,16 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         status[k], bits_hist[k], auth[k] = state, bits, ast.flags
         car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
+    # the yaw rate the fault makes the command cause: against the same run without it
+    r_clean = None
+    if fault is not None and ctrl is not None:
+        r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
-                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen))
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen, r_clean))
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
-                  error: np.ndarray, speed: np.ndarray) -> tuple[int, float, float]:
+                  error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None) -> tuple[int, float, float]:
     """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
     ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection."""
     t = np.arange(bits.size) * ts
@@ -155,7 +159,6 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed}, np.zeros(bits.size))
     exceeded, reported = run.exceeded_time(error_bound(fault.sensor, cfg, run)), run.fault_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
-    c = pl.configure(cfg)
-    gain = speed / (c.wheelbase + c.k_us * speed * speed)
-    return false_alarms, detection, float(np.max(np.where(after, gain * np.abs(command), 0.0)))
+    caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
+    return false_alarms, detection, caused
 
