@@ -8,12 +8,14 @@ scalar model up to the last bits of numpy's and libm's transcendental functions
 
 * ``BatchCar``: ``nonlinear.NonlinearPlant`` (kinematic slip, no relaxation) with the
   magic-formula tyres of ``tyres``, RK4 in ``substeps()`` equal sub-steps, the speed a state
-  that braking lowers down to ``STOP_SPEED``;
+  that braking lowers down to ``STOP_SPEED``; its a_y (``outputs``);
 * ``BatchPositionActuator``: ``actuator_dynamics.PositionActuator`` of order 1 (no dead time):
   range, exact ZOH lag, rate limit, end stop, and the position's mean over the step;
-* ``BatchSensors``: ``sensors.Sensors``: the yaw rate's noise (each sample's own seeded stream,
-  drawn as the scalar draws it), bias, 2nd-order Butterworth and DBC quantisation; the
-  steering angle and the speed quantised (their noise is 0 in a campaign).
+* ``BatchSensors``: ``sensors.Sensors``: the yaw rate's and the lateral acceleration's noise
+  (each sample's own seeded streams, drawn as the scalar draws them), bias, 2nd-order
+  Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
+  steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
+  faults on their inputs (``batch_faults``) and the error each makes.
 
 A tyre axle is evaluated either as one axle on the road's mu (``tyres.AxleTyre.force``) or as
 its two wheels (``AxleTyre.axle_force``).  With intact wheels on the road's mu the two-wheel

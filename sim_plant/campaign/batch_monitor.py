@@ -9,9 +9,10 @@ latched bits int arrays, the state one array per slot of the scalar state (``Aut
 ``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds both equal to the scalar
 code row by row and period by period: the bits, the flags, the counters, the residuals.
 
-Not done yet (docs/campaigns.md, "Not yet in the batch engine"): the car's a_y and the redundant
-sensors in the batch, the oracle ``reference.run`` as the node, and both wired into ``engine``
-after the law.
+``engine`` runs both after the law, as the controller node does, and the authority limiter
+again as the actuator's own limit.  ``BatchMonitor.step`` has a shortcut for the periods
+between redundant samples, ``BatchAuthority.step`` one for periods without DEGRADED (each the
+scalar's branches for such a period, checked by the same tests).
 """
 
 from __future__ import annotations

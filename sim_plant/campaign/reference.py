@@ -85,7 +85,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     handling = Actuator(ActuatorConfig(), ts)
     ctrl = mr.ModelRegulator(config) if config is not None else None
     mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
-    ac = au.configure_authority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config))) if config is not None else None
+    ac = None if config is None else au.configure_authority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)))
     ast = au.AuthorityState()
     every, status_every = cycles(ts), status_cycle(ts)
     pipeline: collections.deque[float] = collections.deque([0.0])

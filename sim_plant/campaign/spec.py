@@ -15,7 +15,6 @@
     noise_density = { loguniform = [0.005, 0.05] }
     disturbance = { choice = ["yaw_moment", "side_wind"] }
     mass = 1296.0              # a number: fixed
-
     fault_sensor = { choice = ["none", "yaw_rate", "lat_accel"] }   # sensor faults (issue 18)
     fault_kind = { choice = ["offset", "drift"] }
     fault_onset = { uniform = [1.0, 3.0] }
