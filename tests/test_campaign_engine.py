@@ -50,16 +50,26 @@ driver_time_constant = {{ uniform = [0.1, 2.0] }}
 
 
 def _compare(s: SampleSet, config: mr.ControllerConfig | None) -> dict[str, np.ndarray]:
+    """The engine's traces and figures against the reference's, sample by sample: the car's
+    state, the command sent (after the authority limiter), the monitor's bits every period."""
     res = engine.simulate(s, config, DURATION, record=True)
     for i in range(len(s)):
         ref = reference.run(scenario_for(s.row(i), DURATION), config)
         for name, trace in (("r", ref.r), ("beta", ref.beta), ("command", ref.command)):
             err = np.max(np.abs(trace - res[name][:, i]))
             assert err <= TOL, f"sample {s.row(i)}: {name} differs by {err:.3g}"
+        differ = np.flatnonzero(res["bits"][:, i] != ref.bits)
+        assert differ.size == 0, f"sample {s.row(i)}: bits differ from step {differ[:1]}"
         assert res["peak_yaw_rate"][i] == pytest.approx(np.max(np.abs(ref.r)), abs=TOL)
         assert res["fault_steps"][i] == np.count_nonzero(ref.status == mr.STATUS_FAULT)
         assert res["time_at_limit"][i] == pytest.approx(np.count_nonzero(ref.status == mr.STATUS_SATURATED) * 0.002)
+        assert res["false_alarm_steps"][i] == np.count_nonzero(ref.bits)
+        assert res["plausibility_bits"][i] == np.bitwise_or.reduce(ref.bits)
+        assert res["authority_steps"][i] == np.count_nonzero(ref.authority)
         assert res["final_speed"][i] == pytest.approx(ref.final_speed, abs=TOL)
+        assert res["false_alarms"][i] == ref.false_alarms
+        assert res["detection_time"][i] == pytest.approx(ref.detection_time, abs=TOL)
+        assert res["fault_yaw_rate"][i] == pytest.approx(ref.fault_yaw_rate, abs=TOL)
     return res
 
 
@@ -82,6 +92,44 @@ def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
     res = _compare(s, mr.ControllerConfig())
     assert res["fault_steps"][:2].min() > 0, "the spin must reach the fault path"
     _compare(s, None)
+
+
+def test_batch_equals_scalar_where_the_monitor_faults_and_the_limiter_fades() -> None:
+    """Yaw-rate biases beyond the kinematic check's bound (2 deg/s) trip the monitor: the
+    command fades at the limiter's rate, the state is FAULT; a small bias stays clean."""
+    from firmware_py import plausibility as pl
+
+    c = spec.parse(WIDE.format(seed=31), "wide.toml")
+    s = sampling.samples(c, np.arange(6))
+    s["bias"][:] = [6.0, -8.0, 4.0, 12.0, 0.3, -0.2]
+    s["v"][:] = np.maximum(s["v"], 12.0)
+    res = _compare(s, mr.ControllerConfig())
+    tripped = (res["plausibility_bits"] & pl.PLAUS_FAULT) != 0
+    assert tripped[:4].all(), res["plausibility_bits"]
+    assert (res["fault_steps"][:4] > 0).all() and (res["authority_steps"][:4] > 0).all()
+
+
+FAULTS = WIDE + """fault_sensor = {{ choice = ["none", "yaw_rate", "lat_accel", "steer", "steer_redundant"] }}
+fault_kind = {{ choice = ["stuck", "offset", "gain", "drift"] }}
+fault_onset = {{ uniform = [0.2, 1.0] }}
+fault_size = {{ uniform = [0.5, 4.0] }}
+"""
+
+
+@pytest.mark.parametrize("seed", [3, 41])
+def test_batch_equals_scalar_with_sampled_sensor_faults(seed: int) -> None:
+    """Sampled sensor faults of every channel and kind: the error each makes, its detection,
+    the yaw rate the command asks while faulted and the alarms before the onset, against the
+    reference's scalar sensors (a faulted and a clean copy) and ``MonitorRun``."""
+    from sim_plant.campaign.params import FAULT_CHANNELS
+
+    c = spec.parse(FAULTS.format(seed=seed), "faults.toml")
+    s = sampling.samples(c, np.random.default_rng(seed).choice(c.samples, 12, replace=False))
+    s["v"][:] = np.maximum(s["v"], 12.0)
+    res = _compare(s, mr.ControllerConfig())
+    faulted = s["fault_sensor"] != FAULT_CHANNELS.index("none")
+    assert faulted.sum() >= 6 and np.isfinite(res["detection_time"][faulted]).any()
+    assert (res["detection_time"][faulted] > 0).any() or (res["fault_steps"][faulted] > 0).any()
 
 
 @pytest.mark.parametrize("name", ["previous", "paper", "../tests/vectors/previous_500hz.cfg"])
@@ -143,6 +191,8 @@ def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
     requests[rng.random((steps, rows)) < 0.005] = np.inf
     choices = np.array([0, 0, 0, 0, pl.PLAUS_DEGRADED, pl.PLAUS_DEGRADED, pl.PLAUS_YAW, pl.PLAUS_STEER])
     bits = choices[rng.integers(0, choices.size, (steps, rows))]
+    calm = np.arange(steps) % 4 == 0  # periods with no bit set and every request finite (the clean path)
+    bits[calm], requests[calm] = 0, walk[calm]
     batch = BatchAuthority(cfg, rows)
     c = au.configure_authority(cfg)
     states = [au.AuthorityState() for _ in range(rows)]
@@ -190,9 +240,12 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux}
 
 
-def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row() -> None:
+@pytest.mark.parametrize("held", [False, True], ids=["every-period", "held-pair"])
+def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool) -> None:
     """``BatchMonitor`` against ``monitor_step`` per row and period: the bits, the detailed flags,
-    the counters and the residuals, over healthy rows and rows with faults, gaps and pauses."""
+    the counters and the residuals, over healthy rows and rows with faults, gaps and pauses.
+    ``held``: the redundant pair passed as the same arrays between its samples, as the engine
+    does, so that the periods between take the monitor's shortcut (checked to have run)."""
     from firmware_py import plausibility as pl
     from sim_plant.campaign.batch_monitor import BatchMonitor
 
@@ -203,8 +256,23 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row() -> None:
     c = pl.configure(cfg)
     states = [pl.MonitorState() for _ in range(rows)]
     seen = 0
+    pair = (x["lat"][0], x["d2"][0])
+    healthy = np.arange(rows) % 10 == 0  # rows without faults, gaps or pauses
+    if held:  # a second monitor of the healthy rows alone: with no row paused, the shortcut runs
+        quiet = BatchMonitor(cfg, int(healthy.sum()))
+        quiet_pair = (x["lat"][0][healthy], x["d2"][0][healthy])
     for k in range(steps):
-        bits = batch.step(x["d"][k], x["d2"][k], x["r"][k], x["lat"][k], x["v"][k], x["aux"][k])
+        if not held or k % 25 == 0:
+            pair = (x["lat"][k], x["d2"][k])
+        bits = batch.step(x["d"][k], pair[1], x["r"][k], pair[0], x["v"][k], x["aux"][k])
+        if held:
+            if k % 25 == 0:
+                quiet_pair = (pair[0][healthy], pair[1][healthy])
+            q = quiet.step(x["d"][k][healthy], quiet_pair[1], x["r"][k][healthy], quiet_pair[0],
+                           x["v"][k][healthy], x["aux"][k][healthy])
+            assert np.array_equal(q, bits[healthy]), k
+            for name in ("yaw_same", "lat_same", "st_same", "st2_same", "model_count", "since"):
+                assert np.array_equal(getattr(quiet, name), getattr(batch, name)[healthy]), (k, name)
         for i, s in enumerate(states):
             expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux")))
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
@@ -216,3 +284,50 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row() -> None:
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
     assert seen == 0xFF, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
+    if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
+        assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,
+                                                                                 batch.steady_periods)
+
+
+def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_models() -> None:
+    """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
+    ``BatchSensors``' lateral acceleration, second steering channel and yaw rate against
+    ``sensors.Sensors`` of the same seed, step by step while the cars move."""
+    from sim_plant.campaign.batch_car import BatchCar, BatchSensors
+    from sim_plant.car.disturbances import Loads
+    from sim_plant.car.plants import Car
+    from sim_plant.car.sensors import SensorConfig, Sensors, YawRateSensorConfig
+    from sim_plant.car.vehicle import VehicleParams
+
+    rng = np.random.default_rng(5)
+    rows, steps, ts = 6, 400, 0.002
+    v, mu, mass = rng.uniform(8.0, 40.0, rows), rng.uniform(0.3, 1.1, rows), rng.uniform(1000.0, 2200.0, rows)
+    seeds, noise, bias = rng.integers(0, 2**62, rows), rng.uniform(0.005, 0.05, rows), rng.uniform(-1.0, 1.0, rows)
+    f_y = rng.uniform(-3000.0, 3000.0, rows)
+    t = np.arange(steps)[:, None] * ts
+    delta = 0.03 * np.sin(2 * np.pi * rng.uniform(0.5, 3.0, rows) * t)
+    car, sensors = BatchCar(v, mu, mass, ts), BatchSensors(noise, bias, seeds, ts)
+    cars = [Car("nonlinear", VehicleParams(v=v[i], mu=mu[i], mass=mass[i]), ts) for i in range(rows)]
+    scalar = [Sensors(SensorConfig(YawRateSensorConfig(noise_density=noise[i], bias_deg_s=bias[i]),
+                                   seed=int(seeds[i])), ts) for i in range(rows)]
+    for c, f in zip(cars, f_y):
+        c.set_loads(Loads(f_y=float(f)))
+    moved = 0.0
+    for k in range(steps):
+        a_y = car.lat_accel(delta[k], f_y, None)
+        sensors.at(k)
+        got = {"yaw_rate": sensors.yaw_rate(car.r), "lat_accel": sensors.quantised_lat(sensors.lat_filtered(a_y)),
+               "steer_redundant": sensors.steer_redundant(delta[k])}
+        for i in range(rows):
+            y = cars[i].outputs(float(delta[k, i]), 0.0)
+            assert abs(y[2] - a_y[i]) <= 1e-12 * max(1.0, abs(y[2])), (k, i)
+            s = scalar[i]
+            s.at(k * ts)
+            want = {"yaw_rate": s.yaw_rate(float(y[0])), "lat_accel": s.lat_accel(float(y[2])),
+                    "steer_redundant": s.steer_redundant(float(delta[k, i]))}
+            for ch, value in want.items():
+                assert abs(got[ch][i] - value) <= TOL, (k, i, ch, got[ch][i], value)
+            cars[i].advance(float(delta[k, i]), 0.0)
+        moved = max(moved, float(np.max(np.abs(a_y))))
+        car.advance(delta[k], np.zeros(rows), f_y, None, None, mu)
+    assert moved > 1.0  # the cars did turn

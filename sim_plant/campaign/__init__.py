@@ -5,8 +5,10 @@
 * ``sampling``: Latin hypercube or random designs, every sample a function of its index;
 * ``batch_car``, ``loads``: the realistic car, actuator, sensors and disturbances vectorised;
 * ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
-* ``batch_monitor``: issue 18's plausibility monitor and authority limiter vectorised (not yet in ``engine``);
-* ``reference``: the same closed loop from the product's scalar classes (the engine's oracle);
+* ``batch_monitor``: issue 18's plausibility monitor and authority limiter vectorised;
+  ``batch_faults``: the sampled sensor faults and their figures;
+* ``reference``: the same closed loop from the product's scalar classes, as the controller node
+  runs them (the engine's oracle);
 * ``results``: a chunk's table, the criteria, Parquet files; ``runner``: chunks on Dask, resume;
 * ``report``: pass rates, maps, histograms, worst cases; ``export``: a sample as a scenario file.
 

@@ -8,12 +8,14 @@ scalar model up to the last bits of numpy's and libm's transcendental functions
 
 * ``BatchCar``: ``nonlinear.NonlinearPlant`` (kinematic slip, no relaxation) with the
   magic-formula tyres of ``tyres``, RK4 in ``substeps()`` equal sub-steps, the speed a state
-  that braking lowers down to ``STOP_SPEED``;
+  that braking lowers down to ``STOP_SPEED``; its a_y (``outputs``);
 * ``BatchPositionActuator``: ``actuator_dynamics.PositionActuator`` of order 1 (no dead time):
   range, exact ZOH lag, rate limit, end stop, and the position's mean over the step;
-* ``BatchSensors``: ``sensors.Sensors``: the yaw rate's noise (each sample's own seeded stream,
-  drawn as the scalar draws it), bias, 2nd-order Butterworth and DBC quantisation; the
-  steering angle and the speed quantised (their noise is 0 in a campaign).
+* ``BatchSensors``: ``sensors.Sensors``: the yaw rate's and the lateral acceleration's noise
+  (each sample's own seeded streams, drawn as the scalar draws them), bias, 2nd-order
+  Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
+  steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
+  faults on their inputs (``batch_faults``) and the error each makes.
 
 A tyre axle is evaluated either as one axle on the road's mu (``tyres.AxleTyre.force``) or as
 its two wheels (``AxleTyre.axle_force``).  With intact wheels on the road's mu the two-wheel
@@ -27,8 +29,10 @@ import math
 
 import numpy as np
 
+from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.car.nonlinear import MAX_STEP_RATE, STOP_SPEED
-from sim_plant.car.sensors import SensorConfig, dbc_resolution
+from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
+from sim_plant.car.sensors import G as G_SENSOR
 from sim_plant.car.tyres import G, PACEJKA_CURVATURE, PACEJKA_SHAPE
 from sim_plant.car.vehicle import MAX_SPEED, VehicleParams, zoh_discretize
 
@@ -117,9 +121,20 @@ class BatchCar:
         row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
         return np.maximum(1, np.ceil(self.ts * np.maximum(row1, row2) / MAX_STEP_RATE)).astype(np.int64)
 
-    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
-        """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
-        t1, t2 = self._t1, self._t2
+    def lat_accel(self, delta: np.ndarray, f_y: np.ndarray | None, tyres: Tyres | None) -> np.ndarray:
+        """``NonlinearPlant.outputs``' a_y = sum F_y / m at the current state, with the front-wheel
+        angle ``delta`` and this step's side force and tyres (None: none, the intact axles)."""
+        f_front, f_rear = self._forces(self.beta, self.r, self.v, delta, tyres or self.intact)
+        a_y = f_front + f_rear
+        if f_y is not None:
+            a_y += f_y
+        a_y /= self.mass
+        return a_y
+
+    def _forces(self, beta, r, v, delta, tyres: Tyres) -> tuple[np.ndarray, np.ndarray]:
+        """(F_yf, F_yr) at the kinematic slip angles (``_slip`` and ``axle_forces``): views of
+        scratch arrays, valid until the next call."""
+        t1 = self._t1
         alpha = self._alpha
         np.multiply(self.l_f, r, out=t1)  # alpha_f = delta - beta - l_f r / v
         t1 /= v
@@ -135,6 +150,12 @@ class BatchCar:
             f_front, f_rear = np.add(f[:, 0], f[:, 1], out=self._axle)
         else:
             f_front, f_rear = f[:, 0]
+        return f_front, f_rear
+
+    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
+        """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
+        t1, t2 = self._t1, self._t2
+        f_front, f_rear = self._forces(beta, r, v, delta, tyres)
         np.add(f_front, f_rear, out=t1)
         if f_y is not None:
             t1 += f_y
@@ -233,55 +254,135 @@ def zoh_first_order(time_constant: float, ts: float) -> tuple[float, float]:
     return float(phi[0, 0]), float(gamma[0, 0])
 
 
-class BatchSensors:
-    """The yaw-rate, steering-angle and speed sensors per row (``sensors.Sensors``)."""
+class _Stream:
+    """One sensor channel's noise per row: row i's stream is ``SeedSequence(seed_i).spawn(...)[child]``
+    (``Sensors.reset``'s child for the channel), drawn ``BLOCK`` steps at a time into the row's
+    own contiguous row of a (rows, BLOCK) array, so that ``at(k)`` is the k-th standard normal of
+    every row's stream, as the scalar draws it once per step (a step reads one strided column:
+    cheaper than transposing, and the generator's per-call cost is paid every 1024 steps)."""
 
-    #: Noise drawn this many steps at a time per row (the scalar's stream, in blocks): each row's
-    #: draw fills its own contiguous row of a (rows, BLOCK) array, a step reads one strided column
-    #: (cheaper than transposing, and the per-call cost of the generator is paid every 1024 steps).
     BLOCK = 1024
 
-    def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
-                 config: SensorConfig = SensorConfig()) -> None:
-        fs = 1.0 / ts
-        self.sigma = np.radians(noise_density) * math.sqrt(fs / 2.0)
-        self.bias = np.radians(bias_deg_s)
+    def __init__(self, seeds: np.ndarray, child: int) -> None:
+        # Generator(PCG64(...)) is default_rng's stream without its dispatch
+        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s, spawn_key=(child,))))
+                      for s in seeds.tolist()]
+        self._noise = np.empty((seeds.size, self.BLOCK))
+        self._block = -1
+
+    def at(self, k: int) -> np.ndarray:
+        """Every row's k-th draw; k never decreases between calls (any k may be skipped)."""
+        block = k // self.BLOCK
+        while self._block < block:  # a skipped block is drawn too: the streams stay in step
+            for g, row in zip(self._rngs, self._noise):
+                g.standard_normal(out=row)
+            self._block += 1
+        return self._noise[:, k % self.BLOCK]
+
+
+class _Butterworth:
+    """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first input."""
+
+    def __init__(self, hz: float, fs: float) -> None:
         from scipy.signal import butter, lfilter_zi
 
-        b, a = butter(2, config.yaw_rate.lowpass_hz, fs=fs)
+        b, a = butter(2, hz, fs=fs)
         b, a = b / a[0], a / a[0]
         self.b, self.a = b.tolist(), a.tolist()
         self.zi = lfilter_zi(b, a).tolist()
-        self.q_yaw, self.q_steer, self.q_speed = (dbc_resolution(q) for q in ("yaw_rate", "steer", "speed"))
-        # Sensors.reset's SeedSequence(seed).spawn(3)[0], the yaw-rate stream, made directly
-        # (Generator(PCG64(...)) is default_rng's stream without its dispatch)
-        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s, spawn_key=(0,))))
-                      for s in seeds.tolist()]
-        self._noise = np.empty((seeds.size, self.BLOCK))
-        self._k = 0
         self._z: tuple[np.ndarray, np.ndarray] | None = None
 
-    def _draw(self) -> np.ndarray:
-        """This step's standard normal per row, from each row's stream in the scalar's order."""
-        j = self._k % self.BLOCK
-        if j == 0:
-            for g, row in zip(self._rngs, self._noise):
-                g.standard_normal(out=row)
-        self._k += 1
-        return self._noise[:, j]
-
-    def yaw_rate(self, r: np.ndarray) -> np.ndarray:
-        noisy = r + self.bias + self.sigma * self._draw()
+    def __call__(self, x: np.ndarray) -> np.ndarray:
         b, a = self.b, self.a
         if self._z is None:  # at rest on the first value (lfilter_zi)
-            self._z = (self.zi[0] * noisy, self.zi[1] * noisy)
+            self._z = (self.zi[0] * x, self.zi[1] * x)
         z0, z1 = self._z
-        y = b[0] * noisy + z0
-        self._z = (b[1] * noisy - a[1] * y + z1, b[2] * noisy - a[2] * y)
-        return np.round(y / self.q_yaw) * self.q_yaw
+        y = b[0] * x + z0
+        self._z = (b[1] * x - a[1] * y + z1, b[2] * x - a[2] * y)
+        return y
+
+
+class BatchSensors:
+    """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row),
+    the lateral acceleration and the steering angle's second channel (``config``'s noise, bias,
+    filter, each row on its own streams), the steering angle and the speed (quantised; their
+    noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
+
+    def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
+                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None) -> None:
+        fs = 1.0 / ts
+        self.ts, self.faults = ts, faults
+        #: per row, its faulted channel's reading less the same sensor's without the fault (the
+        #: last step that read it), as ``plausibility_runs.run`` measures the fault's error
+        self.error = np.zeros(seeds.size)
+        tracked = set(faults.rows) if faults is not None else set()
+        self.tracked = tracked
+        self.sigma = np.radians(noise_density) * math.sqrt(fs / 2.0)
+        self.bias = np.radians(bias_deg_s)
+        lat, steer2 = config.lat_accel, config.steer_redundant
+        self.lat_sigma = lat.noise_density * 1e-6 * G_SENSOR * math.sqrt(fs / 2.0)  # Sensors.lat_sigma
+        self.lat_bias = lat.bias_m_s2
+        self.steer2_sigma = math.radians(steer2.noise)
+        self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
+        self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
+        # the same filters on the fault-free input, for the error of a faulted channel
+        self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
+        self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
+        self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
+            dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
+        # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
+        self._yaw_noise, self._lat_noise, self._steer2_noise = (_Stream(seeds, CHANNELS.index(ch)) for ch in
+                                                                ("yaw_rate", "lat_accel", "steer_redundant"))
+        self._k = 0
+
+    def at(self, k: int) -> None:
+        """The step of the next readings (t = k ts for the faults)."""
+        self._k = k
+        self._t = k * self.ts
+
+    def _input(self, channel: str, x: np.ndarray) -> np.ndarray:
+        return x if self.faults is None else self.faults.input(channel, self._t, x)
+
+    def _error(self, channel: str, faulted: np.ndarray, clean: np.ndarray) -> None:
+        assert self.faults is not None
+        self.error = np.where(self.faults.rows[channel], faulted - clean, self.error)
+
+    def yaw_rate(self, r: np.ndarray) -> np.ndarray:
+        noise = self.sigma * self._yaw_noise.at(self._k)
+        q = self.q_yaw
+        y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
+        if self._yaw_clean is not None:
+            self._error("yaw_rate", y, np.round(self._yaw_clean(r + self.bias + noise) / q) * q)
+        return y
+
+    def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
+        """The lateral acceleration's filter output, unquantised: the filter runs every step,
+        and ``quantised_lat`` makes the value of a step whose reading is sent."""
+        noise = self.lat_sigma * self._lat_noise.at(self._k)
+        y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
+        if self._lat_clean is not None:
+            clean = self._lat_clean(a_y + self.lat_bias + noise)
+            self._error("lat_accel", self.quantised_lat(y), self.quantised_lat(clean))
+        return y
+
+    def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
+        return np.round(filtered / self.q_lat) * self.q_lat
+
+    def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
+        """The second steering channel (no filter: only a step whose reading is sent needs it,
+        and, for its error, every step of a row that faults it)."""
+        noise = self.steer2_sigma * self._steer2_noise.at(self._k)
+        q = self.q_steer2
+        y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
+        if "steer_redundant" in self.tracked:
+            self._error("steer_redundant", y, np.round((delta + 0.0 + noise) / q) * q)
+        return y
 
     def steer(self, delta: np.ndarray) -> np.ndarray:
-        return np.round(delta / self.q_steer) * self.q_steer
+        y = np.round(self._input("steer", delta) / self.q_steer) * self.q_steer
+        if "steer" in self.tracked:
+            self._error("steer", y, np.round(delta / self.q_steer) * self.q_steer)
+        return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:
         return np.round(v / self.q_speed) * self.q_speed

@@ -9,9 +9,10 @@ latched bits int arrays, the state one array per slot of the scalar state (``Aut
 ``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds both equal to the scalar
 code row by row and period by period: the bits, the flags, the counters, the residuals.
 
-Not done yet (docs/campaigns.md, "Not yet in the batch engine"): the car's a_y and the redundant
-sensors in the batch, the oracle ``reference.run`` as the node, and both wired into ``engine``
-after the law.
+``engine`` runs both after the law, as the controller node does, and the authority limiter
+again as the actuator's own limit.  ``BatchMonitor.step`` has a shortcut for the periods
+between redundant samples, ``BatchAuthority.step`` one for periods without DEGRADED (each the
+scalar's branches for such a period, checked by the same tests).
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ class BatchAuthority:
     def step(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
         """The command allowed this period per row (rad) for the law's ``u_request`` and the
         monitor's ``plaus_bits``."""
+        if _within(u_request) and not (plaus_bits & PLAUS_DEGRADED).any():
+            return self._checked(u_request, plaus_bits)
         c = self.c
         finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
         fault = ((plaus_bits & PLAUS_FAULT) != 0) | ~finite
@@ -52,14 +55,40 @@ class BatchAuthority:
         up, down = d > du, d < -du
         d = np.where(up, du, np.where(down, -du, d))
         flags |= np.where((up | down) & (du == c.du_max), au.AUTH_RATE, 0)
+        self.flags = flags
+        return self._move(d)
+
+    def _checked(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
+        """``step`` with every request finite and no row DEGRADED (so none timed out): a
+        faulted row fades to 0, the others bounded in magnitude and rate (min and max are the
+        scalar's comparisons for finite numbers)."""
+        c = self.c
+        fault = (plaus_bits & PLAUS_FAULT) != 0
+        if fault.any():
+            request = np.where(fault, 0.0, u_request)
+            du = np.where(fault, c.fade_step, c.du_max)
+            low = -du
+        else:
+            request, du, low = u_request, c.du_max, -c.du_max
+        target = np.minimum(np.maximum(request, -c.u_max), c.u_max)
+        d = target - self.u
+        bounded = np.minimum(np.maximum(d, low), du)
+        flags = np.where(target != request, au.AUTH_MAGNITUDE, 0) | np.where(bounded != d, au.AUTH_RATE, 0)
+        self.flags = np.where(fault, au.AUTH_FAULT, flags) if request is not u_request else flags
+        return self._move(bounded)
+
+    def _move(self, d: np.ndarray) -> np.ndarray:
+        """The command moved by ``d``, and the intervention's window counted (``authority_step``'s
+        counters: |u| > engage is its two comparisons, False for NaN alike)."""
+        c = self.c
         u = self.u + d
-        acting = (u > c.engage) | (u < -c.engage)
-        self.engaged = np.where(acting & (self.engaged < c.window_steps), self.engaged + 1, self.engaged)
-        quiet = np.where(acting, 0, np.where(self.quiet < c.rearm_steps, self.quiet + 1, self.quiet))
-        self.engaged = np.where(~acting & (quiet >= c.rearm_steps), 0, self.engaged)
+        acting = np.abs(u) > c.engage
+        self.engaged += acting & (self.engaged < c.window_steps)
+        quiet = np.where(acting, 0, self.quiet + (self.quiet < c.rearm_steps))
+        # (an acting row's quiet is 0, below rearm_steps >= 1)
+        self.engaged = np.where(quiet >= c.rearm_steps, 0, self.engaged)
         self.quiet = quiet
         self.u = u
-        self.flags = flags
         return u
 
 
@@ -102,6 +131,17 @@ class BatchMonitor:
         self.kin_raw = np.zeros((pl.KIN_WINDOW, n))
         self.kin_comp = np.zeros((pl.KIN_WINDOW, n))
         self._cols = np.arange(n)
+        self._pair: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the last period's lat, d2
+        self._pair_ok = False  # the pair present in every row at the last full period
+        self._all_started = False  # every row started after it
+        self.steady_periods = 0  # periods that took the shortcut (``step``)
+        self._v_seen: np.ndarray | None = None  # the speed array the shortcut's model denominator is of
+        self._den = np.zeros(n)
+        self._lat_max = self._st2_max = self._run = 0  # the counters' largest values at the last full period
+        #: the CtrlStatus_Plausibility bits of each value of the detailed flags
+        self._bits_of = np.array([(pl.PLAUS_YAW if f & pl.YAW_CHECKS else 0) | (pl.PLAUS_STEER if f & pl.STEER_CHECKS
+                                                                               else 0)
+                                  | (pl.PLAUS_DEGRADED if f & pl.MISSING else 0) for f in range(256)], dtype=np.int64)
 
     def _set(self, name: str, rows: np.ndarray, value) -> None:
         setattr(self, name, np.where(rows, value, getattr(self, name)))
@@ -109,7 +149,33 @@ class BatchMonitor:
     def step(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
              aux: np.ndarray) -> np.ndarray:
         """``monitor_step(c, s, delta_driver=d, delta_driver_redundant=d2, yaw_rate=r,
-        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits."""
+        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits.
+
+        A caller that holds the redundant pair between its samples (the node's 50 ms frame)
+        passes the very same two arrays, unmodified, until the next sample.  A period in which
+        they are the arrays of the period before, the pair is present in every row, the primary
+        inputs are in range and no row starts its checks afresh takes ``_steady``: the scalar's
+        branches for a period without a new sample, and nothing else (``_steady_pausing`` when
+        some rows are below ``speed_min``)."""
+        if (lat is self._pair[0] and d2 is self._pair[1] and self._pair_ok and _within(d) and _within(r)
+                and _within(aux) and _within(v, -1e3)):
+            # every primary input in range but perhaps the speed: the rows below speed_min pause
+            act = None if v.min() >= self.c.speed_min else v >= self.c.speed_min
+            if act is None and self._all_started or act is not None and not (act & ~self.started).any():
+                self.steady_periods += 1
+                if act is None:
+                    return self._steady(d, d2, r, lat, v, aux)
+                return self._steady_pausing(d, d2, r, lat, v, aux, act)
+        bits = self._full(d, d2, r, lat, v, aux)
+        self._pair = (lat, d2)
+        self._pair_ok = not (self.flags & pl.MISSING).any()
+        self._all_started = bool(self.started.all())
+        self._lat_max, self._st2_max, self._run = int(self.lat_same.max()), int(self.st2_same.max()), 0
+        return bits
+
+    def _full(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
+              aux: np.ndarray) -> np.ndarray:
+        """Every branch of ``monitor_step`` as a mask, in its order."""
         c = self.c
         with np.errstate(all="ignore"):  # a paused row's arithmetic (NaN, 1/0) is computed and dropped
             flags = self.latched.copy()
@@ -227,3 +293,93 @@ class BatchMonitor:
         moved = on & ~changed & (np.abs(d - self.st2_ref) > move_st)
         self.st2_same, trip = _frozen(self.st2_same, moved, steps)
         self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
+
+    # monitor_step's path for a period without a new redundant sample, every row checking: the
+    # model check, the count since the last sample and the four frozen checks with new_sample
+    # False (``kin_*``, ``pair_*``, ``lat_prev``, ``steer2_prev`` keep their values: the scalar
+    # writes the value they hold).  Long because it is those checks inline.
+    def _steady_pausing(self, d, d2, r, lat, v, aux, act: np.ndarray) -> np.ndarray:
+        """``_steady`` for the rows that ``act``; the others paused as ``monitor_step`` pauses a
+        row below ``speed_min``: its counters and windows at 0, not started, the rest untouched."""
+        kept = {k: getattr(self, k) for k in ("r_model", "model_err", "since", "yaw_last", "yaw_ref_ok", "st_last",
+                                              "st_ref_ok")}
+        latched = self.latched.copy()
+        with np.errstate(all="ignore"):  # a paused row's arithmetic (a speed of 0) is dropped
+            self._steady(d, d2, r, lat, v, aux)
+        for k, old in kept.items():
+            setattr(self, k, np.where(act, getattr(self, k), old))
+        for k in ("model_count", "yaw_same", "lat_same", "st_same", "st2_same", "kin_count", "pair_count", "kin_n"):
+            setattr(self, k, np.where(act, getattr(self, k), 0))
+        self.started = self.started & act
+        self.latched = np.where(act, self.latched, latched)
+        self.flags = self.latched.copy()
+        self.bits = self._bits_of[self.flags]
+        return self.bits
+
+    def _steady(self, d, d2, r, lat, v, aux) -> np.ndarray:
+        c, latched = self.c, self.latched
+        if v is not self._v_seen:  # the speed is held for several periods: the model's denominator once
+            self._v_seen, self._den = v, c.wheelbase + c.k_us * v * v
+        r_ss = (d + aux) * v / self._den
+        self.r_model = self.r_model + c.model_alpha * (r_ss - self.r_model)
+        e = np.abs(r - self.r_model)
+        bound = c.model_margin + c.model_rel * np.abs(self.r_model)
+        self.model_err = e / bound
+        over = e > bound
+        if over.any():  # +1 held at model_steps, else -1 down to 0 (_count)
+            count = np.minimum(np.maximum(self.model_count + np.where(over, 1, -1), 0), c.model_steps)
+            np.bitwise_or(latched, pl.CHECK_MODEL, out=latched, where=over & (count >= c.model_steps))
+        else:
+            count = np.maximum(self.model_count - 1, 0)
+        self.model_count = count
+        self.since = np.minimum(self.since + 1, 1000000)
+        steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
+        # A counter whose largest value, plus the periods since the last full one, stays below
+        # frozen_steps can neither reach its cap nor trip: it only counts.
+        self._run += 1
+        # the yaw rate against a_y / v
+        same = r == self.yaw_last
+        check = same & self.yaw_ref_ok
+        self.yaw_last = np.where(same, self.yaw_last, r)
+        self.yaw_same = np.where(same, self.yaw_same, 0)
+        self.yaw_ref_ok = check
+        if check.any():
+            moved = check & (np.abs(lat * (1.0 / v) - self.yaw_ref) > move_yaw)
+            _frozen_held(self.yaw_same, moved, steps, latched, pl.FROZEN_YAW)
+        # a_y against the yaw rate (a_y held: unchanged)
+        moved = np.abs(r - self.lat_ref) > move_yaw
+        if self._lat_max + self._run < steps:
+            self.lat_same += moved
+        else:
+            _frozen_held(self.lat_same, moved, steps, latched, pl.FROZEN_LAT)
+        # each steering channel against the other (the second held: unchanged)
+        same = d == self.st_last
+        check = same & self.st_ref_ok
+        self.st_last = np.where(same, self.st_last, d)
+        self.st_same = np.where(same, self.st_same, 0)
+        self.st_ref_ok = check
+        if check.any():
+            moved = check & (np.abs(d2 - self.st_ref) > move_st)
+            _frozen_held(self.st_same, moved, steps, latched, pl.FROZEN_STEER)
+        moved = np.abs(d - self.st2_ref) > move_st
+        if self._st2_max + self._run < steps:
+            self.st2_same += moved
+        else:
+            _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
+        self.flags = latched.copy()
+        self.bits = self._bits_of[self.flags]
+        return self.bits
+
+
+def _within(x: np.ndarray, lo: float = -1e3, closed: bool = False) -> bool:
+    """Every entry of ``x`` in (lo, 1e3), or in [lo, 1e3) when ``closed``: the scalar's range
+    checks for all rows at once.  False for any NaN (min and max propagate it)."""
+    x_lo, x_hi = x.min(), x.max()
+    return bool((x_lo >= lo if closed else x_lo > lo) and x_hi < 1e3)
+
+
+def _frozen_held(same: np.ndarray, moved: np.ndarray, steps: int, latched: np.ndarray, bit: int) -> np.ndarray:
+    """``_frozen`` on a fresh ``same`` (written in place), its trip latched into ``latched``."""
+    same += moved & (same < steps)
+    np.bitwise_or(latched, bit, out=latched, where=moved & (same >= steps))
+    return same

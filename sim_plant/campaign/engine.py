@@ -2,16 +2,26 @@
 firmware's law, the realistic car around it, one numpy operation per time step for all rows.
 
 One step k (t = k ts) is the lockstep plant node's (``sim_plant.nodes.plant.PlantNode.step``
-with one step of loop delay) without the bus, in its order:
+with one step of loop delay) and the controller node's cycle
+(``firmware_py.controller.node.ControllerNode.control``) without the bus, in their order, as the
+scalar oracle ``reference.run`` has them:
 
 1. the scenario's event at its onset (the M_z step, the driver's panic window) and the
    disturbances' loads at t (``loads``);
 2. the driver model (``scenario.ScenarioState.driver_angle``): frozen during the panic time,
    then a slow correction of the yaw rate;
-3. the sensors measure the driver's angle, the speed and the yaw rate (``BatchSensors``);
-4. the law computes the command (``BatchLaw``), which the actuator receives one step later;
-5. the actuator's position follows the command received the step before, and the car advances
-   with the driver's angle plus the position's mean over the step.
+3. the actuator's command handling (``actuator.Actuator``) takes the command sent the step
+   before through its own authority limit, on the plausibility bits of the last status frame
+   (sent every 50 periods, read by the plant two steps after they were computed; DEGRADED
+   before the first);
+4. the sensors read every channel (``BatchSensors``): the driver's angle and the yaw rate sent
+   every period, the speed every 5, the lateral acceleration (the car's a_y at the actuator's
+   position as the step begins) and the second steering channel every 25, each held between;
+5. the controller: the law (``BatchLaw``), the plausibility monitor given the command sent the
+   period before (``BatchMonitor``), the authority limiter on its bits (``BatchAuthority``);
+   the state reported FAULT on ``PLAUS_FAULT``;
+6. the actuator's position follows the handled command, and the car advances with the
+   driver's angle plus the position's mean over the step.
 
 The rows are split into groups that run apart, so that none pays for another's arithmetic: the
 yaw-moment step and the side wind (all wheels intact, speed constant); split-mu braking (speed
@@ -29,18 +39,31 @@ import numpy as np
 
 from firmware_py import authority as au
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
+from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
 from sim_plant.campaign.batch_law import BatchLaw
-from sim_plant.campaign.batch_monitor import BatchAuthority
+from sim_plant.campaign.batch_monitor import BatchAuthority, BatchMonitor
+from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
+from sim_plant.offline.plausibility_runs import cycles
 
 #: Per-row results: name -> unit, description.
 METRICS = {
     "peak_yaw_rate": ("rad/s", "largest |r| of the run"),
     "peak_side_slip": ("deg", "largest |beta| of the run"),
     "time_at_limit": ("s", "time the command sat at the actuator's +-3 deg"),
-    "fault_steps": ("", "steps the firmware reported a fault (no fault is injected: false alarms)"),
+    "fault_steps": ("", "steps the controller reported a fault: step()'s input ranges or the monitor's"),
+    "false_alarm_steps": ("", "steps the monitor reported PLAUS_FAULT or PLAUS_DEGRADED"),
+    "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
+    "authority_steps": ("", "periods the controller's authority limiter bound the command"),
+    "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
+    "detection_time": ("s", "first PLAUS_FAULT less when the fault's error left its bound for 0.3 s (0: it never "
+                            "did, or was reported before; inf: never reported)"),
+    "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
+                                "the fault makes the command cause, its fade included (0 without a fault or a "
+                                "controller)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
     "final_yaw_rate": ("rad/s", "r at the end"),
     "final_speed": ("m/s", "v at the end"),
@@ -66,63 +89,100 @@ def nominal_gain(v: np.ndarray, mass: np.ndarray) -> np.ndarray:
 def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: float, ts: float = 0.002,
              record: bool = False) -> dict[str, np.ndarray]:
     """Every row in closed loop with ``config`` (None: no controller); ``METRICS`` per row, and
-    with ``record`` the traces ``r``, ``beta``, ``command`` (steps x rows) as well."""
+    with ``record`` the traces ``r``, ``beta``, ``command``, ``bits`` (steps x rows) as well.
+
+    A row with a sensor fault runs beside a twin without it (the same sample, noise and all), so
+    that ``fault_yaw_rate`` is the yaw rate the fault makes the command cause: the largest
+    difference of their true yaw rates from the fault's onset."""
     if config is not None and abs(config.ts - ts) > 1e-15:
         raise ValueError(f"the calibration's step {config.ts:g} s differs from the campaign's {ts:g} s")
+    n = len(samples)
+    faulted = np.flatnonzero(samples["fault_sensor"] != 0) if config is not None else np.zeros(0, dtype=np.int64)
+    twin_of = np.full(n + faulted.size, -1)
+    if faulted.size:
+        twins = samples.take(faulted)
+        twins["fault_sensor"] = np.zeros(faulted.size)
+        samples = SampleSet({k: np.concatenate([v, twins[k]]) for k, v in samples.items()})
+        twin_of[faulted] = n + np.arange(faulted.size)
     kind = samples["disturbance"]
     grip = (kind == SPLIT) | (kind == BLOWOUT)
     out: dict[str, np.ndarray] = {}
+    local = np.full(len(samples), -1)
     for rows in (np.flatnonzero(~grip), np.flatnonzero(kind == SPLIT), np.flatnonzero(kind == BLOWOUT)):
         if rows.size == 0:
             continue
-        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record)
+        local[rows] = np.arange(rows.size)  # a twin has its row's kind: the same group
+        twin = np.where(twin_of[rows] >= 0, local[np.maximum(twin_of[rows], 0)], -1)
+        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin)
         res = part.run(steps_of(duration, ts))
         for name, values in res.items():
             if name not in out:
                 shape = (len(samples),) if values.ndim == 1 else (values.shape[0], len(samples))
                 out[name] = np.empty(shape, dtype=values.dtype)
             out[name][..., rows] = values
-    return out
+    return {name: values[..., :n] for name, values in out.items()}
 
 
 class _Group:
     """Rows that share their tyre and speed treatment, run together."""
 
     def __init__(self, s: SampleSet, config: mr.ControllerConfig | None, ts: float, grip: bool,
-                 record: bool) -> None:
+                 record: bool, twin: np.ndarray) -> None:
         self.ts, self.grip, self.record = ts, grip, record
+        self.pairs = np.flatnonzero(twin >= 0)  # the rows with a fault-free twin, and their twins
+        self.twins = twin[self.pairs]
+        self.fault_onset = s["fault_onset"][self.pairs]
         self.mass = s["mass"]
+        n = self.mass.size
         self.car = BatchCar(s["v"], s["mu"], s["mass"], ts)
         self.loads = GripLoads(s, self.car) if grip else IntactLoads(s)
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
-        # The actuator's own authority limit (actuator.Actuator): size and rate, the controller's
-        # status saying every check runs (no monitor in the batch yet: docs/campaigns.md).
-        self.authority = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)),
-                                        self.mass.size)
-        self.checked = np.zeros(self.mass.size, dtype=np.int64)
-        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts)
-        self.law = BatchLaw(config, len(s)) if config is not None else None
+        # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
+        self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
+        self.faults = BatchFaults(s) if bool((s["fault_sensor"] != 0).any()) else None
+        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults)
+        self.every = cycles(ts)
+        if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
+            raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
+        self.status_every = status_cycle(ts)
+        self.law = self.monitor = self.limiter = None
+        if config is not None:  # the controller node: step(), the monitor, the authority limiter
+            self.law = BatchLaw(config, n)
+            self.monitor = BatchMonitor(pl.PlausibilityConfig(ts=ts), n)
+            self.limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)), n)
         self.panic_until = s["onset"] + s["reaction_time"]
         self.onset = s["onset"]
         self.gain_step = ts / s["driver_time_constant"]
         self.nominal = None if grip else nominal_gain(self.car.v, self.mass)
 
-    def _command(self, steer: np.ndarray, yaw: np.ndarray, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The law's command and its status; zero and inactive without a controller."""
-        if self.law is None:
-            return np.zeros_like(steer), np.zeros(steer.size, dtype=np.int8)
-        u = self.law.step(steer, yaw, speed)
-        return u, self.law.status
+    def _loads(self, block: dict, j: int) -> tuple[np.ndarray, np.ndarray | None, Tyres | None]:
+        """This step's m_z, side force and tyres (None: the intact axles) from the loads' block."""
+        f_y = block["f_y"][j] if block["f_y"] is not None else None
+        if not self.grip:
+            return block["m_z"][j], f_y, None
+        b = block["b"]
+        return block["m_z"][j], f_y, Tyres(b[j if b.shape[0] > 1 else 0], block["d"][j])
 
+    # One step of the plant node and the controller node per pass, in their order; long because
+    # each stage is a few lines that read best in sequence (the reference's loop, batched).
     def run(self, n: int) -> dict[str, np.ndarray]:
-        ts, car, rows = self.ts, self.car, self.mass.size
+        ts, car, sensors, rows = self.ts, self.car, self.sensors, self.mass.size
         correction = np.zeros(rows)
-        pending = np.zeros(rows)  # the command in flight (one step of loop delay)
+        pending = np.zeros(rows)  # the command sent the period before (one step of loop delay)
         limit = math.radians(ACTUATOR_LIMIT_DEG)
         peaks, magnitude = np.zeros((2, rows)), np.empty((2, rows))  # |beta|, |r|: car.x's first two rows
         peak_u = np.zeros(rows)
-        at_limit, faults = np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=np.int64)
-        traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command")} if self.record else {}
+        counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
+        ored = np.zeros(rows, dtype=np.int64)
+        act_bits = np.full(rows, pl.PLAUS_DEGRADED, dtype=np.int64)  # no status frame yet: unchecked
+        act_latched = np.zeros(rows, dtype=np.int64)
+        in_flight: np.ndarray | None = None  # a status frame's bits, read by the plant next step
+        held: dict[str, np.ndarray] = {}
+        zeros = np.zeros(rows, dtype=np.int64)
+        traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
+        red_every, speed_every = self.every["lat_accel"], self.every["speed"]
+        figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
+        fault_yaw = np.zeros(self.pairs.size)
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
@@ -136,26 +196,68 @@ class _Group:
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
                 correction = np.where(steering, correction - self.gain_step * r / nominal, correction)
                 driver = np.maximum(-DRIVER_LIMIT, np.minimum(DRIVER_LIMIT, 0.0 + correction))
-                # actuator.Actuator.apply, fresh: its authority limit, then its range
-                handled = np.minimum(limit, np.maximum(-limit, self.authority.step(pending, self.checked)))
-                yaw = self.sensors.yaw_rate(r)
-                u, status = self._command(self.sensors.steer(driver), yaw, self.sensors.speed(car.v))
+                # actuator.Actuator.apply, fresh: its authority limit on the last status, then its range
+                handled = np.minimum(limit, np.maximum(-limit, self.act_limiter.step(pending, act_bits)))
+                if in_flight is not None:  # the status frame the plant reads while it waits
+                    act_latched |= in_flight & pl.PLAUS_FAULT
+                    act_bits, in_flight = in_flight | act_latched, None
+                m_z, f_y, tyres = self._loads(block, j)
+                # The sensors: every channel every step (the filters run at the plant step), each
+                # held at its DBC cycle; a_y at the actuator's position as the step begins.
+                sensors.at(k)
+                yaw = sensors.yaw_rate(r)
+                lat = sensors.lat_filtered(car.lat_accel(driver + self.actuator.position, f_y, tyres))
+                sample = k % red_every == 0
+                if sample:
+                    held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
+                elif figures is not None and "steer_redundant" in sensors.tracked:
+                    sensors.steer_redundant(driver)  # its error, every step
+                if k % speed_every == 0:
+                    held["speed"] = sensors.speed(car.v)
+                steer = sensors.steer(driver)
+                if self.law is not None and self.monitor is not None and self.limiter is not None:
+                    u = self.law.step(steer, yaw, held["speed"])
+                    # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
+                    bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending)
+                    u = self.limiter.step(u, bits)
+                    status = np.where((bits & pl.PLAUS_FAULT) != 0, mr.STATUS_FAULT, self.law.status)
+                    counts["alarms"] += bits != 0
+                    counts["authority"] += self.limiter.flags != 0
+                    ored |= bits
+                    if (k + 1) % self.status_every == 0:
+                        in_flight = bits
+                    if figures is not None:
+                        figures.step(k, sensors.error, bits, r, held["speed"])
+                    if self.pairs.size:
+                        caused = np.abs(r[self.pairs] - r[self.twins])
+                        np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
+                else:
+                    u, status, bits = np.zeros(rows), np.full(rows, mr.STATUS_INACTIVE), zeros
                 np.maximum(peak_u, np.abs(u), out=peak_u)
-                at_limit += status == mr.STATUS_SATURATED
-                faults += status == mr.STATUS_FAULT
+                counts["at_limit"] += status == mr.STATUS_SATURATED
+                counts["faults"] += status == mr.STATUS_FAULT
                 pending = u
                 self.actuator.step(handled)
-                applied = self.actuator.mean  # the car gets the position's mean over the step
                 if self.record:
-                    traces["r"][k], traces["beta"][k], traces["command"][k] = car.r, car.beta, u
-                m_z = block["m_z"][j]
-                f_y = block["f_y"][j] if block["f_y"] is not None else None
+                    for name, value in (("r", car.r), ("beta", car.beta), ("command", u), ("bits", bits)):
+                        traces[name][k] = value
+                # the car gets the position's mean over the step
+                delta = driver + self.actuator.mean
                 if self.grip:
-                    b = block["b"]
-                    tyres = Tyres(b[j if b.shape[0] > 1 else 0], block["d"][j])
-                    car.advance(driver + applied, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
+                    car.advance(delta, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
                 else:
-                    car.advance(driver + applied, m_z, f_y, None, None, car.mu)
-        return {"peak_yaw_rate": peaks[1], "peak_side_slip": np.degrees(peaks[0]), "time_at_limit": at_limit * ts,
-                "fault_steps": faults, "peak_command": np.degrees(peak_u), "final_yaw_rate": car.r.copy(),
-                "final_speed": car.v.copy(), **traces}
+                    car.advance(delta, m_z, f_y, None, None, car.mu)
+        return {"peak_yaw_rate": peaks[1], "peak_side_slip": np.degrees(peaks[0]),
+                "time_at_limit": counts["at_limit"] * ts, "fault_steps": counts["faults"],
+                "false_alarm_steps": counts["alarms"], "plausibility_bits": ored,
+                "authority_steps": counts["authority"], "peak_command": np.degrees(peak_u),
+                **(figures.result() if figures is not None else
+                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows)}),
+                "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
+                "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+
+
+def _scatter(rows: int, at: np.ndarray, values: np.ndarray) -> np.ndarray:
+    out = np.zeros(rows)
+    out[at] = values
+    return out

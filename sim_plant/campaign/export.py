@@ -1,7 +1,8 @@
 """One campaign sample as a scenario file that ``mrsteer hil run --scenario FILE`` plays on the bus.
 
 The file carries every key of ``car.scenario``'s format the sample sets (the realistic car:
-``plant``, ``[actuator]``, ``[sensors]`` with its seed, the driver model, the one event), with
+``plant``, ``[actuator]``, ``[sensors]`` with its seed, the driver model, the one event, the
+sensor fault as a ``[[sensor_fault]]`` table), with
 floats written as Python's ``repr`` so that they read back bit for bit.  Reading the file back
 with ``scenario.load`` gives the very ``Scenario`` that ``params.scenario_for`` built, which the
 scalar reference and the batch engine ran (a test holds this).
@@ -35,6 +36,10 @@ def to_toml(sc: scn.Scenario, comments: list[str] | None = None) -> str:
     lines += ["[sensors]", f"seed = {s.seed}", "", "[sensors.yaw_rate]",
               f"noise_density = {_num(s.yaw_rate.noise_density)}", f"bias_deg_s = {_num(s.yaw_rate.bias_deg_s)}",
               f"lowpass_hz = {_num(s.yaw_rate.lowpass_hz)}", f"quantise = {str(s.yaw_rate.quantise).lower()}", ""]
+    for f in sc.sensor_faults:
+        lines += ["[[sensor_fault]]", f'sensor = "{f.sensor}"', f'kind = "{f.kind}"', f"start = {_num(f.start)}"]
+        lines += [f"value = {_num(f.value)}"] if f.value is not None else []
+        lines.append("")
     for e in sc.events:
         lines += ["[[events]]", f"t = {_num(e.t)}"]
         if e.load is None:

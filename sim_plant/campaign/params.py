@@ -19,9 +19,12 @@ Disturbance kinds (``KINDS``, the codes stored in the ``disturbance`` column):
   (``disturbances.TyreBlowout``).
 
 Every kind's own parameters are drawn for every sample (so the design stays one hypercube) and
-ignored by the other kinds.  Sensor faults (issue 18) are not modelled yet: the place for them
-is a further column here, its effect in ``batch_car.BatchSensors.yaw_rate`` and in
-``scenario_for``'s ``[sensors]`` table once the sensor models carry them.
+ignored by the other kinds.
+
+A sample may fault one sensor (issue 18): ``fault_sensor`` (``FAULT_CHANNELS``; ``none`` by
+default), ``fault_kind`` (``FAULT_KINDS``: stuck at a value, an offset, a gain, a drift),
+``fault_onset`` and ``fault_size``, which ``sensor_fault`` makes the scenario's
+``sensor_faults.SensorFault`` (``batch_faults`` has them for the batch).
 """
 
 from __future__ import annotations
@@ -34,11 +37,20 @@ import numpy as np
 from sim_plant.car import disturbances as dist
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.car.scenario import DriverModel, Event, Scenario
+from sim_plant.car.sensor_faults import FAULT_SENSORS, SensorFault
 from sim_plant.car.sensors import MAX_SEED, SensorConfig, YawRateSensorConfig
 from sim_plant.car.vehicle import MAX_MU
 
 KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
+#: fault_sensor codes: none, then the sensors of sensor_faults.FAULT_SENSORS that the monitor
+#: checks (each has a plausibility bound: ``plausibility_runs.error_bound``; the speed has none)
+FAULT_CHANNELS = ("none", *(ch for ch in FAULT_SENSORS if ch != "speed"))
+#: fault_kind codes and the sensor_faults kind each one is
+FAULT_KINDS = ("stuck", "offset", "gain", "drift")
+SCALAR_FAULT_KINDS = ("stuck", "bias", "scale", "drift")
+#: the channels whose fault_size is in degrees (the fault's value in rad)
+_ANGLES = tuple(FAULT_CHANNELS.index(ch) for ch in ("yaw_rate", "steer", "steer_redundant"))
 
 
 @dataclass(frozen=True)
@@ -70,6 +82,12 @@ PARAMETERS: dict[str, Parameter] = {
     "bias": Parameter("deg/s", -50.0, 50.0, 0.0, "yaw-rate sensor bias"),
     "reaction_time": Parameter("s", 0.5, 2.0, 1.0, "driver's panic reaction time"),
     "driver_time_constant": Parameter("s", 0.05, 10.0, 0.5, "how slowly the driver's correction converges"),
+    "fault_sensor": Parameter("", 0, len(FAULT_CHANNELS) - 1, 0, "the faulted sensor (none: no fault)",
+                              FAULT_CHANNELS),
+    "fault_kind": Parameter("", 0, len(FAULT_KINDS) - 1, 1, "the sensor fault's kind", FAULT_KINDS),
+    "fault_onset": Parameter("s", 0.0, 60.0, 1.0, "when the sensor fault starts"),
+    "fault_size": Parameter("", -1000.0, 1000.0, 1.0, "stuck at, offset or drift per s in deg/s (yaw rate), "
+                            "m/s^2 (a_y) or deg (steering angles); gain: the factor"),
 }
 #: Columns every SampleSet has besides PARAMETERS: the sample's index and its sensors' noise seed.
 INDEX, NOISE_SEED = "index", "noise_seed"
@@ -96,6 +114,22 @@ def noise_seed(campaign_seed: int, index: np.ndarray) -> np.ndarray:
     return out
 
 
+def fault_value(sensor: np.ndarray, kind: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """The ``SensorFault.value`` (SI) of each row's fault: ``fault_size`` in rad for an angle's
+    stuck value, offset or drift, the factor itself for a gain."""
+    angle = np.isin(sensor, _ANGLES) & (kind != FAULT_KINDS.index("gain"))
+    return np.where(angle, np.radians(size), size)
+
+
+def sensor_fault(row: dict[str, float]) -> SensorFault | None:
+    """The ``SensorFault`` of one sample (None: ``fault_sensor`` none)."""
+    sensor, kind = int(row["fault_sensor"]), int(row["fault_kind"])
+    if FAULT_CHANNELS[sensor] == "none":
+        return None
+    value = float(fault_value(np.array([sensor]), np.array([kind]), np.array([float(row["fault_size"])]))[0])
+    return SensorFault(FAULT_CHANNELS[sensor], SCALAR_FAULT_KINDS[kind], float(row["fault_onset"]), value)
+
+
 def scenario_for(row: dict[str, float], duration: float) -> Scenario:
     """The scenario of one sample (a ``SampleSet.row``) lasting ``duration`` s."""
     kind = KINDS[int(row["disturbance"])]
@@ -111,7 +145,8 @@ def scenario_for(row: dict[str, float], duration: float) -> Scenario:
     return Scenario(name=f"campaign-sample-{int(row[INDEX])}", duration=duration, v=float(row["v"]),
                     mu=float(row["mu"]), mass=mass, events=(event,),
                     driver=DriverModel("model", float(row["reaction_time"]), float(row["driver_time_constant"])),
-                    description=f"{kind} at {onset:g} s", plant="nonlinear", actuator=actuator, sensors=sensors)
+                    description=f"{kind} at {onset:g} s", plant="nonlinear", actuator=actuator, sensors=sensors,
+                    sensor_faults=() if (fault := sensor_fault(row)) is None else (fault,))
 
 
 def disturbance_for(row: dict[str, float], kind: str) -> object:

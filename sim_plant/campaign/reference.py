@@ -1,52 +1,101 @@
-"""The scalar reference of the batch engine: one scenario in closed loop with the firmware's own
-``step()``, built from the product's scalar classes only.
+"""The scalar reference of the batch engine: one scenario in closed loop with the controller
+node's arithmetic, built from the product's scalar classes only.
 
 ``run`` is the lockstep plant node's step (``sim_plant.nodes.plant.PlantNode.step``, one step of
-loop delay) with the bus taken out: ``scenario.ScenarioState`` (events, loads, the driver
-model), ``plants.Car`` (the nonlinear car), ``actuator.Actuator`` (the command handling) and
-``actuator_dynamics.PositionActuator``, ``sensors.Sensors``, and
-``model_regulator.ModelRegulator``.  The batch engine must equal it (the test of
-``tests/test_campaign_engine.py``), and ``mrsteer bench --only campaign`` times it as the
-scalar firmware loop the engine is measured against.
+loop delay) and the controller node's cycle (``firmware_py.controller.node.ControllerNode.control``)
+with the bus taken out:
+
+* the plant: ``scenario.ScenarioState`` (events, loads, the driver model), ``plants.Car`` (the
+  nonlinear car; its a_y from ``Car.outputs`` at the actuator's position as the step begins),
+  ``actuator.Actuator`` (the command handling and its authority limit) and
+  ``actuator_dynamics.PositionActuator``, ``sensors.Sensors`` (every channel read every step,
+  each on its own stream);
+* the bus: each channel held at its DBC cycle (``plausibility_runs.cycles``: driver angle and
+  yaw rate every period, the speed every 5, ``MRS_RedundantSensors`` every 25), the command one
+  period late, ``MRS_CtrlStatus`` every 50 periods, its plausibility bits reaching the actuator
+  two steps after they were computed (the plant reads the frame while it waits for the next
+  command, after that step's command handling);
+* the controller: ``u = step(d, r, v)``, ``bits = monitor_step(mc, ms, d, d2, r, lat, v,
+  previous_command)``, ``u = authority_step(ac, as, u, bits)``, the reported state FAULT when
+  ``bits & PLAUS_FAULT``.
+
+The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
+campaign`` times it as the scalar firmware loop the engine is measured against.
 """
 
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+import mrsteer_dbc
+from firmware_py import authority as au
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
+from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE
 from sim_plant.car import scenario as scn
 from sim_plant.car.actuator import Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
-from sim_plant.car.sensors import Sensors
+from sim_plant.car.sensors import CHANNELS, Sensors
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.offline.plausibility_runs import MonitorRun, cycles, error_bound
 
 
 @dataclass(frozen=True)
 class ReferenceRun:
-    """Per step: the true yaw rate and side slip at the step's start, and the command."""
+    """Per step: the true yaw rate and side slip at the step's start, the command sent (after the
+    authority limiter), the reported state, the plausibility bits and the limiter's flags."""
 
     r: np.ndarray
     beta: np.ndarray
     command: np.ndarray
     status: np.ndarray
+    bits: np.ndarray
+    authority: np.ndarray
     final_speed: float
+    false_alarms: int  # steps with a plausibility bit before the sensor fault's onset (all, without one)
+    detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun
+    fault_yaw_rate: float
 
 
+def status_cycle(ts: float) -> int:
+    """``MRS_CtrlStatus``'s cycle in control periods (``ControllerNode.status_every``)."""
+    return max(1, int(round((mrsteer_dbc.load().cycle_time_s(MSG_STATUS) or 0.1) / ts)))
+
+
+def authority_limit(config: mr.ControllerConfig) -> float:
+    """The controller's authority limit: its ``aux_limit`` within the command's DBC range (the node's)."""
+    return min(config.aux_limit, mrsteer_dbc.load().signal_range(MSG_CMD, SIG_CMD_ANGLE)[1])
+
+
+# The plant node's step and the controller's cycle side by side; long because each stage is a
+# few lines that read best in the order the bus runs them.
 def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002) -> ReferenceRun:
-    """Play ``sc`` with the controller ``config`` (None: none) in the loop, step by step."""
+    """Play ``sc`` with the controller ``config`` (None: none, and no monitor) in the loop."""
     scene = scn.ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
     position = PositionActuator(sc.actuator, ts)
-    sensors = Sensors(sc.sensors, ts)
+    sensors = Sensors(sc.sensor_config, ts)
+    fault = sc.sensor_config.faults[0] if sc.sensor_config.faults else None
+    clean = Sensors(replace(sc.sensors, faults=()), ts) if fault is not None else None  # the same, fault-free
     handling = Actuator(ActuatorConfig(), ts)
     ctrl = mr.ModelRegulator(config) if config is not None else None
+    mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
+    ac = None if config is None else au.configure_authority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)))
+    ast = au.AuthorityState()
+    every, status_every = cycles(ts), status_cycle(ts)
     pipeline: collections.deque[float] = collections.deque([0.0])
     n = int(round(sc.duration / ts)) + 1
-    r_hist, beta_hist, u_hist, status = np.empty(n), np.empty(n), np.empty(n), np.empty(n, dtype=np.int8)
+    r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
+    status, bits_hist, auth = (np.zeros(n, dtype=np.int64) for _ in range(3))
+    error, speed_seen = np.zeros(n), np.zeros(n)
+    held: dict[str, float] = {}
+    command = 0.0  # the command sent the period before: what acts on the car now
+    in_flight: int | None = None  # a status frame's plausibility bits, not yet read by the plant
     for k in range(n):
         t = k * ts
         if scene.advance_to(t):
@@ -56,19 +105,60 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         x = car.x
         driver = scene.driver_angle(t, float(x[1]), ts)
         handling.apply(pipeline.popleft())
-        yaw = sensors.yaw_rate(float(x[1]))
-        steer, speed = sensors.steer(driver), sensors.speed(scene.v)
-        u = ctrl.step(steer, yaw, speed) if ctrl is not None else 0.0
+        if in_flight is not None:  # read while the plant waits for this step's command
+            handling.status_received(in_flight)
+            in_flight = None
+        y = car.outputs(driver + position.position, m_z)
+        truth = {"yaw_rate": float(y[0]), "steer": driver, "speed": scene.v, "lat_accel": float(y[2]),
+                 "steer_redundant": driver}
+        sensors.at(t)
+        read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        if fault is not None and clean is not None:
+            clean.at(t)
+            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
+        for ch in CHANNELS:
+            if k % every[ch] == 0:
+                held[ch] = read[ch]
+        speed_seen[k] = held["speed"]
+        u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
+        if ctrl is not None and ac is not None:
+            u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"])
+            bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
+                            held["speed"], command)
+            u = au.authority_step(ac, ast, u, bits)
+            state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
+            if (k + 1) % status_every == 0:
+                in_flight = bits
+        command = u
         pipeline.append(u)
         handling.command_received()  # lockstep: the answer arrived
-        # The controller's status as a clean monitor sends it: every check running, none tripped
-        # (the actuator's authority limit then bounds only size and rate; the batch engine has
-        # neither the monitor nor this second limit yet: docs/campaigns.md).
-        handling.status_received(0)
         handling.tick()
         position.step(handling.applied)
         r_hist[k], beta_hist[k], u_hist[k] = x[1], x[0], u
-        status[k] = ctrl.state.status if ctrl is not None else mr.STATUS_INACTIVE
+        status[k], bits_hist[k], auth[k] = state, bits, ast.flags
         car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
-    return ReferenceRun(r_hist, beta_hist, u_hist, status, car.v)
+    # the yaw rate the fault makes the command cause: against the same run without it
+    r_clean = None
+    if fault is not None and ctrl is not None:
+        r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
+    return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen, r_clean))
+
+
+def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
+                  error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None) -> tuple[int, float, float]:
+    """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
+    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection."""
+    t = np.arange(bits.size) * ts
+    after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
+    false_alarms = int(np.count_nonzero((bits != 0) & ~after))
+    if fault is None:
+        return false_alarms, 0.0, 0.0
+    cfg = pl.PlausibilityConfig(ts=ts)
+    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed}, np.zeros(bits.size))
+    exceeded, reported = run.exceeded_time(error_bound(fault.sensor, cfg, run)), run.fault_time
+    detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
+    caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
+    return false_alarms, detection, caused
+

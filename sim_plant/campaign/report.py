@@ -86,7 +86,9 @@ def build(out: Path) -> dict[str, Any]:
     for metric in CRITERIA:
         fig, ax = plt.subplots(figsize=(5.5, 4.0))
         for name in summary["calibrations"]:
-            ax.hist(cols[metric][cols["calibration"] == name], bins=50, alpha=0.5, label=name)
+            values = cols[metric][cols["calibration"] == name]
+            # (a detection_time of inf, never reported, has no bin: the summary's max shows it)
+            ax.hist(values[np.isfinite(values)], bins=50, alpha=0.5, label=name)
         bound = summary["criteria"].get(metric)
         if bound is not None:
             ax.axvline(bound, color="k", ls="--", label="criterion")

@@ -15,12 +15,17 @@
     noise_density = { loguniform = [0.005, 0.05] }
     disturbance = { choice = ["yaw_moment", "side_wind"] }
     mass = 1296.0              # a number: fixed
+    fault_sensor = { choice = ["none", "yaw_rate", "lat_accel"] }   # sensor faults (issue 18)
+    fault_kind = { choice = ["offset", "drift"] }
+    fault_onset = { uniform = [1.0, 3.0] }
+    fault_size = { uniform = [-3.0, 3.0] }   # deg/s, m/s^2, deg/s per s ...
 
     [criteria]                 # a sample passes when every figure is at or below its bound
     peak_yaw_rate = 0.5        # rad/s
     peak_side_slip = 6.0       # deg
     time_at_limit = 1.0        # s
-    fault_steps = 0            # steps with a fault reported (false alarms)
+    false_alarms = 0           # steps the monitor alarmed before any sensor fault
+    detection_time = 0.3       # s from the fault's error leaving its bound to the report
 
 Every error is one ``SpecError`` line naming the file and the key.
 """
@@ -42,7 +47,10 @@ from sim_plant.campaign.params import PARAMETERS, Parameter
 SAMPLINGS = ("lhs", "random")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice")
 NAMED_CALIBRATIONS = ("shipped", "paper", "previous", "none")
-CRITERIA = ("peak_yaw_rate", "peak_side_slip", "time_at_limit", "fault_steps")
+CRITERIA = ("peak_yaw_rate", "peak_side_slip", "time_at_limit", "fault_steps", "false_alarms", "detection_time",
+            "fault_yaw_rate")
+#: the parameters of a sensor fault besides fault_sensor (meaningless while it is always none)
+FAULT_PARAMETERS = ("fault_kind", "fault_onset", "fault_size")
 MAX_SAMPLES = 10**8
 TS = 0.002  # the firmware's step; a campaign runs at its calibrations' step
 
@@ -119,9 +127,13 @@ def parse(text: str, where: str) -> Campaign:
     _no_unknown(params, set(PARAMETERS), f"{where} [parameters]")
     dists = {k: _distribution(params[k], k, p, f"{where} [parameters]") if k in params
              else Distribution("fixed", (p.default,)) for k, p in PARAMETERS.items()}
-    onset = dists["onset"].values[-1]
-    if onset > duration:
-        raise SpecError(f"{where} [parameters]: 'onset' reaches {onset:g} s, after the end of the run ({duration:g} s)")
+    no_faults = dists["fault_sensor"].kind == "fixed" and dists["fault_sensor"].values[0] == 0.0
+    for key in ("onset",) if no_faults else ("onset", "fault_onset"):
+        onset = dists[key].values[-1]
+        if onset > duration:
+            raise SpecError(f"{where} [parameters]: {key!r} reaches {onset:g} s, after the end of the run "
+                            f"({duration:g} s)")
+    _check_faults(params, dists, f"{where} [parameters]")
     crit = _table(data, "criteria", where)
     _no_unknown(crit, set(CRITERIA), f"{where} [criteria]")
     criteria = {}
@@ -134,6 +146,16 @@ def parse(text: str, where: str) -> Campaign:
         raise SpecError(f"{where}: 'name' must be a non-empty string")
     return Campaign(name, samples, _int(data, "seed", 0, 0, 2**63 - 1, where), sampling, float(duration),
                     _int(data, "chunk", 16384, 1, 10**6, where), tuple(cals), dists, criteria, text)
+
+
+def _check_faults(given: dict[str, Any], dists: dict[str, Distribution], where: str) -> None:
+    """A fault's kind, onset or size given while no sample can have a fault is a mistake."""
+    sensor = dists["fault_sensor"]
+    if sensor.kind == "fixed" and sensor.values[0] == 0.0:  # (the code of "none")
+        named = [k for k in FAULT_PARAMETERS if k in given]
+        if named:
+            raise SpecError(f"{where}: {named[0]!r} is given but 'fault_sensor' is none: no sample has a sensor "
+                            f"fault (give fault_sensor a sensor or a choice)")
 
 
 def calibration(name: str, base: Path = Path("."), where: str = "campaign") -> mr.ControllerConfig | None:

@@ -37,6 +37,13 @@ _MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.
             "lat_accel": names.MSG_REDUNDANT, "steer_redundant": names.MSG_REDUNDANT}
 
 
+def cycles(ts: float) -> dict[str, int]:
+    """Each channel's bus cycle in periods of ``ts`` (the plant node's ``every``): the channel is
+    sent, and the controller's value of it renewed, at the steps k with k % cycle == 0."""
+    contract = mrsteer_dbc.load()
+    return {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in CHANNELS}
+
+
 @dataclass
 class MonitorRun:
     t: np.ndarray
@@ -95,8 +102,7 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
         guard: bool = True) -> MonitorRun:
-    contract = mrsteer_dbc.load()
-    every = {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in CHANNELS}
+    every = cycles(ts)
     scene = scn.ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
     actuator = PositionActuator(sc.actuator, ts)
