@@ -143,6 +143,17 @@ def test_report_writes_figures_and_html(tmp_path: Path) -> None:
     assert "Worst" in (out / "report" / "index.html").read_text()
 
 
+def test_report_json_is_strict_json_with_null_for_never() -> None:
+    import json
+    import math
+
+    from sim_plant.campaign import report
+
+    text = report.as_json({"a": [1.0, math.inf], "b": (math.nan, "x"), "c": {"d": -math.inf, "e": 2}})
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in the JSON")) == {
+        "a": [1.0, None], "b": [None, "x"], "c": {"d": None, "e": 2}}
+
+
 def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     bad = _write(tmp_path, "samples = 5\n[parameters]\nmu = { uniform = [0.0, 1.0] }\n")
     for args in (["campaign", "run", str(bad), "--out", str(tmp_path / "o")],

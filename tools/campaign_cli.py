@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import time
@@ -108,7 +107,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     s = report.build(args.dir)
     if args.json:
-        print(json.dumps(s, indent=2))
+        print(report.as_json(s))
         return 0
     print(f"campaign {s['campaign']}: {s['samples']} samples; report in {args.dir / 'report' / 'index.html'}")
     for name, c in s["calibrations"].items():

@@ -15,6 +15,8 @@ It returns the summary numbers (also what ``campaign report --json`` prints).
 from __future__ import annotations
 
 import html
+import json
+import math
 import io
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,20 @@ def summarise(out: Path) -> dict[str, Any]:
                             "max": float(np.max(rows[k]))} for k in CRITERIA} if n else {},
         }
     return summary
+
+
+def as_json(summary: Any) -> str:
+    """``summary`` as strict JSON (what ``campaign report --json`` prints): a non-finite figure, such
+    as the ``detection_time`` of a fault never reported (inf), is null."""
+    def finite(x: Any) -> Any:
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: finite(v) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            return [finite(v) for v in x]
+        return x
+    return json.dumps(finite(summary), indent=2, allow_nan=False)
 
 
 def _plain(x: Any) -> Any:
