@@ -85,7 +85,7 @@ def _recorded_run(args: argparse.Namespace) -> tuple[str, float, str]:
     if used:
         source = f"{' and '.join(used)} from {args.log.parent / 'summary.json'}"
     elif args.trigger == "auto" or args.rate_hz is None:
-        source = "no summary.json beside the log: defaults where not given"
+        source = "no readable summary.json beside the log: defaults where not given"
     else:
         source = "as given"
     return trigger, rate_hz, source

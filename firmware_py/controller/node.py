@@ -21,7 +21,8 @@ Each cycle, in this order (the scheduling contract a port must keep):
    the monitor differentiates over the yaw-rate samples between two of them, so a sample is
    withheld (NaN until the next one) when it arrived more than ``REDUNDANT_JITTER_CYCLES``
    (``sample_clock``) yaw-rate samples away from what its alive counter says elapsed (delta x
-   50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
+   50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The
+   authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
    and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
    with ``CAUSE_PLAUSIBILITY``;
 5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).

@@ -201,10 +201,16 @@ static int send_status(mrs_node_t *n)
 }
 
 /* An input is valid while its newest accepted frame is at most `limit` periods old and it has
- * not been rejected e2e_fail_max times in a row (inputs.py); ages it by one period. */
+ * not been rejected e2e_fail_max times in a row (inputs.py's Input.valid). */
+static int valid(const mrs_node_t *n, const mrs_input_t *in)
+{
+    return in->age <= in->limit && in->rejects < n->e2e_fail_max;
+}
+
+/* valid(), then the input ages by one period. */
 static int fresh(mrs_node_t *n, mrs_input_t *in)
 {
-    const int ok = in->age <= in->limit && in->rejects < n->e2e_fail_max;
+    const int ok = valid(n, in);
     ++in->age;
     return ok;
 }
@@ -221,8 +227,7 @@ int mrs_node_control(mrs_node_t *n)
      * invalid), and the redundant sample withheld when it came off its counter's time. */
     const mrs_input_t *yaw = &n->in[1];
     const long samples = n->yaw_samples < yaw->limit ? n->yaw_samples : yaw->limit;
-    const int yaw_valid = yaw->age <= yaw->limit && yaw->rejects < n->e2e_fail_max;
-    const long steps = samples > 0 ? samples : (yaw_valid ? 0 : 1);
+    const long steps = samples > 0 ? samples : (valid(n, yaw) ? 0 : 1);
     long k;
     if (fresh(n, red) && n->red_usable) {
         lat = red->value;
