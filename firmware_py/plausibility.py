@@ -223,9 +223,12 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     st2_ok = -1e3 < delta_driver_redundant < 1e3
     if not (lat_ok and st2_ok):
         flags |= MISSING
-        s.have_sample = False  # no difference across the gap: the next sample starts one
         if s.since >= c.kin_gap_steps:
-            s.kin_n = 0  # a long gap: the kinematic window restarts when the frame is back
+            # A long gap: no difference across it, and the kinematic window restarts when the
+            # frame is back.  A shorter one (a sample withheld) is bridged as a lost frame is:
+            # the next sample's interval spans it.
+            s.have_sample = False
+            s.kin_n = 0
     if not primary_ok:
         # Paused (too slow, or step() faults on the input): restart the windows, keep the latch.
         s.kin_count = s.pair_count = s.model_count = 0

@@ -45,10 +45,12 @@ def _speed(t: float, k: int) -> tuple[float, int, bytes]:
 def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, fade: float = FADE,
              unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
              early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END,
-             status_lag: float = 0.0, episode: tuple[float, float] | None = None, gap: bool = False) -> Evidence:
+             status_lag: float = 0.0, episode: tuple[float, float] | None = None, gap: bool = False,
+             redundant_lost: tuple[int, ...] | None = None) -> Evidence:
     """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
     ONSET on the controller's), a command every period (U0, FAULT from ONSET + ``detect``,
-    faded at ``fade``), a status every 100 ms."""
+    faded at ``fade``), a status every 100 ms; with ``redundant_lost``, the redundant frame every
+    50 ms on the controller's bus but for those samples (counted from 0 s)."""
     n = int(round(end / TS))
     vehicle, ctl, cmds, angles, statuses = [], [], [], [], []
     t_fault = None if detect is None else ONSET + detect
@@ -60,6 +62,9 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
         if not stall:
             vehicle.append(_yaw(t, R, k))
             ctl.append(_yaw(t + 1e-4, R + (error(t) if t >= ONSET else 0.0), k))
+        if redundant_lost is not None and k % 25 == 0 and k // 25 not in redundant_lost:
+            ctl.append((t + 2e-4, C.frame_id(names.MSG_REDUNDANT), C.encode(
+                names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4, names.SIG_STEER_ANGLE_2: 0.0}, (k // 25) % 15)))
         if k % 5 == 0 and not stall:
             vehicle.append(_speed(t, k // 5))
             ctl.append(_speed(t + 1e-4, k // 5))
@@ -103,6 +108,15 @@ def test_late_detection_fails_and_the_status_cycle_is_allowed_only_to_the_status
     assert any("reported late" in f for f in fails)
     fails, _, _ = _judge(evidence(_row(), detect=0.29))
     assert fails == []
+
+
+def test_a_redundant_sample_missing_before_the_report_is_shown_beside_the_detection() -> None:
+    # Each costs the kinematic check time: a late row must say whether that is why.
+    _, observed, _ = _judge(evidence(_row(), redundant_lost=()))
+    assert not any("redundant frame" in o for o in observed), observed
+    _, observed, _ = _judge(evidence(_row(), redundant_lost=(22,)))  # 1.1 s: after the onset, before 1.2 s
+    assert any("redundant frame before the report: 0 status frames DEGRADED, largest gap 100 ms" in o
+               for o in observed), observed
 
 
 @pytest.mark.parametrize("kwargs,needle", [

@@ -173,9 +173,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
 
     if (!(lat_ok && st2_ok)) {
         flags |= MRS_MISSING;
-        s->have_sample = 0u; /* no difference across the gap: the next sample starts one */
         if (s->since >= c->kin_gap_steps) {
-            s->kin_n = 0; /* a long gap: the kinematic window restarts */
+            /* a long gap: no difference across it, the kinematic window restarts; a shorter
+             * one is bridged as a lost frame is (the next sample's interval spans it) */
+            s->have_sample = 0u;
+            s->kin_n = 0;
         }
     }
     if (!primary_ok) {

@@ -185,8 +185,9 @@ class BatchMonitor:
             st2_ok = (-1e3 < d2) & (d2 < 1e3)
             missing = ~(lat_ok & st2_ok)
             flags |= np.where(missing, pl.MISSING, 0)
-            self._set("have_sample", missing, False)
-            self._set("kin_n", missing & (self.since >= c.kin_gap_steps), 0)
+            gap = missing & (self.since >= c.kin_gap_steps)  # a shorter gap is bridged (the scalar's comment)
+            self._set("have_sample", gap, False)
+            self._set("kin_n", gap, 0)
             paused = ~act
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
                          "kin_n"):

@@ -34,7 +34,7 @@ import math
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py.plausibility import PLAUS_FAULT, PlausibilityConfig
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, PlausibilityConfig
 from mrsteer_dbc import names
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
@@ -193,6 +193,8 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
     shown = "; ".join(f"{what} {1e3 * (t_ - ref):.0f} ms" for what, t_ in (("FAULT", t_cmd), ("status", t_st))
                       if t_ is not None)
     observed.append(shown + " after" + ("" if cycles is None else f" ({cycles} cycles)"))
+    if (trouble := redundancy_trouble(e, start, t_det)) is not None:
+        observed.append(trouble)
     if over is None:
         pass  # reported before the error left its bound (a growing error, a frozen value): early
     elif not (cmd_ok or st_ok):
@@ -205,6 +207,22 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         return None
     check_fade(e, fails, observed, t_cmd)
     return cycles
+
+
+def redundancy_trouble(e: Evidence, start: float, until: float) -> str | None:
+    """What the redundant frame did between the onset and the report when it could have slowed
+    the detection (a sample missing costs the kinematic check 50 ms, a long gap a window):
+    status frames DEGRADED (a sample withheld or timed out) and its largest gap on the
+    controller's bus over 1.5 of its cycles; ``None`` when neither happened."""
+    c = mrsteer_dbc.load()
+    cycle = c.cycle_time_s(names.MSG_REDUNDANT, e.setup.ts) or e.setup.ts
+    fid = c.frame_id(names.MSG_REDUNDANT)
+    times = [start] + [t for t, f, _ in e.frames if f == fid and start < t <= until] + [until]
+    gap = max(b - a for a, b in zip(times, times[1:]))
+    degraded = sum(1 for s in e.statuses if start <= s.t <= until and s.plausibility & PLAUS_DEGRADED)
+    if not degraded and gap <= 1.5 * cycle:
+        return None
+    return f"redundant frame before the report: {degraded} status frames DEGRADED, largest gap {1e3 * gap:.0f} ms"
 
 
 def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float | None) -> None:
