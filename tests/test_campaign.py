@@ -170,10 +170,10 @@ def test_metrics_are_the_engine_figures() -> None:
     assert set(spec.CRITERIA) <= set(engine.METRICS)
 
 
-@pytest.mark.parametrize("name", ["example.toml", "shipped-vs-paper.toml"])
+@pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "campaigns").glob("*.toml")))
 def test_shipped_campaign_files_parse(name: str) -> None:
     c = spec.load(ROOT / "campaigns" / name)
-    assert c.samples > 0 and c.criteria and len(c.sampled) >= 10
+    assert c.samples > 0 and c.criteria and len(c.sampled) >= 5
     s = sampling.samples(c, np.array([0, c.samples - 1]))
     for i in range(2):  # a sample is a valid scenario file's content
         sc = params.scenario_for(s.row(i), c.duration)
