@@ -231,13 +231,21 @@ def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # The wheel is held in paper-fig9, so a driver-angle frame a late cycle may or may not have
     # drained cannot change a command (docs/can-runtime.md would not say which it was).
-    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "hil", "run", "--scenario", "paper-fig9", "--mode",
-                           "realtime", "--duration", "0.7", "--out", str(tmp_path)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=300, env=os.environ.copy())
-    assert proc.returncode == 0, proc.stderr
-    log = tmp_path / "traffic.log"
-    code, doc, _ = _replay(capsys, str(log))  # the trigger and rate from the run's summary.json
-    assert doc["replays"][0]["trigger"] == "clock" and "summary.json" in doc["recorded_run"]
+    for attempt in range(3):
+        proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "hil", "run", "--scenario", "paper-fig9", "--mode",
+                               "realtime", "--duration", "0.7", "--out", str(tmp_path)], capture_output=True,
+                               text=True, cwd=ROOT, timeout=300, env=os.environ.copy())
+        assert proc.returncode == 0, proc.stderr
+        log = tmp_path / "traffic.log"
+        code, doc, _ = _replay(capsys, str(log))  # the trigger and rate from the run's summary.json
+        assert doc["replays"][0]["trigger"] == "clock" and "summary.json" in doc["recorded_run"]
+        # The documented limit of a clock replay (README, "mrsteer replay"): a machine stall
+        # within a cycle can make the real node time an input out a cycle before the replay
+        # does; it shows as a recorded FAULT the replay does not give.  Such a recording is
+        # not the clean log this test needs: record again (any other mismatch fails at once).
+        stalled = f"state: replayed {mr.STATUS_ACTIVE}, recorded {mr.STATUS_FAULT}"
+        if not any(m["what"] == stalled for m in doc["replays"][0]["all_mismatches"]):
+            break
     assert code == 0 and doc["replays"][0]["commands_recorded"] > 300, doc["replays"][0]["all_mismatches"][:5]
     lines = _lines(log)
     i = _command_lines(lines, after=250)[0]
