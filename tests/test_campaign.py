@@ -203,3 +203,49 @@ def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
     whole = tmp_path / "whole"
     runner.run(spec.parse(text, "t.toml"), tmp_path, whole, workers=0)
     assert results.read_all(out).equals(results.read_all(whole))
+
+
+FAULTY = """
+name = "faulty"
+samples = 2
+seed = 7
+duration = 1.6
+chunk = 2
+calibrations = ["shipped"]
+[parameters]
+v = 20.0
+mu = 0.8
+yaw_moment = 0.0
+fault_sensor = "yaw_rate"
+fault_kind = "offset"
+fault_onset = 0.6
+fault_size = {{ uniform = [2.8, 3.0] }}
+[criteria]
+detection_time = 0.3
+"""
+
+
+def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monitor_fault(tmp_path: Path) -> None:
+    # Issue 19's "exported and replayed on the bus reproducing the campaign's figure", with the
+    # monitor in the loop: the lockstep HIL run of the sample (plant and controller processes)
+    # against the engine's row, the car's peak and the period the monitor's fault began.
+    import json
+
+    c = spec.parse(FAULTY.format(), "f.toml")
+    out = tmp_path / "out"
+    runner.run(c, tmp_path, out, workers=0)
+    cols = results.read_all(out).to_pydict()
+    row = cols["index"].index(0)
+    assert 0 < cols["fault_steps"][row] < round(c.duration / spec.TS)  # the monitor found it, after the onset
+    file = tmp_path / "s.toml"
+    for cmd in (["campaign", "export", str(out), "0", "--out", str(file)],
+                ["hil", "run", "--scenario", str(file), "--calibration", str(file.with_suffix(".cfg")),
+                 "--out", str(tmp_path / "hil")]):
+        proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", *cmd], capture_output=True, text=True, cwd=ROOT,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr
+    s = json.loads((tmp_path / "hil" / "summary.json").read_text())
+    assert s["peak_yaw_rate_true_rad_s"] == pytest.approx(cols["peak_yaw_rate"][row], abs=1e-6)  # the DBC's 1 urad
+    steps = round(c.duration / spec.TS) + 1
+    fault_from = (steps - cols["fault_steps"][row]) * spec.TS
+    assert s["plausibility"]["fault_detected_s"] == pytest.approx(fault_from, abs=1.5 * spec.TS)
