@@ -18,10 +18,14 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
 1. **Kinematic** (yaw rate against lateral acceleration): a_y = v (beta' + r), so in steady
    state r = a_y / v; the residual a_y / v - r is beta', which the car keeps small.  Evaluated
    at each new ``MRS_RedundantSensors`` sample (50 ms), against the yaw rate of the same cycle
-   (the plant sends both frames in the same step, so the comparison has no hold error).
+   (the plant sends both frames in the same step, so the comparison has no hold error).  Less
+   the beta' of a family of nominal cars: every friction in [``mu_min``, 1], so that a car on
+   low mu or under a yaw moment, whose physical channels move together, is not taken for a
+   sensor that disagrees with them.
 2. **Model** (yaw rate against the steering): the nominal (mu = 1) car's steady-state yaw
    rate K_n(v) (delta_driver + aux) of eq. (15), lagged by a first-order filter, against the
-   yaw rate.  Low mu makes the car yaw *less* than the model, disturbances (the yaw moments the
+   yaw rate.  ``aux`` in both checks is the command sent the period before through the
+   actuator's nominal lag ``actuator_tau``: the angle it puts on the car.  Low mu makes the car yaw *less* than the model, disturbances (the yaw moments the
    controller exists for) make it yaw otherwise, so this bound is wide: a gross check that
    still works when the lateral acceleration is missing.
 3. **Steering pair**: the driver's angle against the steering sensor's second channel, at each
@@ -100,6 +104,12 @@ class PlausibilityConfig:
     # s without a usable redundant sample after which the kinematic window restarts; a shorter
     # gap (one sample withheld or lost: 100 ms between two used ones) keeps it (docs/controller.md)
     kin_gap: float = 0.15
+    # The kinematic check's family of nominal cars: every friction in [mu_min, 1] (the tyres'
+    # stiffness scaled by mu), so that the low-mu car's side-slip rate is not a yaw-rate error
+    mu_min: float = 0.5
+    # The actuator's nominal lag: ``aux_cmd_applied`` is the command sent the period before,
+    # and the angle it puts on the car follows it by a first-order lag of this (docs/controller.md)
+    actuator_tau: float = 0.025
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +137,8 @@ class MonitorCoefficients:
     inv_cs_m: float  # m / (c_f + c_r)
     moment_m: float  # (c_r l_r - c_f l_f) / m
     cf_m: float  # c_f / m
+    lat_span: float  # 1 / mu_min - 1: how far the family's a_y term reaches beyond mu = 1's
+    aux_alpha: float  # the actuator's lag per period: 1 - exp(-ts / actuator_tau)
 
 
 class MonitorState:
@@ -136,7 +148,8 @@ class MonitorState:
                  "yaw_last", "yaw_same", "yaw_ref", "lat_last", "lat_same", "lat_ref",
                  "st_last", "st_same", "st_ref", "st2_last", "st2_same", "st2_ref", "latched", "flags", "bits",
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
-                 "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok")
+                 "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
+                 "lat_beta_prev", "aux_lag")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -166,6 +179,9 @@ def reset_monitor(s: MonitorState) -> None:
     s.beta_prev = 0.0
     s.kin_raw = [0.0] * KIN_WINDOW  # the last samples of a_y / v - r (C: double[4])
     s.kin_comp = [0.0] * KIN_WINDOW  # the same less the nominal car's beta'
+    s.kin_lat = [0.0] * KIN_WINDOW  # the part of that beta' from a_y, which scales with 1 / mu
+    s.lat_beta_prev = 0.0
+    s.aux_lag = 0.0  # the auxiliary angle on the car: the command lagged by actuator_tau
     s.kin_idx = 0
     s.kin_n = 0  # samples in the window so far
 
@@ -173,7 +189,9 @@ def reset_monitor(s: MonitorState) -> None:
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
-                          "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap"))
+                          "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau"))
+    if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
+        raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
@@ -196,7 +214,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         frozen_move_steer=cfg.frozen_move_steer, wheelbase=wheelbase, k_us=k_us, ts=cfg.ts,
         inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
-        cf_m=cfg.nominal_c_f / cfg.nominal_mass)
+        cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
+        aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau))
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -212,7 +231,8 @@ def check_positive(cfg: object, names: tuple[str, ...]) -> None:
 def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
                  yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float) -> int:
     """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
-    detailed checks).  ``aux_cmd_applied``: the auxiliary angle acting on the car now.  NaN for
+    detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
+    monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
     a missing input: a missing primary input pauses every check (step() faults on it), a
     missing redundant one the checks that need it (DEGRADED)."""
     flags = s.latched
@@ -248,7 +268,13 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
 
     inv_v = 1.0 / speed
     r_kin = lat_accel * inv_v if lat_ok else 0.0
-    delta = delta_driver + aux_cmd_applied
+    if not s.started:
+        s.aux_lag = aux_cmd_applied
+    # The angle on the car: the command sent the period before, through the actuator's lag.
+    # Taking the command itself for it made the nominal car's beta' (below) jump by half the
+    # command's rate while the law slews: 0.09 rad/s, a false alarm on every strong yaw moment.
+    s.aux_lag += c.aux_alpha * (aux_cmd_applied - s.aux_lag)
+    delta = delta_driver + s.aux_lag
     # --- 2. model: the nominal car's steady-state yaw rate, lagged
     r_ss = delta * speed / (c.wheelbase + c.k_us * speed * speed)
     if not s.started:
@@ -296,11 +322,13 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         # a_y = -(c_f + c_r) / m beta + moment_m r / v + c_f / m delta), nearly insensitive to r
         # (moment_m / v is the small understeer term), so a yaw-rate error hardly moves it.
         beta = (c.moment_m * inv_v * inv_v * yaw_rate + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * speed
+        lat_beta = lat_accel * c.inv_cs_m  # the a_y term of beta (with the minus sign: beta = ... - lat_beta)
         if s.have_sample:
             mid = 0.5 * (raw + s.raw_prev)
             i = s.kin_idx
             s.kin_raw[i] = mid
             s.kin_comp[i] = mid - (beta - s.beta_prev) / (s.since * c.ts)
+            s.kin_lat[i] = (lat_beta - s.lat_beta_prev) / (s.since * c.ts)
             i += 1
             if i >= KIN_WINDOW:
                 i = 0
@@ -310,11 +338,22 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.have_sample = True
         s.raw_prev = raw
         s.beta_prev = beta
+        s.lat_beta_prev = lat_beta
         s.since = 0
         raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
         comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
+        # The family of nominal cars on mu in [mu_min, 1]: the car on mu has the a_y term of beta
+        # 1 / mu times mu = 1's, so its residual is comp + (1 / mu - 1) lat, linear in 1 / mu; the
+        # smallest |residual| of the family is 0 if the two ends differ in sign, else the smaller end.
+        far = comp + c.lat_span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
         raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
-        comp = -comp if comp < 0.0 else comp
+        if comp * far <= 0.0:
+            comp = 0.0
+        else:
+            comp = -comp if comp < 0.0 else comp
+            far = -far if far < 0.0 else far
+            if far < comp:
+                comp = far
         e = comp if comp < raw else raw
         if s.kin_n < KIN_WINDOW:
             e = 0.0  # the window is not full yet

@@ -279,7 +279,7 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
                          "kin_n", "since"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
-            for name in ("r_model", "kin_err", "pair_err", "model_err"):
+            for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)

@@ -28,6 +28,8 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->nominal_c_f = 84000.0;
     cfg->nominal_c_r = 96000.0;
     cfg->kin_gap = 0.15;
+    cfg->mu_min = 0.5;
+    cfg->actuator_tau = 0.025;
 }
 
 static int positive(double x)
@@ -46,7 +48,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
 {
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
-                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap};
+                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -55,7 +57,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         }
     }
     if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
-        g->steer_count < 1 || g->steer_count > 100) {
+        g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0)) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
@@ -82,6 +84,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->inv_cs_m = g->nominal_mass / (g->nominal_c_f + g->nominal_c_r);
     c->moment_m = (g->nominal_c_r * g->nominal_l_r - g->nominal_c_f * g->nominal_l_f) / g->nominal_mass;
     c->cf_m = g->nominal_c_f / g->nominal_mass;
+    c->lat_span = 1.0 / g->mu_min - 1.0;
+    c->aux_alpha = 1.0 - exp(-g->ts / g->actuator_tau);
     return 0;
 }
 
@@ -107,9 +111,12 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->have_sample = 0u;
     s->raw_prev = 0.0;
     s->beta_prev = 0.0;
+    s->lat_beta_prev = 0.0;
+    s->aux_lag = 0.0;
     for (i = 0; i < MRS_KIN_WINDOW; ++i) {
         s->kin_raw[i] = 0.0;
         s->kin_comp[i] = 0.0;
+        s->kin_lat[i] = 0.0;
     }
     s->kin_idx = 0;
     s->kin_n = 0;
@@ -190,7 +197,12 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     }
     inv_v = 1.0 / speed;
     r_kin = lat_ok ? lat_accel * inv_v : 0.0;
-    delta = delta_driver + aux_cmd_applied;
+    if (!s->started) {
+        s->aux_lag = aux_cmd_applied;
+    }
+    /* the angle on the car: the command sent the period before, through the actuator's lag */
+    s->aux_lag += c->aux_alpha * (aux_cmd_applied - s->aux_lag);
+    delta = delta_driver + s->aux_lag;
     /* 2. model */
     r_ss = delta * speed / (c->wheelbase + c->k_us * speed * speed);
     if (!s->started) {
@@ -226,13 +238,15 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     new_sample = lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev);
     if (new_sample) {
         double raw = r_kin - yaw_rate;
-        double comp, beta;
+        double comp, far, beta, lat_beta;
         beta = (c->moment_m * inv_v * inv_v * yaw_rate + c->cf_m * inv_v * delta - r_kin) * c->inv_cs_m * speed;
+        lat_beta = lat_accel * c->inv_cs_m;
         if (s->have_sample) {
             double mid = 0.5 * (raw + s->raw_prev);
             int32_t i = s->kin_idx;
             s->kin_raw[i] = mid;
             s->kin_comp[i] = mid - (beta - s->beta_prev) / ((double)s->since * c->ts);
+            s->kin_lat[i] = (lat_beta - s->lat_beta_prev) / ((double)s->since * c->ts);
             i += 1;
             if (i >= MRS_KIN_WINDOW) {
                 i = 0;
@@ -245,10 +259,22 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->have_sample = 1u;
         s->raw_prev = raw;
         s->beta_prev = beta;
+        s->lat_beta_prev = lat_beta;
         s->since = 0;
         raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW)) *
               c->inv_yaw_raw_fraction;
-        comp = MRS_MAG((s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW));
+        comp = (s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW);
+        /* the family of nominal cars on mu in [mu_min, 1]: 0 if its two ends differ in sign */
+        far = comp + c->lat_span * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
+        if (comp * far <= 0.0) {
+            comp = 0.0;
+        } else {
+            comp = MRS_MAG(comp);
+            far = MRS_MAG(far);
+            if (far < comp) {
+                comp = far;
+            }
+        }
         e = comp < raw ? comp : raw;
         if (s->kin_n < MRS_KIN_WINDOW) {
             e = 0.0;

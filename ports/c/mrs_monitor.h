@@ -48,6 +48,8 @@ typedef struct {
     double model_margin, model_rel, model_tau, model_time, frozen_time, frozen_move_yaw, frozen_move_steer;
     double nominal_l_f, nominal_l_r, nominal_mass, nominal_c_f, nominal_c_r;
     double kin_gap; /* s without a usable redundant sample before the kinematic window restarts */
+    double mu_min;  /* the kinematic check's family of nominal cars: every friction in [mu_min, 1] */
+    double actuator_tau; /* the actuator's nominal lag behind the command sent, s */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -58,16 +60,17 @@ typedef struct {
     double model_margin, model_rel, model_alpha;
     int32_t model_steps, frozen_steps, kin_gap_steps;
     double frozen_move_yaw, frozen_move_steer, wheelbase, k_us, ts, inv_cs_m, moment_m, cf_m;
+    double lat_span, aux_alpha; /* 1 / mu_min - 1; 1 - exp(-ts / actuator_tau) */
 } mrs_monitor_coeffs_t;
 
 typedef struct {
     uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, latched, flags, bits;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since;
     int32_t yaw_same, lat_same, st_same, st2_same;
-    double lat_prev, steer2_prev, r_model, raw_prev, beta_prev;
+    double lat_prev, steer2_prev, r_model, raw_prev, beta_prev, lat_beta_prev, aux_lag;
     double yaw_last, yaw_ref, lat_last, lat_ref, st_last, st_ref, st2_last, st2_ref;
     double kin_err, pair_err, model_err;
-    double kin_raw[MRS_KIN_WINDOW], kin_comp[MRS_KIN_WINDOW];
+    double kin_raw[MRS_KIN_WINDOW], kin_comp[MRS_KIN_WINDOW], kin_lat[MRS_KIN_WINDOW];
 } mrs_monitor_state_t;
 
 typedef struct {

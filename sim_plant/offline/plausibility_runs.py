@@ -138,8 +138,10 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
             if k % every[ch] == 0:
                 held[ch] = read[ch]
         u = reg.step(held["steer"], held["yaw_rate"], held["speed"])
+        # the command sent the period before, as the controller node passes it (the monitor
+        # models the actuator's lag itself)
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
-                        applied)
+                        pipeline[0])
         if guard:
             u = au.authority_step(ac, ast, u, bits)
         pipeline.append(u)
