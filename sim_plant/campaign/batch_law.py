@@ -43,11 +43,64 @@ class BatchLaw:
         self.status = np.full(n, mr.STATUS_INACTIVE, dtype=np.int8)
         self.fault_flags = np.zeros(n, dtype=np.int8)
         self._cols = np.arange(n)
+        self._hist_at: int | None = 0  # every row's hist_idx when they are all equal, else None
+        self._speed: np.ndarray | None = None  # the speed array of the last period, its checks and 1/K_n
+        self._speed_ok = False
+        self._inv_kn: np.ndarray | None = None
+        self._flags_clear = True  # no row's fault_flags set
+        self._needs_any = True  # some row needs_init
 
     def step(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, speed: np.ndarray) -> np.ndarray:
         """One control period of every row; the commands (rad).  ``status`` and
-        ``fault_flags`` per row as the scalar ``State`` has them."""
+        ``fault_flags`` per row as the scalar ``State`` has them.
+
+        A caller that holds the speed between its samples passes the same array, unmodified,
+        until the next one: its checks and the law's terms of the speed alone are then reused."""
         c = self.c
+        if speed is not self._speed:
+            self._speed = speed
+            # every row's speed within [speed_active_min, speed_max] (False for a NaN)
+            self._speed_ok = bool(speed.min() >= c.speed_active_min) and bool(speed.max() <= c.speed_max)
+            self._inv_kn = None
+        if (self._speed_ok and self._flags_clear and _within(delta_driver, c.driver_angle_max)
+                and _within(yaw_rate, c.yaw_rate_max)):
+            return self._active(delta_driver, yaw_rate, speed)
+        return self._general(delta_driver, yaw_rate, speed)
+
+    def _active(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        """``step`` when every row's inputs are in range and active (no flags, none idle): the
+        scalar's active path, with the work of rows that need no re-initialisation and are not
+        recovering skipped when none are."""
+        c = self.c
+        if self._inv_kn is None:
+            self._inv_kn = c.wheelbase / speed + c.k_us * speed
+        rho = self._inv_kn * yaw_rate
+        law = self.table.at(speed)
+        recovering = self.recovering
+        if self._needs_any:
+            init = self.needs_init
+            recovering = self._reinit(init, delta_driver, rho, law)
+            self.needs_init = np.zeros_like(init)
+            self._needs_any = False
+        u_prev = self.u_prev
+        if recovering is not None and recovering.any():
+            du = np.where(recovering & (c.fade_step < c.du_max), c.fade_step, c.du_max)
+        else:
+            recovering, du = None, c.du_max
+        lo_slew = u_prev - du
+        hi_slew = u_prev + du
+        lo = np.maximum(lo_slew, -c.u_max)
+        hi = np.minimum(hi_slew, c.u_max)
+        u = self._law(delta_driver, rho, lo, hi, law)
+        self.recovering = None if recovering is None else recovering & ~((lo_slew < u) & (u < hi_slew))
+        self.u_prev = u
+        self.status = np.where((u >= c.u_max) | (u <= -c.u_max), mr.STATUS_SATURATED, mr.STATUS_ACTIVE).astype(np.int8)
+        return u
+
+    def _general(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        """``step`` for any inputs: every branch of the scalar code a mask."""
+        c = self.c
+        self._recovering_array()
         # |x| <= max is -max <= x <= max, NaN failing both
         ok_driver = np.abs(delta_driver) <= c.driver_angle_max
         ok_yaw = np.abs(yaw_rate) <= c.yaw_rate_max
@@ -55,11 +108,12 @@ class BatchLaw:
         ok = ok_driver & ok_yaw & ok_speed
         idle = ~ok | (speed < c.speed_active_min)
         any_idle = bool(idle.any())
-        if any_idle or self.fault_flags.any():  # the flags of a row with every input in range are 0
+        if any_idle or not self._flags_clear:  # the flags of a row with every input in range are 0
             flags = np.where(ok_driver, 0, mr.FAULT_DRIVER_ANGLE)
             flags |= np.where(ok_yaw, 0, mr.FAULT_YAW_RATE)
             flags |= np.where(ok_speed, 0, mr.FAULT_SPEED)
             self.fault_flags = flags.astype(np.int8)
+            self._flags_clear = not bool(self.fault_flags.any())
 
         u_prev = self.u_prev
         fs = c.fade_step
@@ -86,21 +140,40 @@ class BatchLaw:
         if not any_idle:
             self.recovering = still
             self.needs_init = self.needs_init & ~init
+            self._needs_any = bool(self.needs_init.any())
             self.u_prev = u
             self.status = active_status.astype(np.int8)
             return u
         self._restore(idle, keep)  # an idle row's state is the scalar's: untouched
         self.recovering = np.where(idle, self.recovering, still)
         self.needs_init = idle | (self.needs_init & ~init)
+        self._needs_any = True
         out = np.where(idle, faded, u)
         self.u_prev = out
         self.status = np.where(idle, np.where(~ok, mr.STATUS_FAULT, mr.STATUS_INACTIVE),
                                active_status).astype(np.int8)
         return out
 
+    def _recovering_array(self) -> None:
+        """``recovering`` as an array (``_active`` leaves None for no row recovering)."""
+        if self.recovering is None:
+            self.recovering = np.zeros(self.z.size, dtype=bool)
+
     _STATE = ("z", "p_n", "f_s1", "f_s2", "hist_idx")
 
+    def _hist_array(self) -> None:
+        """``hist_idx`` per row, from the one index all rows share (``_hist_at``)."""
+        if self._hist_at is not None:
+            self.hist_idx = np.full(self.z.size, self._hist_at, dtype=np.int64)
+            self._hist_at = None
+
+    def _hist_uniform(self) -> None:
+        """The one index of ``hist_idx`` when all rows share it (a gather and scatter saved)."""
+        if self._hist_at is None and self.hist_idx.min() == self.hist_idx.max():
+            self._hist_at = int(self.hist_idx[0])
+
     def _state(self) -> tuple[np.ndarray, ...]:
+        self._hist_array()
         return tuple(getattr(self, k) for k in self._STATE) + (self.u_hist.copy(),)
 
     def _restore(self, idle: np.ndarray, kept: tuple[np.ndarray, ...]) -> None:
@@ -109,12 +182,14 @@ class BatchLaw:
         for k, old in zip(self._STATE, kept):
             setattr(self, k, np.where(idle, old, getattr(self, k)))
         self.u_hist = np.where(idle, kept[-1], self.u_hist)
+        self._hist_uniform()
 
     def _reinit(self, init: np.ndarray, delta_driver: np.ndarray, rho: np.ndarray, law) -> np.ndarray:
         """The re-start of every filter at its steady state for the present inputs with the
         command held; the rows now recovering."""
         if not init.any():
             return self.recovering
+        self._hist_array()
         a, g_w0, g_w1, g_r0, g_r1, q0 = law
         b0, b1, b2, a1, a2 = self.flt
         w0 = delta_driver + self.u_prev
@@ -125,6 +200,7 @@ class BatchLaw:
         self.p_n = np.where(init, self.u_prev, self.p_n)
         self.f_s1 = np.where(init, (1.0 - b0) * w0, self.f_s1)
         self.f_s2 = np.where(init, (b2 - a2) * w0, self.f_s2)
+        self._hist_uniform()
         return self.recovering | init
 
     def _law(self, delta_driver: np.ndarray, rho: np.ndarray, lo: np.ndarray, hi: np.ndarray, law) -> np.ndarray:
@@ -140,19 +216,32 @@ class BatchLaw:
         else:
             act_a, act_b = self.act
             b0, b1, b2, a1, a2 = self.flt
-            i = self.hist_idx
-            self.p_n = act_a * self.p_n + act_b * self.u_hist[i, self._cols]
+            at = self._hist_at
+            i = self.hist_idx if at is None else at
+            last = self.u_hist[i, self._cols] if at is None else self.u_hist[at]
+            self.p_n = act_a * self.p_n + act_b * last
             x = delta_driver + self.p_n
             w = b0 * x + self.f_s1
             self.f_s1 = b1 * x - a1 * w + self.f_s2
             self.f_s2 = b2 * x - a2 * w
             y = g_w0 * w - g_r0 * rho + self.z
-            u = np.where(y < lo, lo, np.where(y > hi, hi, y))
-            self.u_hist[i, self._cols] = u
-            nxt = i + 1
-            self.hist_idx = np.where(nxt >= self.m, 0, nxt)
+            # y < lo: lo; y > hi: hi; else y (lo <= hi; a NaN stays; on a tie numpy's maximum and
+            # minimum return their second argument, so a signed zero is the scalar's too)
+            u = np.minimum(hi, np.maximum(lo, y))
+            if at is None:
+                self.u_hist[i, self._cols] = u
+                nxt = i + 1
+                self.hist_idx = np.where(nxt >= self.m, 0, nxt)
+            else:
+                self.u_hist[at] = u
+                self._hist_at = at + 1 if at + 1 < self.m else 0
         self.z = g_w1 * w - g_r1 * rho + a * y
         return u
+
+
+def _within(x: np.ndarray, bound: float) -> bool:
+    """-bound <= x <= bound in every row (False for a NaN: min and max propagate it)."""
+    return bool(x.min() >= -bound) and bool(x.max() <= bound)
 
 
 class _Schedule:
@@ -174,13 +263,15 @@ class _Schedule:
         self.diffs[:, :-1] = self.tables[:, 1:] - self.tables[:, :-1]
         self._speed: np.ndarray | None = None
         self._law: tuple[np.ndarray, ...] = ()
+        self._seen: np.ndarray | None = None  # the array of the last call (held: the same values)
         if self.n == 1:
             self.const = tuple(t[0] + 0.0 * (t[0] - t[0]) for t in self.tables)
 
     def at(self, speed: np.ndarray):
         if self.const is not None:
             return self.const
-        if self._speed is not None and np.array_equal(speed, self._speed):
+        if speed is self._seen or self._speed is not None and np.array_equal(speed, self._speed):
+            self._seen = speed
             return self._law
         n, sv = self.n, self.v
         # the last breakpoint at or below the speed (ascending): the count of sv[1..n-2] <= speed
@@ -191,5 +282,5 @@ class _Schedule:
         f = np.where(inside, (speed - sv[j]) * self.inv_dv[j], 0.0)
         # outside the breakpoints step() adds 0 (t[j] - t[j]); here 0 times the (finite) next difference
         law = self.tables[:, j] + f * self.diffs[:, j]
-        self._speed, self._law = speed.copy(), tuple(law)
+        self._speed, self._law, self._seen = speed.copy(), tuple(law), speed
         return self._law
