@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from sim_plant.campaign.batch_faults import BatchFaults
+from sim_plant.campaign.noise import NoiseStream
 from sim_plant.car.nonlinear import MAX_STEP_RATE, STOP_SPEED
 from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
 from sim_plant.car.sensors import G as G_SENSOR
@@ -110,6 +111,9 @@ class BatchCar:
         self._k = np.empty((4, 3, n))  # k1..k4 of (beta, r, v)
         self._stage = np.empty((3, n))
         self._t1, self._t2 = np.empty(n), np.empty(n)
+        self._arms = np.array([[p.l_f], [p.l_r]])  # the axles' distances from the centre of mass
+        self._lr = np.empty((2, n))
+        self._mv: np.ndarray | None = None  # m v while the speed is constant
         self._acc_tmp = np.empty((3, n))
 
     def substeps(self, mu_max: np.ndarray) -> np.ndarray:
@@ -134,37 +138,37 @@ class BatchCar:
     def _forces(self, beta, r, v, delta, tyres: Tyres) -> tuple[np.ndarray, np.ndarray]:
         """(F_yf, F_yr) at the kinematic slip angles (``_slip`` and ``axle_forces``): views of
         scratch arrays, valid until the next call."""
-        t1 = self._t1
+        lr = self._lr
         alpha = self._alpha
-        np.multiply(self.l_f, r, out=t1)  # alpha_f = delta - beta - l_f r / v
-        t1 /= v
-        np.subtract(delta, beta, out=alpha[0, 0])
-        alpha[0, 0] -= t1
-        np.multiply(self.l_r, r, out=t1)  # alpha_r = -beta + l_r r / v
-        t1 /= v
-        np.subtract(t1, beta, out=alpha[1, 0])
+        np.multiply(self._arms, r, out=lr)  # l_f r / v and l_r r / v, both axles in one operation
+        lr /= v
+        np.subtract(delta, beta, out=alpha[0, 0])  # alpha_f = delta - beta - l_f r / v
+        alpha[0, 0] -= lr[0]
+        np.subtract(lr[1], beta, out=alpha[1, 0])  # alpha_r = -beta + l_r r / v
         nb, nd = tyres.b.shape[1], tyres.d.shape[1]
         s = shape_sine(alpha, tyres.b, self._s[nb], self._s_tmp[nb])
         f = np.multiply(tyres.d, s, out=self._f[nd])
         if nd == 2:
-            f_front, f_rear = np.add(f[:, 0], f[:, 1], out=self._axle)
-        else:
-            f_front, f_rear = f[:, 0]
-        return f_front, f_rear
+            return np.add(f[:, 0], f[:, 1], out=self._axle)
+        return f[:, 0]
 
     def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
         """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
-        t1, t2 = self._t1, self._t2
-        f_front, f_rear = self._forces(beta, r, v, delta, tyres)
-        np.add(f_front, f_rear, out=t1)
+        t1, lr = self._t1, self._lr
+        forces = self._forces(beta, r, v, delta, tyres)  # (F_yf, F_yr) as one (2, N) array
+        np.add(forces[0], forces[1], out=t1)
         if f_y is not None:
             t1 += f_y
-        np.multiply(self.mass, v, out=t2)
-        np.divide(t1, t2, out=k[0])
+        if v is self.v and a_x is None:  # the speed constant: m v too
+            if self._mv is None:
+                self._mv = self.mass * v
+            mv = self._mv
+        else:
+            mv = np.multiply(self.mass, v, out=self._t2)
+        np.divide(t1, mv, out=k[0])
         k[0] -= r
-        np.multiply(self.l_f, f_front, out=t1)
-        np.multiply(self.l_r, f_rear, out=t2)
-        np.subtract(t1, t2, out=k[1])
+        np.multiply(self._arms, forces, out=lr)  # l_f F_yf and l_r F_yr
+        np.subtract(lr[0], lr[1], out=k[1])
         k[1] += m_z
         k[1] /= self.inertia
         if a_x is not None:
@@ -254,32 +258,6 @@ def zoh_first_order(time_constant: float, ts: float) -> tuple[float, float]:
     return float(phi[0, 0]), float(gamma[0, 0])
 
 
-class _Stream:
-    """One sensor channel's noise per row: row i's stream is ``SeedSequence(seed_i).spawn(...)[child]``
-    (``Sensors.reset``'s child for the channel), drawn ``BLOCK`` steps at a time into the row's
-    own contiguous row of a (rows, BLOCK) array, so that ``at(k)`` is the k-th standard normal of
-    every row's stream, as the scalar draws it once per step (a step reads one strided column:
-    cheaper than transposing, and the generator's per-call cost is paid every 1024 steps)."""
-
-    BLOCK = 1024
-
-    def __init__(self, seeds: np.ndarray, child: int) -> None:
-        # Generator(PCG64(...)) is default_rng's stream without its dispatch
-        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s, spawn_key=(child,))))
-                      for s in seeds.tolist()]
-        self._noise = np.empty((seeds.size, self.BLOCK))
-        self._block = -1
-
-    def at(self, k: int) -> np.ndarray:
-        """Every row's k-th draw; k never decreases between calls (any k may be skipped)."""
-        block = k // self.BLOCK
-        while self._block < block:  # a skipped block is drawn too: the streams stay in step
-            for g, row in zip(self._rngs, self._noise):
-                g.standard_normal(out=row)
-            self._block += 1
-        return self._noise[:, k % self.BLOCK]
-
-
 class _Butterworth:
     """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first input."""
 
@@ -309,7 +287,8 @@ class BatchSensors:
     noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
 
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
-                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None) -> None:
+                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None,
+                 steps: int | None = None) -> None:
         fs = 1.0 / ts
         self.ts, self.faults = ts, faults
         #: per row, its faulted channel's reading less the same sensor's without the fault (the
@@ -331,8 +310,11 @@ class BatchSensors:
         self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
             dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
         # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
-        self._yaw_noise, self._lat_noise, self._steer2_noise = (_Stream(seeds, CHANNELS.index(ch)) for ch in
-                                                                ("yaw_rate", "lat_accel", "steer_redundant"))
+        # the second steering channel is read every 25 steps, unless a row faults it
+        self._yaw_noise, self._lat_noise, self._steer2_noise = (
+            NoiseStream(seeds, CHANNELS.index(ch), scale, steps, dense) for ch, scale, dense in (
+                ("yaw_rate", self.sigma, True), ("lat_accel", self.lat_sigma, True),
+                ("steer_redundant", self.steer2_sigma, "steer_redundant" in tracked)))
         self._k = 0
 
     def at(self, k: int) -> None:
@@ -348,7 +330,7 @@ class BatchSensors:
         self.error = np.where(self.faults.rows[channel], faulted - clean, self.error)
 
     def yaw_rate(self, r: np.ndarray) -> np.ndarray:
-        noise = self.sigma * self._yaw_noise.at(self._k)
+        noise = self._yaw_noise.at(self._k)  # sigma times the draw
         q = self.q_yaw
         y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
         if self._yaw_clean is not None:
@@ -358,7 +340,7 @@ class BatchSensors:
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
         """The lateral acceleration's filter output, unquantised: the filter runs every step,
         and ``quantised_lat`` makes the value of a step whose reading is sent."""
-        noise = self.lat_sigma * self._lat_noise.at(self._k)
+        noise = self._lat_noise.at(self._k)
         y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
         if self._lat_clean is not None:
             clean = self._lat_clean(a_y + self.lat_bias + noise)
@@ -371,7 +353,7 @@ class BatchSensors:
     def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
         """The second steering channel (no filter: only a step whose reading is sent needs it,
         and, for its error, every step of a row that faults it)."""
-        noise = self.steer2_sigma * self._steer2_noise.at(self._k)
+        noise = self._steer2_noise.at(self._k)
         q = self.q_steer2
         y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
         if "steer_redundant" in self.tracked:

@@ -113,8 +113,9 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
             continue
         local[rows] = np.arange(rows.size)  # a twin has its row's kind: the same group
         twin = np.where(twin_of[rows] >= 0, local[np.maximum(twin_of[rows], 0)], -1)
-        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin)
-        res = part.run(steps_of(duration, ts))
+        steps = steps_of(duration, ts)
+        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin, steps=steps)
+        res = part.run(steps)
         for name, values in res.items():
             if name not in out:
                 shape = (len(samples),) if values.ndim == 1 else (values.shape[0], len(samples))
@@ -127,7 +128,7 @@ class _Group:
     """Rows that share their tyre and speed treatment, run together."""
 
     def __init__(self, s: SampleSet, config: mr.ControllerConfig | None, ts: float, grip: bool,
-                 record: bool, twin: np.ndarray) -> None:
+                 record: bool, twin: np.ndarray, steps: int | None = None) -> None:
         self.ts, self.grip, self.record = ts, grip, record
         self.pairs = np.flatnonzero(twin >= 0)  # the rows with a fault-free twin, and their twins
         self.twins = twin[self.pairs]
@@ -140,7 +141,7 @@ class _Group:
         # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
         self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
         self.faults = BatchFaults(s) if bool((s["fault_sensor"] != 0).any()) else None
-        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults)
+        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults, steps=steps)
         self.every = cycles(ts)
         if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
             raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
