@@ -242,6 +242,10 @@ class BatchPositionActuator:
         nxt = self.phi * x + self.gamma * u
         move = nxt - x
         exact = np.abs(move) <= self.max_move
+        if exact.all() and np.abs(nxt).max() <= lim:  # no row rate-limited or at its end stop
+            self.mean = u + (x - u) * self.mean_c
+            self.position = nxt
+            return nxt
         nxt = np.where(exact, nxt, x + np.copysign(self.max_move, move))
         stopped = np.abs(nxt) > lim
         nxt = np.where(stopped, np.copysign(lim, nxt), nxt)

@@ -170,16 +170,13 @@ class _Group:
         ts, car, sensors, rows = self.ts, self.car, self.sensors, self.mass.size
         correction = np.zeros(rows)
         pending = np.zeros(rows)  # the command sent the period before (one step of loop delay)
-        limit = math.radians(ACTUATOR_LIMIT_DEG)
-        peaks, magnitude = np.zeros((2, rows)), np.empty((2, rows))  # |beta|, |r|: car.x's first two rows
-        peak_u = np.zeros(rows)
-        counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
-        ored = np.zeros(rows, dtype=np.int64)
         act_bits = np.full(rows, pl.PLAUS_DEGRADED, dtype=np.int64)  # no status frame yet: unchecked
         act_latched = np.zeros(rows, dtype=np.int64)
         in_flight: np.ndarray | None = None  # a status frame's bits, read by the plant next step
         held: dict[str, np.ndarray] = {}
-        zeros = np.zeros(rows, dtype=np.int64)
+        controlled = self.law is not None and self.monitor is not None and self.limiter is not None
+        tally = _Tally(rows, controlled)
+        term = np.empty(rows)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
         figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
@@ -187,18 +184,27 @@ class _Group:
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
+            # The driver: frozen until panic_until once the event has fired, else correcting.
+            steering = (t_block >= self.panic_until) | (self.onset > t_block + EVENT_SLACK)
+            all_steering = steering.all(axis=1).tolist()
             for j in range(t_block.shape[0]):
                 k = k0 + j
                 t = k * ts
                 r = car.r  # (a view: read before the car advances)
-                np.maximum(peaks, np.abs(car.x[:2], out=magnitude), out=peaks)
-                # The driver: frozen until panic_until once the event has fired, else correcting.
-                steering = (t >= self.panic_until) | (self.onset > t + EVENT_SLACK)
+                tally.state(j, car.x)
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
-                correction = np.where(steering, correction - self.gain_step * r / nominal, correction)
-                driver = np.maximum(-DRIVER_LIMIT, np.minimum(DRIVER_LIMIT, 0.0 + correction))
-                # actuator.Actuator.apply, fresh: its authority limit on the last status, then its range
-                handled = np.minimum(limit, np.maximum(-limit, self.act_limiter.step(pending, act_bits)))
+                np.multiply(self.gain_step, r, out=term)
+                term /= nominal
+                if all_steering[j]:
+                    correction -= term
+                else:
+                    correction = np.where(steering[j], correction - term, correction)
+                driver = np.add(correction, 0.0)
+                np.minimum(driver, DRIVER_LIMIT, out=driver)
+                np.maximum(driver, -DRIVER_LIMIT, out=driver)
+                # actuator.Actuator.apply, fresh: its authority limit on the last status (its range
+                # is the position actuator's own, below)
+                handled = self.act_limiter.step(pending, act_bits)
                 if in_flight is not None:  # the status frame the plant reads while it waits
                     act_latched |= in_flight & pl.PLAUS_FAULT
                     act_bits, in_flight = in_flight | act_latched, None
@@ -208,23 +214,19 @@ class _Group:
                 sensors.at(k)
                 yaw = sensors.yaw_rate(r)
                 lat = sensors.lat_filtered(car.lat_accel(driver + self.actuator.position, f_y, tyres))
-                sample = k % red_every == 0
-                if sample:
+                if k % red_every == 0:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
                 elif figures is not None and "steer_redundant" in sensors.tracked:
                     sensors.steer_redundant(driver)  # its error, every step
-                if k % speed_every == 0:
+                if k % speed_every == 0 and (self.grip or k == 0):  # (the intact rows' speed is constant)
                     held["speed"] = sensors.speed(car.v)
                 steer = sensors.steer(driver)
-                if self.law is not None and self.monitor is not None and self.limiter is not None:
+                if controlled:
                     u = self.law.step(steer, yaw, held["speed"])
                     # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
                     bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending)
                     u = self.limiter.step(u, bits)
-                    status = np.where((bits & pl.PLAUS_FAULT) != 0, mr.STATUS_FAULT, self.law.status)
-                    counts["alarms"] += bits != 0
-                    counts["authority"] += self.limiter.flags != 0
-                    ored |= bits
+                    tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
                     if figures is not None:
@@ -233,10 +235,7 @@ class _Group:
                         caused = np.abs(r[self.pairs] - r[self.twins])
                         np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
                 else:
-                    u, status, bits = np.zeros(rows), np.full(rows, mr.STATUS_INACTIVE), zeros
-                np.maximum(peak_u, np.abs(u), out=peak_u)
-                counts["at_limit"] += status == mr.STATUS_SATURATED
-                counts["faults"] += status == mr.STATUS_FAULT
+                    u, bits = np.zeros(rows), tally.no_bits
                 pending = u
                 self.actuator.step(handled)
                 if self.record:
@@ -248,14 +247,57 @@ class _Group:
                     car.advance(delta, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
                 else:
                     car.advance(delta, m_z, f_y, None, None, car.mu)
-        return {"peak_yaw_rate": peaks[1], "peak_side_slip": np.degrees(peaks[0]),
-                "time_at_limit": counts["at_limit"] * ts, "fault_steps": counts["faults"],
-                "false_alarm_steps": counts["alarms"], "plausibility_bits": ored,
-                "authority_steps": counts["authority"], "peak_command": np.degrees(peak_u),
+            tally.reduce(t_block.shape[0])
+        c = tally.counts
+        return {"peak_yaw_rate": tally.peaks[1], "peak_side_slip": np.degrees(tally.peaks[0]),
+                "time_at_limit": c["at_limit"] * ts, "fault_steps": c["faults"],
+                "false_alarm_steps": c["alarms"], "plausibility_bits": tally.ored,
+                "authority_steps": c["authority"], "peak_command": np.degrees(tally.peak_u),
                 **(figures.result() if figures is not None else
-                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows)}),
+                   {"false_alarms": c["alarms"].copy(), "detection_time": np.zeros(rows)}),
                 "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+
+
+class _Tally:
+    """The run's per-row figures from each step's values: a step copies them into its row of a
+    block (``BLOCK`` steps), and ``reduce`` folds the block in with one operation per figure
+    (the counts, the OR of the bits, the peaks), not a dozen small ones every step."""
+
+    def __init__(self, rows: int, controlled: bool) -> None:
+        self.controlled = controlled
+        self.x = np.empty((BLOCK, 2, rows))  # beta, r as each step begins
+        self.u = np.empty((BLOCK, rows))
+        self.status = np.empty((BLOCK, rows), dtype=np.int8)
+        self.bits = np.empty((BLOCK, rows), dtype=np.int64)
+        self.flags = np.empty((BLOCK, rows), dtype=np.int64)
+        self.peaks, self.peak_u = np.zeros((2, rows)), np.zeros(rows)  # |beta|, |r|; |u|
+        self.counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
+        self.ored = np.zeros(rows, dtype=np.int64)
+        self.no_bits = np.zeros(rows, dtype=np.int64)
+
+    def state(self, j: int, x: np.ndarray) -> None:
+        self.x[j] = x[:2]
+
+    def control(self, j: int, u: np.ndarray, status: np.ndarray, bits: np.ndarray, flags: np.ndarray) -> None:
+        """Step j's command sent, the law's status, the monitor's bits, the limiter's flags."""
+        self.u[j], self.status[j], self.bits[j], self.flags[j] = u, status, bits, flags
+
+    def reduce(self, steps: int) -> None:
+        """The block's first ``steps`` rows folded in: the controller node's state FAULT on
+        ``PLAUS_FAULT``, else the law's."""
+        np.maximum(self.peaks, np.abs(self.x[:steps]).max(axis=0), out=self.peaks)
+        if not self.controlled:
+            return
+        np.maximum(self.peak_u, np.abs(self.u[:steps]).max(axis=0), out=self.peak_u)
+        status, bits = self.status[:steps], self.bits[:steps]
+        plaus_fault = (bits & pl.PLAUS_FAULT) != 0
+        c = self.counts
+        c["at_limit"] += np.count_nonzero((status == mr.STATUS_SATURATED) & ~plaus_fault, axis=0)
+        c["faults"] += np.count_nonzero((status == mr.STATUS_FAULT) | plaus_fault, axis=0)
+        c["alarms"] += np.count_nonzero(bits, axis=0)
+        c["authority"] += np.count_nonzero(self.flags[:steps], axis=0)
+        self.ored |= np.bitwise_or.reduce(bits, axis=0)
 
 
 def _scatter(rows: int, at: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -6,6 +6,10 @@ The loads depend on time and on the sample only, never on the car's state, so th
 ahead in blocks (``BLOCK`` steps) with one numpy operation per block instead of per step.  Each
 formula repeats its scalar model's arithmetic; a row of another kind gets exact zeros, which
 leave the sums of ``plants.Car`` unchanged.
+
+Once every row's ramps have ended and its events fired, the loads no longer change: a block
+from then on is the first such step's values broadcast over the block (computed once), which
+the formulas give bitwise (a ramp is exactly 1 from ``start + duration`` on).
 """
 
 from __future__ import annotations
@@ -35,7 +39,35 @@ def ramp(t: np.ndarray, start: np.ndarray, duration: float) -> np.ndarray:
     return np.where(t <= start, 0.0, np.where(t >= start + duration, 1.0, mid))
 
 
-class IntactLoads:
+def ended(t: float, ramps: list[tuple[np.ndarray, float]]) -> bool:
+    """Every ``ramp(t', start, duration)`` of ``ramps`` is 1 for every row at every t' >= t
+    (``ramp``'s own comparisons: past ``start`` and at or past ``start + duration``)."""
+    return all(start.size == 0 or (t > start.max() and (duration <= 0.0 or t >= (start + duration).max()))
+               for start, duration in ramps)
+
+
+class _Settling:
+    """A block of loads from the step from which nothing changes on (``_ramps`` ended,
+    ``_events`` fired): the values of that step, computed once, broadcast over the block."""
+
+    _steady: dict | None = None
+
+    def _ended(self, t: float) -> bool:
+        raise NotImplementedError
+
+    def block(self, t: np.ndarray) -> dict:
+        if not self._ended(float(t[0, 0])):
+            return self._block(t)
+        if self._steady is None:
+            self._steady = self._block(t[:1])
+        steps = t.shape[0]
+        return {k: v if v is None else np.broadcast_to(v, (steps,) + v.shape[1:]) for k, v in self._steady.items()}
+
+    def _block(self, t: np.ndarray) -> dict:
+        raise NotImplementedError
+
+
+class IntactLoads(_Settling):
     """Rows of the yaw-moment step and the side-wind gust: all wheels keep their grip, v its value."""
 
     def __init__(self, s: SampleSet) -> None:
@@ -45,8 +77,14 @@ class IntactLoads:
         self.is_yaw = kind == YAW
         self.wind = np.where(kind == WIND, s["wind_force"], 0.0)
         self.any_wind = bool((kind == WIND).any())
+        g = _WIND
+        self._last_event = float(self.onset.max()) if self.onset.size else 0.0
+        self._ramps = [(self.onset, g.rise_time), (self.onset + g.rise_time + g.hold_time, g.fall_time)]
 
-    def block(self, t: np.ndarray) -> dict[str, np.ndarray]:
+    def _ended(self, t: float) -> bool:
+        return t + EVENT_SLACK >= self._last_event and (not self.any_wind or ended(t, self._ramps))
+
+    def _block(self, t: np.ndarray) -> dict[str, np.ndarray]:
         """m_z (scene's step plus the loads'), f_y (or None) at times t (column)."""
         g = _WIND
         fired = self.onset <= t + EVENT_SLACK
@@ -59,7 +97,7 @@ class IntactLoads:
         return {"m_z": m_scene + (0.0 + g.cp_ahead * f), "f_y": 0.0 + f}
 
 
-class GripLoads:
+class GripLoads(_Settling):
     """Rows of split-mu braking and the tyre blow-out: wheels' grip, a deceleration, a yaw moment."""
 
     def __init__(self, s: SampleSet, car) -> None:
@@ -77,8 +115,12 @@ class GripLoads:
         #: Only split-mu rows: each axle's wheels keep one B (only their mu differs), so they share
         #: the formula's sine (``BatchCar``).
         self.shared = not bool(self.blow.any())
+        self._ramps = [(self.onset, _SPLIT.ramp), (self.onset, _BLOW.deflation_time)]
 
-    def block(self, t: np.ndarray) -> dict[str, object]:
+    def _ended(self, t: float) -> bool:
+        return ended(t, self._ramps)  # (past every onset: SplitMuBraking.at's t >= t_start too)
+
+    def _block(self, t: np.ndarray) -> dict[str, object]:
         sp, bl = _SPLIT, _BLOW
         on = t >= self.onset  # SplitMuBraking.at: nothing before t_start
         demand = 0.5 * self.mass * self.decel * ramp(t, self.onset, sp.ramp)
