@@ -114,6 +114,7 @@ class BatchCar:
         self._arms = np.array([[p.l_f], [p.l_r]])  # the axles' distances from the centre of mass
         self._lr = np.empty((2, n))
         self._mv: np.ndarray | None = None  # m v while the speed is constant
+        self._mass_min = float(mass.min()) if n else 1.0
         self._acc_tmp = np.empty((3, n))
 
     def substeps(self, mu_max: np.ndarray) -> np.ndarray:
@@ -124,6 +125,18 @@ class BatchCar:
         row1 = (c_f + c_r) / (m * v) + np.abs(moment / (m * v * v) - 1.0)
         row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
         return np.maximum(1, np.ceil(self.ts * np.maximum(row1, row2) / MAX_STEP_RATE)).astype(np.int64)
+
+    def one_substep(self, mu_max: np.ndarray) -> bool:
+        """``substeps`` is 1 in every row: its rates bounded above with the largest mu, the
+        smallest mass and speed (and |x - 1| <= x + 1), a margin far beyond rounding."""
+        p, mu, v, m = BASE, float(mu_max.max()), float(self.v.min()), self._mass_min
+        if not (v > 0.0 and 0.0 <= mu < math.inf):  # (False for a NaN)
+            return False
+        c_f, c_r = mu * p.c_f0, mu * p.c_r0
+        moment = abs(c_r * p.l_r - c_f * p.l_f)
+        row1 = (c_f + c_r) / (m * v) + moment / (m * v * v) + 1.0
+        row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
+        return self.ts * max(row1, row2) / MAX_STEP_RATE * (1.0 + 1e-9) <= 1.0
 
     def lat_accel(self, delta: np.ndarray, f_y: np.ndarray | None, tyres: Tyres | None) -> np.ndarray:
         """``NonlinearPlant.outputs``' a_y = sum F_y / m at the current state, with the front-wheel
@@ -171,8 +184,11 @@ class BatchCar:
         np.subtract(lr[0], lr[1], out=k[1])
         k[1] += m_z
         k[1] /= self.inertia
-        if a_x is not None:
-            np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
+        if a_x is not None:  # -a_x, but no braking below STOP_SPEED
+            if v.min() > STOP_SPEED:
+                np.negative(a_x, out=k[2])
+            else:
+                np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
 
     def advance(self, delta: np.ndarray, m_z: np.ndarray, f_y: np.ndarray | None, a_x: np.ndarray | None,
                 tyres: Tyres | None, mu_max: np.ndarray) -> None:
@@ -182,9 +198,11 @@ class BatchCar:
             if self._fixed_substeps is None:
                 self._fixed_substeps = self.substeps(mu_max)
             n = self._fixed_substeps
+        elif self.one_substep(mu_max):
+            n = None
         else:
             n = self.substeps(mu_max)
-        n_max = int(n.max())
+        n_max = 1 if n is None else int(n.max())
         h = self.ts / n if n_max > 1 else self.ts
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
         for j in range(n_max):
