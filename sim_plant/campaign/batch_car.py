@@ -205,6 +205,8 @@ class BatchCar:
         n_max = 1 if n is None else int(n.max())
         h = self.ts / n if n_max > 1 else self.ts
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
+        if braking is not None and not braking.any():
+            braking = None
         for j in range(n_max):
             self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n)
         if a_x is not None:
@@ -228,13 +230,15 @@ class BatchCar:
         acc += tmp
         acc += k[3]
         acc *= h / 6.0
-        acc += x
-        if dims == 3:
-            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
         if active is None:
-            x[:] = acc
-        else:  # rows with fewer sub-steps than the most are done
-            np.copyto(x, acc, where=active)
+            np.add(acc, x, out=x)
+            if braking is not None:
+                np.copyto(x[2], np.maximum(x[2], STOP_SPEED), where=braking)
+            return
+        acc += x
+        if braking is not None:
+            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
+        np.copyto(x, acc, where=active)  # rows with fewer sub-steps than the most are done
 
 
 class BatchPositionActuator:
@@ -291,14 +295,21 @@ class _Butterworth:
         self.b, self.a = b.tolist(), a.tolist()
         self.zi = lfilter_zi(b, a).tolist()
         self._z: tuple[np.ndarray, np.ndarray] | None = None
+        self._tmp: np.ndarray | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         b, a = self.b, self.a
         if self._z is None:  # at rest on the first value (lfilter_zi)
             self._z = (self.zi[0] * x, self.zi[1] * x)
-        z0, z1 = self._z
+        z0, z1 = self._z  # (updated in place: b1 x - a1 y + z1 and b2 x - a2 y)
         y = b[0] * x + z0
-        self._z = (b[1] * x - a[1] * y + z1, b[2] * x - a[2] * y)
+        tmp = self._tmp if self._tmp is not None else np.empty_like(y)
+        np.multiply(b[1], x, out=z0)
+        z0 -= np.multiply(a[1], y, out=tmp)
+        z0 += z1
+        np.multiply(b[2], x, out=z1)
+        z1 -= np.multiply(a[2], y, out=tmp)
+        self._tmp = tmp
         return y
 
 
