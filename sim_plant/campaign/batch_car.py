@@ -115,6 +115,8 @@ class BatchCar:
         self._lr = np.empty((2, n))
         self._mv: np.ndarray | None = None  # m v while the speed is constant
         self._mass_min = float(mass.min()) if n else 1.0
+        # lat_accel's rear axle force for advance's first stage, and the tyres it was of (False: none)
+        self._rear, self._rear_of = np.empty(n), False
         self._acc_tmp = np.empty((3, n))
 
     def substeps(self, mu_max: np.ndarray) -> np.ndarray:
@@ -140,35 +142,53 @@ class BatchCar:
 
     def lat_accel(self, delta: np.ndarray, f_y: np.ndarray | None, tyres: Tyres | None) -> np.ndarray:
         """``NonlinearPlant.outputs``' a_y = sum F_y / m at the current state, with the front-wheel
-        angle ``delta`` and this step's side force and tyres (None: none, the intact axles)."""
+        angle ``delta`` and this step's side force and tyres (None: none, the intact axles).
+
+        The rear axle's force does not depend on the steering angle: ``advance`` with the same
+        tyres, from this state, reuses it for its first stage."""
         f_front, f_rear = self._forces(self.beta, self.r, self.v, delta, tyres or self.intact)
+        np.copyto(self._rear, f_rear)
+        self._rear_of = tyres
         a_y = f_front + f_rear
         if f_y is not None:
             a_y += f_y
         a_y /= self.mass
         return a_y
 
-    def _forces(self, beta, r, v, delta, tyres: Tyres) -> tuple[np.ndarray, np.ndarray]:
-        """(F_yf, F_yr) at the kinematic slip angles (``_slip`` and ``axle_forces``): views of
-        scratch arrays, valid until the next call."""
-        lr = self._lr
+    def _forces(self, beta, r, v, delta, tyres: Tyres, rear: np.ndarray | None = None) -> np.ndarray:
+        """(F_yf, F_yr) as one (2, N) array at the kinematic slip angles (``_slip`` and
+        ``axle_forces``): a view of scratch arrays, valid until the next call.  ``rear``: the
+        rear axle's force, known (only the front is evaluated)."""
         alpha = self._alpha
-        np.multiply(self._arms, r, out=lr)  # l_f r / v and l_r r / v, both axles in one operation
-        lr /= v
+        axles = 2 if rear is None else 1
+        if rear is None:
+            lr = self._lr
+            np.multiply(self._arms, r, out=lr)  # l_f r / v and l_r r / v, both axles in one operation
+            lr /= v
+            np.subtract(lr[1], beta, out=alpha[1, 0])  # alpha_r = -beta + l_r r / v
+            lf = lr[0]
+        else:
+            lf = np.multiply(self.l_f, r, out=self._t1)
+            lf /= v
         np.subtract(delta, beta, out=alpha[0, 0])  # alpha_f = delta - beta - l_f r / v
-        alpha[0, 0] -= lr[0]
-        np.subtract(lr[1], beta, out=alpha[1, 0])  # alpha_r = -beta + l_r r / v
+        alpha[0, 0] -= lf
         nb, nd = tyres.b.shape[1], tyres.d.shape[1]
-        s = shape_sine(alpha, tyres.b, self._s[nb], self._s_tmp[nb])
-        f = np.multiply(tyres.d, s, out=self._f[nd])
+        s = shape_sine(alpha[:axles], tyres.b[:axles], self._s[nb][:axles], self._s_tmp[nb][:axles])
+        f = np.multiply(tyres.d[:axles], s, out=self._f[nd][:axles])
         if nd == 2:
-            return np.add(f[:, 0], f[:, 1], out=self._axle)
-        return f[:, 0]
+            out = self._axle
+            np.add(f[:, 0], f[:, 1], out=out[:axles])
+        else:
+            out = self._f[nd][:, 0]
+        if rear is not None:
+            np.copyto(out[1], rear)
+        return out
 
-    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
+    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray,
+                    rear: np.ndarray | None = None) -> None:
         """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
+        forces = self._forces(beta, r, v, delta, tyres, rear)  # (F_yf, F_yr) as one (2, N) array
         t1, lr = self._t1, self._lr
-        forces = self._forces(beta, r, v, delta, tyres)  # (F_yf, F_yr) as one (2, N) array
         np.add(forces[0], forces[1], out=t1)
         if f_y is not None:
             t1 += f_y
@@ -207,17 +227,21 @@ class BatchCar:
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
         if braking is not None and not braking.any():
             braking = None
+        rear = self._rear if self._rear_of is tyres else None  # (lat_accel's, at this state and tyres)
+        self._rear_of = False
         for j in range(n_max):
-            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n)
+            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n,
+                      rear if j == 0 else None)
         if a_x is not None:
             np.minimum(self.v, MAX_SPEED, out=self.v)
 
-    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active) -> None:
-        """One classical RK4 step of (beta, r[, v]) in place (``NonlinearPlant``'s)."""
+    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active, rear=None) -> None:
+        """One classical RK4 step of (beta, r[, v]) in place (``NonlinearPlant``'s); ``rear``: the
+        rear axle's force at the state, known."""
         dims = 3 if a_x is not None else 2
         x, k, stage = self.x[:dims], self._k[:, :dims], self._stage[:dims]
         half = 0.5 * h
-        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0])
+        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0], rear)
         for i, step in ((1, half), (2, half), (3, h)):
             np.multiply(step, k[i - 1], out=stage)  # the stage's state x + step k_(i-1)
             np.add(x, stage, out=stage)
