@@ -116,8 +116,9 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
         local[rows] = np.arange(rows.size)  # a twin has its row's kind: the same group
         twin = np.where(twin_of[rows] >= 0, local[np.maximum(twin_of[rows], 0)], -1)
         steps = steps_of(duration, ts)
-        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin, steps=steps)
-        res = part.run(steps)
+        # (the group freed as soon as it has run: the next one's arrays reuse its memory, not fresh pages)
+        res = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin,
+                     steps=steps).run(steps)
         for name, values in res.items():
             if name not in out:
                 shape = (len(samples),) if values.ndim == 1 else (values.shape[0], len(samples))
