@@ -12,7 +12,7 @@ scalar model up to the last bits of numpy's and libm's transcendental functions
 * ``BatchPositionActuator``: ``actuator_dynamics.PositionActuator`` of order 1 (no dead time):
   range, exact ZOH lag, rate limit, end stop, and the position's mean over the step;
 * ``BatchSensors``: ``sensors.Sensors``: the yaw rate's and the lateral acceleration's noise
-  (each sample's own seeded streams, drawn as the scalar draws them), bias, 2nd-order
+  (each sample's own seeded streams, drawn as the scalar draws them: ``noise``), bias, 2nd-order
   Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
   steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
   faults on their inputs (``batch_faults``) and the error each makes.
