@@ -107,7 +107,7 @@ class GripLoads(_Settling):
         self.mu_right = np.where(self.split, s["mu_split"], self.mu)
         self.decel = np.where(self.split, s["deceleration"], 0.0)
         wheel = np.where(self.blow, s["blowout_wheel"], -1)
-        self.blown = [wheel == w for w in range(4)]  # fl, fr, rl, rr
+        self.blown_rows = [np.flatnonzero(wheel == w) for w in range(4)]  # fl, fr, rl, rr
         f_zf, f_zr = static_axle_loads(self.mass, _BLOW.l_f, _BLOW.l_r)
         self.wheel_load = np.where(wheel <= 1, 0.5 * f_zf, 0.5 * f_zr)  # TyreBlowout.wheel_load
         self.side = np.where((wheel == 0) | (wheel == 2), 1.0, -1.0)
@@ -116,6 +116,7 @@ class GripLoads(_Settling):
         #: the formula's sine (``BatchCar``).
         self.shared = not bool(self.blow.any())
         self._ramps = [(self.onset, _SPLIT.ramp), (self.onset, _BLOW.deflation_time)]
+        self._kept: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _wheels' arrays by block length
 
     def _ended(self, t: float) -> bool:
         return ended(t, self._ramps)  # (past every onset: SplitMuBraking.at's t >= t_start too)
@@ -149,13 +150,30 @@ class GripLoads(_Settling):
                 d[:, a, 0] = 0.5 * 1.0 * mu_left * f_z
                 d[:, a, 1] = 0.5 * 1.0 * mu_right * f_z
             return {**common, "b": b, "d": d}
-        b, d = (np.empty((steps, 2, 2, self.mu.size)) for _ in range(2))
-        for w in range(4):  # fl, fr, rl, rr: AxleTyre.wheel_force's (B stiffness / peak, 0.5 peak mu F_z)
-            hit = self.blown[w] & blow_on
-            st = np.where(hit, stiffness, 1.0)
-            pk = np.where(hit, peak, 1.0)
-            front = w <= 1
-            b_axle, f_z = (car.b_f, car.f_zf) if front else (car.b_r, car.f_zr)
-            b[:, 1 - front, w % 2] = b_axle * st / pk
-            d[:, 1 - front, w % 2] = 0.5 * pk * (mu_left if w % 2 == 0 else mu_right) * f_z
+        b, d = self._wheels(steps)
+        for a, f_z in enumerate((car.f_zf, car.f_zr)):  # the right wheels (split mu from the onset)
+            np.multiply(0.5 * 1.0 * mu_right, f_z, out=d[:, a, 1])
+        for w, rows in enumerate(self.blown_rows):  # fl, fr, rl, rr: the blown wheel's B and peak
+            if rows.size == 0:
+                continue
+            # AxleTyre.wheel_force's B stiffness / peak and 0.5 peak mu F_z (before the onset,
+            # k = 0 makes both fractions exactly 1: the intact wheel's values)
+            a, side = (0 if w <= 1 else 1), w % 2
+            b_axle, f_z = (car.b_f, car.f_zf) if a == 0 else (car.b_r, car.f_zr)
+            st, pk = stiffness[:, rows], peak[:, rows]
+            b[:, a, side, rows] = b_axle[rows] * st / pk
+            d[:, a, side, rows] = 0.5 * pk * (mu_left if side == 0 else mu_right)[:, rows] * f_z[rows]
         return {**common, "b": b, "d": d}
+
+    def _wheels(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """(steps, axle, wheel, rows) arrays of B and the peak, kept from block to block: every
+        wheel's values but the right wheels' peaks and the blown wheel's are constant, written
+        once (a block's arrays are read only while it runs)."""
+        if steps not in self._kept:
+            car, n = self.car, self.mu.size
+            b, d = np.empty((steps, 2, 2, n)), np.empty((steps, 2, 2, n))
+            for a, (b_axle, f_z) in enumerate(((car.b_f, car.f_zf), (car.b_r, car.f_zr))):
+                b[:, a] = b_axle  # B stiffness / peak with both fractions 1 is B itself
+                d[:, a, 0] = 0.5 * 1.0 * self.mu * f_z
+            self._kept[steps] = (b, d)
+        return self._kept[steps]
