@@ -293,7 +293,8 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
     ``BatchSensors``' lateral acceleration, second steering channel and yaw rate against
     ``sensors.Sensors`` of the same seed, step by step while the cars move."""
-    from sim_plant.campaign.batch_car import BatchCar, BatchSensors
+    from sim_plant.campaign.batch_car import BatchCar
+    from sim_plant.campaign.batch_sensors import BatchSensors
     from sim_plant.car.disturbances import Loads
     from sim_plant.car.plants import Car
     from sim_plant.car.sensors import SensorConfig, Sensors, YawRateSensorConfig

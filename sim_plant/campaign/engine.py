@@ -43,7 +43,8 @@ from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
-from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
+from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
+from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.batch_law import BatchLaw
 from sim_plant.campaign.batch_monitor import BatchAuthority, BatchMonitor
 from sim_plant.campaign.reference import authority_limit, status_cycle
