@@ -47,8 +47,9 @@ def ended(t: float, ramps: list[tuple[np.ndarray, float]]) -> bool:
 
 
 class _Settling:
-    """A block of loads from the step from which nothing changes on (``_ramps`` ended,
-    ``_events`` fired): the values of that step, computed once, broadcast over the block."""
+    """A block of loads from the step on which nothing changes any more (``_ended``: every
+    ramp ended, every event fired) is that step's values, computed once, broadcast over the
+    block (read-only views)."""
 
     _steady: dict | None = None
 
