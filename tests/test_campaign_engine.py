@@ -293,7 +293,8 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
     ``BatchSensors``' lateral acceleration, second steering channel and yaw rate against
     ``sensors.Sensors`` of the same seed, step by step while the cars move."""
-    from sim_plant.campaign.batch_car import BatchCar, BatchSensors
+    from sim_plant.campaign.batch_car import BatchCar
+    from sim_plant.campaign.batch_sensors import BatchSensors
     from sim_plant.car.disturbances import Loads
     from sim_plant.car.plants import Car
     from sim_plant.car.sensors import SensorConfig, Sensors, YawRateSensorConfig
@@ -331,3 +332,23 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
         moved = max(moved, float(np.max(np.abs(a_y))))
         car.advance(delta[k], np.zeros(rows), f_y, None, None, mu)
     assert moved > 1.0  # the cars did turn
+
+
+def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light_grippy_cars() -> None:
+    from sim_plant.campaign.batch_car import BatchCar
+
+    rng = np.random.default_rng(8)
+    claimed = 0
+    for _ in range(200):
+        rows = 5
+        v, mass = rng.uniform(0.3, 45.0, rows), rng.uniform(900.0, 2400.0, rows)
+        mu_max = rng.uniform(0.1, 1.2, rows)
+        car = BatchCar(v, mu_max, mass, 0.002)
+        if car.one_substep(mu_max):
+            claimed += 1
+            assert (car.substeps(mu_max) == 1).all()
+    assert 20 < claimed < 200
+    slow = BatchCar(np.array([0.5, 30.0]), np.ones(2), np.array([1000.0, 1500.0]), 0.002)
+    assert not slow.one_substep(np.ones(2)) and slow.substeps(np.ones(2)).max() > 1
+    fast = BatchCar(np.array([20.0, 30.0]), np.ones(2), np.array([1500.0, 1500.0]), 0.002)
+    assert fast.one_substep(np.ones(2))

@@ -3,7 +3,9 @@
 * ``params``: the sampled parameters, a ``SampleSet``, the scenario one sample is;
 * ``spec``: the campaign file (TOML): distributions, sample count, calibrations, criteria;
 * ``sampling``: Latin hypercube or random designs, every sample a function of its index;
-* ``batch_car``, ``loads``: the realistic car, actuator, sensors and disturbances vectorised;
+* ``batch_car``, ``batch_sensors``, ``loads``: the realistic car and actuator, the sensors, the
+  disturbances vectorised; ``noise``: the sensors' per-row noise streams, seeded and drawn as
+  the scalar sensors draw them;
 * ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
 * ``batch_monitor``: issue 18's plausibility monitor and authority limiter vectorised;
   ``batch_faults``: the sampled sensor faults and their figures;

@@ -10,12 +10,9 @@ scalar model up to the last bits of numpy's and libm's transcendental functions
   magic-formula tyres of ``tyres``, RK4 in ``substeps()`` equal sub-steps, the speed a state
   that braking lowers down to ``STOP_SPEED``; its a_y (``outputs``);
 * ``BatchPositionActuator``: ``actuator_dynamics.PositionActuator`` of order 1 (no dead time):
-  range, exact ZOH lag, rate limit, end stop, and the position's mean over the step;
-* ``BatchSensors``: ``sensors.Sensors``: the yaw rate's and the lateral acceleration's noise
-  (each sample's own seeded streams, drawn as the scalar draws them), bias, 2nd-order
-  Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
-  steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
-  faults on their inputs (``batch_faults``) and the error each makes.
+  range, exact ZOH lag, rate limit, end stop, and the position's mean over the step.
+
+The sensors are in ``batch_sensors``.
 
 A tyre axle is evaluated either as one axle on the road's mu (``tyres.AxleTyre.force``) or as
 its two wheels (``AxleTyre.axle_force``).  With intact wheels on the road's mu the two-wheel
@@ -29,10 +26,7 @@ import math
 
 import numpy as np
 
-from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.car.nonlinear import MAX_STEP_RATE, STOP_SPEED
-from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
-from sim_plant.car.sensors import G as G_SENSOR
 from sim_plant.car.tyres import G, PACEJKA_CURVATURE, PACEJKA_SHAPE
 from sim_plant.car.vehicle import MAX_SPEED, VehicleParams, zoh_discretize
 
@@ -110,6 +104,12 @@ class BatchCar:
         self._k = np.empty((4, 3, n))  # k1..k4 of (beta, r, v)
         self._stage = np.empty((3, n))
         self._t1, self._t2 = np.empty(n), np.empty(n)
+        self._arms = np.array([[p.l_f], [p.l_r]])  # the axles' distances from the centre of mass
+        self._lr = np.empty((2, n))
+        self._mv: np.ndarray | None = None  # m v while the speed is constant
+        self._mass_min = float(mass.min()) if n else 1.0
+        # lat_accel's rear axle force for advance's first stage, and the tyres it was of (False: none)
+        self._rear, self._rear_of = np.empty(n), False
         self._acc_tmp = np.empty((3, n))
 
     def substeps(self, mu_max: np.ndarray) -> np.ndarray:
@@ -121,54 +121,87 @@ class BatchCar:
         row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
         return np.maximum(1, np.ceil(self.ts * np.maximum(row1, row2) / MAX_STEP_RATE)).astype(np.int64)
 
+    def one_substep(self, mu_max: np.ndarray) -> bool:
+        """``substeps`` is 1 in every row: its rates bounded above with the largest mu, the
+        smallest mass and speed (and |x - 1| <= x + 1), a margin far beyond rounding."""
+        p, mu, v, m = BASE, float(mu_max.max()), float(self.v.min()), self._mass_min
+        if not (v > 0.0 and 0.0 <= mu < math.inf):  # (False for a NaN)
+            return False
+        c_f, c_r = mu * p.c_f0, mu * p.c_r0
+        moment = abs(c_r * p.l_r - c_f * p.l_f)
+        row1 = (c_f + c_r) / (m * v) + moment / (m * v * v) + 1.0
+        row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
+        return self.ts * max(row1, row2) / MAX_STEP_RATE * (1.0 + 1e-9) <= 1.0
+
     def lat_accel(self, delta: np.ndarray, f_y: np.ndarray | None, tyres: Tyres | None) -> np.ndarray:
         """``NonlinearPlant.outputs``' a_y = sum F_y / m at the current state, with the front-wheel
-        angle ``delta`` and this step's side force and tyres (None: none, the intact axles)."""
+        angle ``delta`` and this step's side force and tyres (None: none, the intact axles).
+
+        The rear axle's force does not depend on the steering angle: ``advance`` with the same
+        tyres, from this state, reuses it for its first stage."""
         f_front, f_rear = self._forces(self.beta, self.r, self.v, delta, tyres or self.intact)
+        np.copyto(self._rear, f_rear)
+        self._rear_of = tyres
         a_y = f_front + f_rear
         if f_y is not None:
             a_y += f_y
         a_y /= self.mass
         return a_y
 
-    def _forces(self, beta, r, v, delta, tyres: Tyres) -> tuple[np.ndarray, np.ndarray]:
-        """(F_yf, F_yr) at the kinematic slip angles (``_slip`` and ``axle_forces``): views of
-        scratch arrays, valid until the next call."""
-        t1 = self._t1
+    def _forces(self, beta, r, v, delta, tyres: Tyres, rear: np.ndarray | None = None) -> np.ndarray:
+        """(F_yf, F_yr) as one (2, N) array at the kinematic slip angles (``_slip`` and
+        ``axle_forces``): a view of scratch arrays, valid until the next call.  ``rear``: the
+        rear axle's force, known (only the front is evaluated)."""
         alpha = self._alpha
-        np.multiply(self.l_f, r, out=t1)  # alpha_f = delta - beta - l_f r / v
-        t1 /= v
-        np.subtract(delta, beta, out=alpha[0, 0])
-        alpha[0, 0] -= t1
-        np.multiply(self.l_r, r, out=t1)  # alpha_r = -beta + l_r r / v
-        t1 /= v
-        np.subtract(t1, beta, out=alpha[1, 0])
-        nb, nd = tyres.b.shape[1], tyres.d.shape[1]
-        s = shape_sine(alpha, tyres.b, self._s[nb], self._s_tmp[nb])
-        f = np.multiply(tyres.d, s, out=self._f[nd])
-        if nd == 2:
-            f_front, f_rear = np.add(f[:, 0], f[:, 1], out=self._axle)
+        axles = 2 if rear is None else 1
+        if rear is None:
+            lr = self._lr
+            np.multiply(self._arms, r, out=lr)  # l_f r / v and l_r r / v, both axles in one operation
+            lr /= v
+            np.subtract(lr[1], beta, out=alpha[1, 0])  # alpha_r = -beta + l_r r / v
+            lf = lr[0]
         else:
-            f_front, f_rear = f[:, 0]
-        return f_front, f_rear
+            lf = np.multiply(self.l_f, r, out=self._t1)
+            lf /= v
+        np.subtract(delta, beta, out=alpha[0, 0])  # alpha_f = delta - beta - l_f r / v
+        alpha[0, 0] -= lf
+        nb, nd = tyres.b.shape[1], tyres.d.shape[1]
+        s = shape_sine(alpha[:axles], tyres.b[:axles], self._s[nb][:axles], self._s_tmp[nb][:axles])
+        f = np.multiply(tyres.d[:axles], s, out=self._f[nd][:axles])
+        if nd == 2:
+            out = self._axle
+            np.add(f[:, 0], f[:, 1], out=out[:axles])
+        else:
+            out = self._f[nd][:, 0]
+        if rear is not None:
+            np.copyto(out[1], rear)
+        return out
 
-    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray) -> None:
+    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray,
+                    rear: np.ndarray | None = None) -> None:
         """``NonlinearPlant._derivative`` into k (3, N): d beta, d r, d v (the last only with a_x)."""
-        t1, t2 = self._t1, self._t2
-        f_front, f_rear = self._forces(beta, r, v, delta, tyres)
-        np.add(f_front, f_rear, out=t1)
+        forces = self._forces(beta, r, v, delta, tyres, rear)  # (F_yf, F_yr) as one (2, N) array
+        t1, lr = self._t1, self._lr
+        np.add(forces[0], forces[1], out=t1)
         if f_y is not None:
             t1 += f_y
-        np.multiply(self.mass, v, out=t2)
-        np.divide(t1, t2, out=k[0])
+        if v is self.v and a_x is None:  # the speed constant: m v too
+            if self._mv is None:
+                self._mv = self.mass * v
+            mv = self._mv
+        else:
+            mv = np.multiply(self.mass, v, out=self._t2)
+        np.divide(t1, mv, out=k[0])
         k[0] -= r
-        np.multiply(self.l_f, f_front, out=t1)
-        np.multiply(self.l_r, f_rear, out=t2)
-        np.subtract(t1, t2, out=k[1])
+        np.multiply(self._arms, forces, out=lr)  # l_f F_yf and l_r F_yr
+        np.subtract(lr[0], lr[1], out=k[1])
         k[1] += m_z
         k[1] /= self.inertia
-        if a_x is not None:
-            np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
+        if a_x is not None:  # -a_x, but no braking below STOP_SPEED
+            if v.min() > STOP_SPEED:
+                np.negative(a_x, out=k[2])
+            else:
+                np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
 
     def advance(self, delta: np.ndarray, m_z: np.ndarray, f_y: np.ndarray | None, a_x: np.ndarray | None,
                 tyres: Tyres | None, mu_max: np.ndarray) -> None:
@@ -178,22 +211,30 @@ class BatchCar:
             if self._fixed_substeps is None:
                 self._fixed_substeps = self.substeps(mu_max)
             n = self._fixed_substeps
+        elif self.one_substep(mu_max):
+            n = None
         else:
             n = self.substeps(mu_max)
-        n_max = int(n.max())
+        n_max = 1 if n is None else int(n.max())
         h = self.ts / n if n_max > 1 else self.ts
         braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
+        if braking is not None and not braking.any():
+            braking = None
+        rear = self._rear if self._rear_of is tyres else None  # (lat_accel's, at this state and tyres)
+        self._rear_of = False
         for j in range(n_max):
-            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n)
+            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n,
+                      rear if j == 0 else None)
         if a_x is not None:
             np.minimum(self.v, MAX_SPEED, out=self.v)
 
-    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active) -> None:
-        """One classical RK4 step of (beta, r[, v]) in place (``NonlinearPlant``'s)."""
+    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active, rear=None) -> None:
+        """One classical RK4 step of (beta, r[, v]) in place (``NonlinearPlant``'s); ``rear``: the
+        rear axle's force at the state, known."""
         dims = 3 if a_x is not None else 2
         x, k, stage = self.x[:dims], self._k[:, :dims], self._stage[:dims]
         half = 0.5 * h
-        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0])
+        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0], rear)
         for i, step in ((1, half), (2, half), (3, h)):
             np.multiply(step, k[i - 1], out=stage)  # the stage's state x + step k_(i-1)
             np.add(x, stage, out=stage)
@@ -206,13 +247,15 @@ class BatchCar:
         acc += tmp
         acc += k[3]
         acc *= h / 6.0
-        acc += x
-        if dims == 3:
-            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
         if active is None:
-            x[:] = acc
-        else:  # rows with fewer sub-steps than the most are done
-            np.copyto(x, acc, where=active)
+            np.add(acc, x, out=x)
+            if braking is not None:
+                np.copyto(x[2], np.maximum(x[2], STOP_SPEED), where=braking)
+            return
+        acc += x
+        if braking is not None:
+            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
+        np.copyto(x, acc, where=active)  # rows with fewer sub-steps than the most are done
 
 
 class BatchPositionActuator:
@@ -238,6 +281,10 @@ class BatchPositionActuator:
         nxt = self.phi * x + self.gamma * u
         move = nxt - x
         exact = np.abs(move) <= self.max_move
+        if exact.all() and np.abs(nxt).max() <= lim:  # no row rate-limited or at its end stop
+            self.mean = u + (x - u) * self.mean_c
+            self.position = nxt
+            return nxt
         nxt = np.where(exact, nxt, x + np.copysign(self.max_move, move))
         stopped = np.abs(nxt) > lim
         nxt = np.where(stopped, np.copysign(lim, nxt), nxt)
@@ -252,137 +299,3 @@ def zoh_first_order(time_constant: float, ts: float) -> tuple[float, float]:
     """(phi, gamma) of T y' + y = u, exactly as ``PositionActuator`` discretises it."""
     phi, gamma = zoh_discretize(np.array([[-1.0 / time_constant]]), np.array([[1.0 / time_constant]]), ts)
     return float(phi[0, 0]), float(gamma[0, 0])
-
-
-class _Stream:
-    """One sensor channel's noise per row: row i's stream is ``SeedSequence(seed_i).spawn(...)[child]``
-    (``Sensors.reset``'s child for the channel), drawn ``BLOCK`` steps at a time into the row's
-    own contiguous row of a (rows, BLOCK) array, so that ``at(k)`` is the k-th standard normal of
-    every row's stream, as the scalar draws it once per step (a step reads one strided column:
-    cheaper than transposing, and the generator's per-call cost is paid every 1024 steps)."""
-
-    BLOCK = 1024
-
-    def __init__(self, seeds: np.ndarray, child: int) -> None:
-        # Generator(PCG64(...)) is default_rng's stream without its dispatch
-        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s, spawn_key=(child,))))
-                      for s in seeds.tolist()]
-        self._noise = np.empty((seeds.size, self.BLOCK))
-        self._block = -1
-
-    def at(self, k: int) -> np.ndarray:
-        """Every row's k-th draw; k never decreases between calls (any k may be skipped)."""
-        block = k // self.BLOCK
-        while self._block < block:  # a skipped block is drawn too: the streams stay in step
-            for g, row in zip(self._rngs, self._noise):
-                g.standard_normal(out=row)
-            self._block += 1
-        return self._noise[:, k % self.BLOCK]
-
-
-class _Butterworth:
-    """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first input."""
-
-    def __init__(self, hz: float, fs: float) -> None:
-        from scipy.signal import butter, lfilter_zi
-
-        b, a = butter(2, hz, fs=fs)
-        b, a = b / a[0], a / a[0]
-        self.b, self.a = b.tolist(), a.tolist()
-        self.zi = lfilter_zi(b, a).tolist()
-        self._z: tuple[np.ndarray, np.ndarray] | None = None
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        b, a = self.b, self.a
-        if self._z is None:  # at rest on the first value (lfilter_zi)
-            self._z = (self.zi[0] * x, self.zi[1] * x)
-        z0, z1 = self._z
-        y = b[0] * x + z0
-        self._z = (b[1] * x - a[1] * y + z1, b[2] * x - a[2] * y)
-        return y
-
-
-class BatchSensors:
-    """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row),
-    the lateral acceleration and the steering angle's second channel (``config``'s noise, bias,
-    filter, each row on its own streams), the steering angle and the speed (quantised; their
-    noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
-
-    def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
-                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None) -> None:
-        fs = 1.0 / ts
-        self.ts, self.faults = ts, faults
-        #: per row, its faulted channel's reading less the same sensor's without the fault (the
-        #: last step that read it), as ``plausibility_runs.run`` measures the fault's error
-        self.error = np.zeros(seeds.size)
-        tracked = set(faults.rows) if faults is not None else set()
-        self.tracked = tracked
-        self.sigma = np.radians(noise_density) * math.sqrt(fs / 2.0)
-        self.bias = np.radians(bias_deg_s)
-        lat, steer2 = config.lat_accel, config.steer_redundant
-        self.lat_sigma = lat.noise_density * 1e-6 * G_SENSOR * math.sqrt(fs / 2.0)  # Sensors.lat_sigma
-        self.lat_bias = lat.bias_m_s2
-        self.steer2_sigma = math.radians(steer2.noise)
-        self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
-        self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
-        # the same filters on the fault-free input, for the error of a faulted channel
-        self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
-        self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
-        self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
-            dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
-        # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
-        self._yaw_noise, self._lat_noise, self._steer2_noise = (_Stream(seeds, CHANNELS.index(ch)) for ch in
-                                                                ("yaw_rate", "lat_accel", "steer_redundant"))
-        self._k = 0
-
-    def at(self, k: int) -> None:
-        """The step of the next readings (t = k ts for the faults)."""
-        self._k = k
-        self._t = k * self.ts
-
-    def _input(self, channel: str, x: np.ndarray) -> np.ndarray:
-        return x if self.faults is None else self.faults.input(channel, self._t, x)
-
-    def _error(self, channel: str, faulted: np.ndarray, clean: np.ndarray) -> None:
-        assert self.faults is not None
-        self.error = np.where(self.faults.rows[channel], faulted - clean, self.error)
-
-    def yaw_rate(self, r: np.ndarray) -> np.ndarray:
-        noise = self.sigma * self._yaw_noise.at(self._k)
-        q = self.q_yaw
-        y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
-        if self._yaw_clean is not None:
-            self._error("yaw_rate", y, np.round(self._yaw_clean(r + self.bias + noise) / q) * q)
-        return y
-
-    def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
-        """The lateral acceleration's filter output, unquantised: the filter runs every step,
-        and ``quantised_lat`` makes the value of a step whose reading is sent."""
-        noise = self.lat_sigma * self._lat_noise.at(self._k)
-        y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
-        if self._lat_clean is not None:
-            clean = self._lat_clean(a_y + self.lat_bias + noise)
-            self._error("lat_accel", self.quantised_lat(y), self.quantised_lat(clean))
-        return y
-
-    def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
-        return np.round(filtered / self.q_lat) * self.q_lat
-
-    def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
-        """The second steering channel (no filter: only a step whose reading is sent needs it,
-        and, for its error, every step of a row that faults it)."""
-        noise = self.steer2_sigma * self._steer2_noise.at(self._k)
-        q = self.q_steer2
-        y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
-        if "steer_redundant" in self.tracked:
-            self._error("steer_redundant", y, np.round((delta + 0.0 + noise) / q) * q)
-        return y
-
-    def steer(self, delta: np.ndarray) -> np.ndarray:
-        y = np.round(self._input("steer", delta) / self.q_steer) * self.q_steer
-        if "steer" in self.tracked:
-            self._error("steer", y, np.round(delta / self.q_steer) * self.q_steer)
-        return y
-
-    def speed(self, v: np.ndarray) -> np.ndarray:
-        return np.round(v / self.q_speed) * self.q_speed

@@ -23,10 +23,12 @@ scalar oracle ``reference.run`` has them:
 6. the actuator's position follows the handled command, and the car advances with the
    driver's angle plus the position's mean over the step.
 
-The rows are split into groups that run apart, so that none pays for another's arithmetic: the
-yaw-moment step and the side wind (all wheels intact, speed constant); split-mu braking (speed
-integrated, each axle's two wheels on their own mu with one shared tyre curve); the blow-out
-(speed integrated, every wheel evaluated on its own).
+The rows are split into two groups that run apart, so that neither pays for the other's
+arithmetic: the yaw-moment step and the side wind (all wheels intact, speed constant); split-mu
+braking and the blow-out (speed integrated, every wheel evaluated on its own: a split-mu row's
+wheels keep their axle's B, which gives its values bitwise).  Split-mu rows alone could share
+each axle's tyre curve, but a third group's numpy calls cost more than their wheels' curves
+(each call's fixed cost is about that of a thousand rows' arithmetic).
 
 ``simulate`` returns, per row, the figures the criteria judge (``METRICS``).
 """
@@ -41,7 +43,8 @@ from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
-from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, BatchSensors, Tyres
+from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
+from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.batch_law import BatchLaw
 from sim_plant.campaign.batch_monitor import BatchAuthority, BatchMonitor
 from sim_plant.campaign.reference import authority_limit, status_cycle
@@ -108,13 +111,15 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
     grip = (kind == SPLIT) | (kind == BLOWOUT)
     out: dict[str, np.ndarray] = {}
     local = np.full(len(samples), -1)
-    for rows in (np.flatnonzero(~grip), np.flatnonzero(kind == SPLIT), np.flatnonzero(kind == BLOWOUT)):
+    for rows in (np.flatnonzero(~grip), np.flatnonzero(grip)):
         if rows.size == 0:
             continue
         local[rows] = np.arange(rows.size)  # a twin has its row's kind: the same group
         twin = np.where(twin_of[rows] >= 0, local[np.maximum(twin_of[rows], 0)], -1)
-        part = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin)
-        res = part.run(steps_of(duration, ts))
+        steps = steps_of(duration, ts)
+        # (the group freed as soon as it has run: the next one's arrays reuse its memory, not fresh pages)
+        res = _Group(samples.take(rows), config, ts, grip=bool(grip[rows[0]]), record=record, twin=twin,
+                     steps=steps).run(steps)
         for name, values in res.items():
             if name not in out:
                 shape = (len(samples),) if values.ndim == 1 else (values.shape[0], len(samples))
@@ -127,7 +132,7 @@ class _Group:
     """Rows that share their tyre and speed treatment, run together."""
 
     def __init__(self, s: SampleSet, config: mr.ControllerConfig | None, ts: float, grip: bool,
-                 record: bool, twin: np.ndarray) -> None:
+                 record: bool, twin: np.ndarray, steps: int | None = None) -> None:
         self.ts, self.grip, self.record = ts, grip, record
         self.pairs = np.flatnonzero(twin >= 0)  # the rows with a fault-free twin, and their twins
         self.twins = twin[self.pairs]
@@ -140,7 +145,7 @@ class _Group:
         # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
         self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
         self.faults = BatchFaults(s) if bool((s["fault_sensor"] != 0).any()) else None
-        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults)
+        self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults, steps=steps)
         self.every = cycles(ts)
         if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
             raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
@@ -169,16 +174,13 @@ class _Group:
         ts, car, sensors, rows = self.ts, self.car, self.sensors, self.mass.size
         correction = np.zeros(rows)
         pending = np.zeros(rows)  # the command sent the period before (one step of loop delay)
-        limit = math.radians(ACTUATOR_LIMIT_DEG)
-        peaks, magnitude = np.zeros((2, rows)), np.empty((2, rows))  # |beta|, |r|: car.x's first two rows
-        peak_u = np.zeros(rows)
-        counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
-        ored = np.zeros(rows, dtype=np.int64)
         act_bits = np.full(rows, pl.PLAUS_DEGRADED, dtype=np.int64)  # no status frame yet: unchecked
         act_latched = np.zeros(rows, dtype=np.int64)
         in_flight: np.ndarray | None = None  # a status frame's bits, read by the plant next step
         held: dict[str, np.ndarray] = {}
-        zeros = np.zeros(rows, dtype=np.int64)
+        controlled = self.law is not None and self.monitor is not None and self.limiter is not None
+        tally = _Tally(rows, controlled)
+        term = np.empty(rows)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
         figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
@@ -186,18 +188,27 @@ class _Group:
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
+            # The driver: frozen until panic_until once the event has fired, else correcting.
+            steering = (t_block >= self.panic_until) | (self.onset > t_block + EVENT_SLACK)
+            all_steering = steering.all(axis=1).tolist()
             for j in range(t_block.shape[0]):
                 k = k0 + j
                 t = k * ts
                 r = car.r  # (a view: read before the car advances)
-                np.maximum(peaks, np.abs(car.x[:2], out=magnitude), out=peaks)
-                # The driver: frozen until panic_until once the event has fired, else correcting.
-                steering = (t >= self.panic_until) | (self.onset > t + EVENT_SLACK)
+                tally.state(j, car.x)
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
-                correction = np.where(steering, correction - self.gain_step * r / nominal, correction)
-                driver = np.maximum(-DRIVER_LIMIT, np.minimum(DRIVER_LIMIT, 0.0 + correction))
-                # actuator.Actuator.apply, fresh: its authority limit on the last status, then its range
-                handled = np.minimum(limit, np.maximum(-limit, self.act_limiter.step(pending, act_bits)))
+                np.multiply(self.gain_step, r, out=term)
+                term /= nominal
+                if all_steering[j]:
+                    correction -= term
+                else:
+                    correction = np.where(steering[j], correction - term, correction)
+                driver = np.add(correction, 0.0)
+                np.minimum(driver, DRIVER_LIMIT, out=driver)
+                np.maximum(driver, -DRIVER_LIMIT, out=driver)
+                # actuator.Actuator.apply, fresh: its authority limit on the last status (its range
+                # is the position actuator's own, below)
+                handled = self.act_limiter.step(pending, act_bits)
                 if in_flight is not None:  # the status frame the plant reads while it waits
                     act_latched |= in_flight & pl.PLAUS_FAULT
                     act_bits, in_flight = in_flight | act_latched, None
@@ -207,23 +218,19 @@ class _Group:
                 sensors.at(k)
                 yaw = sensors.yaw_rate(r)
                 lat = sensors.lat_filtered(car.lat_accel(driver + self.actuator.position, f_y, tyres))
-                sample = k % red_every == 0
-                if sample:
+                if k % red_every == 0:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
                 elif figures is not None and "steer_redundant" in sensors.tracked:
                     sensors.steer_redundant(driver)  # its error, every step
-                if k % speed_every == 0:
+                if k % speed_every == 0 and (self.grip or k == 0):  # (the intact rows' speed is constant)
                     held["speed"] = sensors.speed(car.v)
                 steer = sensors.steer(driver)
-                if self.law is not None and self.monitor is not None and self.limiter is not None:
+                if controlled:
                     u = self.law.step(steer, yaw, held["speed"])
                     # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
                     bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending)
                     u = self.limiter.step(u, bits)
-                    status = np.where((bits & pl.PLAUS_FAULT) != 0, mr.STATUS_FAULT, self.law.status)
-                    counts["alarms"] += bits != 0
-                    counts["authority"] += self.limiter.flags != 0
-                    ored |= bits
+                    tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
                     if figures is not None:
@@ -232,10 +239,7 @@ class _Group:
                         caused = np.abs(r[self.pairs] - r[self.twins])
                         np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
                 else:
-                    u, status, bits = np.zeros(rows), np.full(rows, mr.STATUS_INACTIVE), zeros
-                np.maximum(peak_u, np.abs(u), out=peak_u)
-                counts["at_limit"] += status == mr.STATUS_SATURATED
-                counts["faults"] += status == mr.STATUS_FAULT
+                    u, bits = np.zeros(rows), tally.no_bits
                 pending = u
                 self.actuator.step(handled)
                 if self.record:
@@ -247,14 +251,57 @@ class _Group:
                     car.advance(delta, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
                 else:
                     car.advance(delta, m_z, f_y, None, None, car.mu)
-        return {"peak_yaw_rate": peaks[1], "peak_side_slip": np.degrees(peaks[0]),
-                "time_at_limit": counts["at_limit"] * ts, "fault_steps": counts["faults"],
-                "false_alarm_steps": counts["alarms"], "plausibility_bits": ored,
-                "authority_steps": counts["authority"], "peak_command": np.degrees(peak_u),
+            tally.reduce(t_block.shape[0])
+        c = tally.counts
+        return {"peak_yaw_rate": tally.peaks[1], "peak_side_slip": np.degrees(tally.peaks[0]),
+                "time_at_limit": c["at_limit"] * ts, "fault_steps": c["faults"],
+                "false_alarm_steps": c["alarms"], "plausibility_bits": tally.ored,
+                "authority_steps": c["authority"], "peak_command": np.degrees(tally.peak_u),
                 **(figures.result() if figures is not None else
-                   {"false_alarms": counts["alarms"].copy(), "detection_time": np.zeros(rows)}),
+                   {"false_alarms": c["alarms"].copy(), "detection_time": np.zeros(rows)}),
                 "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+
+
+class _Tally:
+    """The run's per-row figures from each step's values: a step copies them into its row of a
+    block (``BLOCK`` steps), and ``reduce`` folds the block in with one operation per figure
+    (the counts, the OR of the bits, the peaks), not a dozen small ones every step."""
+
+    def __init__(self, rows: int, controlled: bool) -> None:
+        self.controlled = controlled
+        self.x = np.empty((BLOCK, 2, rows))  # beta, r as each step begins
+        self.u = np.empty((BLOCK, rows))
+        self.status = np.empty((BLOCK, rows), dtype=np.int8)
+        self.bits = np.empty((BLOCK, rows), dtype=np.int64)
+        self.flags = np.empty((BLOCK, rows), dtype=np.int64)
+        self.peaks, self.peak_u = np.zeros((2, rows)), np.zeros(rows)  # |beta|, |r|; |u|
+        self.counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
+        self.ored = np.zeros(rows, dtype=np.int64)
+        self.no_bits = np.zeros(rows, dtype=np.int64)
+
+    def state(self, j: int, x: np.ndarray) -> None:
+        self.x[j] = x[:2]
+
+    def control(self, j: int, u: np.ndarray, status: np.ndarray, bits: np.ndarray, flags: np.ndarray) -> None:
+        """Step j's command sent, the law's status, the monitor's bits, the limiter's flags."""
+        self.u[j], self.status[j], self.bits[j], self.flags[j] = u, status, bits, flags
+
+    def reduce(self, steps: int) -> None:
+        """The block's first ``steps`` rows folded in: the controller node's state FAULT on
+        ``PLAUS_FAULT``, else the law's."""
+        np.maximum(self.peaks, np.abs(self.x[:steps]).max(axis=0), out=self.peaks)
+        if not self.controlled:
+            return
+        np.maximum(self.peak_u, np.abs(self.u[:steps]).max(axis=0), out=self.peak_u)
+        status, bits = self.status[:steps], self.bits[:steps]
+        plaus_fault = (bits & pl.PLAUS_FAULT) != 0
+        c = self.counts
+        c["at_limit"] += np.count_nonzero((status == mr.STATUS_SATURATED) & ~plaus_fault, axis=0)
+        c["faults"] += np.count_nonzero((status == mr.STATUS_FAULT) | plaus_fault, axis=0)
+        c["alarms"] += np.count_nonzero(bits, axis=0)
+        c["authority"] += np.count_nonzero(self.flags[:steps], axis=0)
+        self.ored |= np.bitwise_or.reduce(bits, axis=0)
 
 
 def _scatter(rows: int, at: np.ndarray, values: np.ndarray) -> np.ndarray:

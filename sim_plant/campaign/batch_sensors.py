@@ -1,0 +1,140 @@
+"""The realistic car's sensors, vectorised over a batch of samples (the engine's ``batch_car``
+holds the car and the actuator).
+
+``BatchSensors`` is ``sim_plant.car.sensors.Sensors`` for a batch of samples, repeating its
+arithmetic statement for statement: the yaw rate's and the lateral acceleration's noise (each
+sample's own seeded streams, drawn as the scalar draws them: ``noise``), bias, 2nd-order
+Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
+steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
+faults on their inputs (``batch_faults``) and the error each makes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim_plant.campaign.batch_faults import BatchFaults
+from sim_plant.campaign.noise import NoiseStream
+from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
+from sim_plant.car.sensors import G as G_SENSOR
+
+
+class _Butterworth:
+    """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first input."""
+
+    def __init__(self, hz: float, fs: float) -> None:
+        from scipy.signal import butter, lfilter_zi
+
+        b, a = butter(2, hz, fs=fs)
+        b, a = b / a[0], a / a[0]
+        self.b, self.a = b.tolist(), a.tolist()
+        self.zi = lfilter_zi(b, a).tolist()
+        self._z: tuple[np.ndarray, np.ndarray] | None = None
+        self._tmp: np.ndarray | None = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        b, a = self.b, self.a
+        if self._z is None:  # at rest on the first value (lfilter_zi)
+            self._z = (self.zi[0] * x, self.zi[1] * x)
+        z0, z1 = self._z  # (updated in place: b1 x - a1 y + z1 and b2 x - a2 y)
+        y = b[0] * x + z0
+        tmp = self._tmp if self._tmp is not None else np.empty_like(y)
+        np.multiply(b[1], x, out=z0)
+        z0 -= np.multiply(a[1], y, out=tmp)
+        z0 += z1
+        np.multiply(b[2], x, out=z1)
+        z1 -= np.multiply(a[2], y, out=tmp)
+        self._tmp = tmp
+        return y
+
+
+class BatchSensors:
+    """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row),
+    the lateral acceleration and the steering angle's second channel (``config``'s noise, bias,
+    filter, each row on its own streams), the steering angle and the speed (quantised; their
+    noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
+
+    def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
+                 config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None,
+                 steps: int | None = None) -> None:
+        fs = 1.0 / ts
+        self.ts, self.faults = ts, faults
+        #: per row, its faulted channel's reading less the same sensor's without the fault (the
+        #: last step that read it), as ``plausibility_runs.run`` measures the fault's error
+        self.error = np.zeros(seeds.size)
+        tracked = set(faults.rows) if faults is not None else set()
+        self.tracked = tracked
+        self.sigma = np.radians(noise_density) * math.sqrt(fs / 2.0)
+        self.bias = np.radians(bias_deg_s)
+        lat, steer2 = config.lat_accel, config.steer_redundant
+        self.lat_sigma = lat.noise_density * 1e-6 * G_SENSOR * math.sqrt(fs / 2.0)  # Sensors.lat_sigma
+        self.lat_bias = lat.bias_m_s2
+        self.steer2_sigma = math.radians(steer2.noise)
+        self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
+        self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
+        # the same filters on the fault-free input, for the error of a faulted channel
+        self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
+        self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
+        self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
+            dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
+        # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
+        # the second steering channel is read every 25 steps, unless a row faults it
+        self._yaw_noise, self._lat_noise, self._steer2_noise = (
+            NoiseStream(seeds, CHANNELS.index(ch), scale, steps, dense) for ch, scale, dense in (
+                ("yaw_rate", self.sigma, True), ("lat_accel", self.lat_sigma, True),
+                ("steer_redundant", self.steer2_sigma, "steer_redundant" in tracked)))
+        self._k = 0
+
+    def at(self, k: int) -> None:
+        """The step of the next readings (t = k ts for the faults)."""
+        self._k = k
+        self._t = k * self.ts
+
+    def _input(self, channel: str, x: np.ndarray) -> np.ndarray:
+        return x if self.faults is None else self.faults.input(channel, self._t, x)
+
+    def _error(self, channel: str, faulted: np.ndarray, clean: np.ndarray) -> None:
+        assert self.faults is not None
+        self.error = np.where(self.faults.rows[channel], faulted - clean, self.error)
+
+    def yaw_rate(self, r: np.ndarray) -> np.ndarray:
+        noise = self._yaw_noise.at(self._k)  # sigma times the draw
+        q = self.q_yaw
+        y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
+        if self._yaw_clean is not None:
+            self._error("yaw_rate", y, np.round(self._yaw_clean(r + self.bias + noise) / q) * q)
+        return y
+
+    def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
+        """The lateral acceleration's filter output, unquantised: the filter runs every step,
+        and ``quantised_lat`` makes the value of a step whose reading is sent."""
+        noise = self._lat_noise.at(self._k)
+        y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
+        if self._lat_clean is not None:
+            clean = self._lat_clean(a_y + self.lat_bias + noise)
+            self._error("lat_accel", self.quantised_lat(y), self.quantised_lat(clean))
+        return y
+
+    def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
+        return np.round(filtered / self.q_lat) * self.q_lat
+
+    def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
+        """The second steering channel (no filter: only a step whose reading is sent needs it,
+        and, for its error, every step of a row that faults it)."""
+        noise = self._steer2_noise.at(self._k)
+        q = self.q_steer2
+        y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
+        if "steer_redundant" in self.tracked:
+            self._error("steer_redundant", y, np.round((delta + 0.0 + noise) / q) * q)
+        return y
+
+    def steer(self, delta: np.ndarray) -> np.ndarray:
+        y = np.round(self._input("steer", delta) / self.q_steer) * self.q_steer
+        if "steer" in self.tracked:
+            self._error("steer", y, np.round(delta / self.q_steer) * self.q_steer)
+        return y
+
+    def speed(self, v: np.ndarray) -> np.ndarray:
+        return np.round(v / self.q_speed) * self.q_speed
