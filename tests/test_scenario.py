@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from sim_plant.car import scenario as scn
+from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.vehicle import VehicleParams, nominal_yaw_gain
 
 
@@ -77,7 +78,7 @@ def test_overrides_replace_operating_point_and_yaw_moments() -> None:
 
 
 def test_steer_norm_is_the_figure8_normalisation() -> None:
-    st = scn.ScenarioState(scn.load("paper-fig8"))
+    st = ScenarioState(scn.load("paper-fig8"))
     st.advance_to(1.0)
     assert st.steer_intent == pytest.approx(1.0 / nominal_yaw_gain(20.0))
 
@@ -85,7 +86,7 @@ def test_steer_norm_is_the_figure8_normalisation() -> None:
 def test_driver_holds_during_panic_then_steers_back() -> None:
     sc = scn.Scenario("t", 5.0, v=20.0, events=(scn.Event(0.5, "yaw_moment", 3000.0),),
                       driver=scn.DriverModel("model", 1.0, 0.5))
-    st = scn.ScenarioState(sc)
+    st = ScenarioState(sc)
     dt = 0.01
     angles = []
     for k in range(400):
@@ -96,14 +97,14 @@ def test_driver_holds_during_panic_then_steers_back() -> None:
     assert a[0.4] == 0.0 and a[1.4] == 0.0  # panic reaction time: the wheel is held
     assert a[1.6] < 0.0  # then the driver counter-steers
     assert a[3.9] < a[1.6]  # and keeps integrating while the error persists
-    hold = scn.ScenarioState(scn.load("paper-fig9"))
+    hold = ScenarioState(scn.load("paper-fig9"))
     hold.advance_to(2.0)
     assert hold.driver_angle(2.0, 0.1, dt) == 0.0  # "hold" never steers
 
 
 def test_mu_and_speed_events_change_the_operating_point() -> None:
     sc = scn.Scenario("t", 3.0, events=(scn.Event(1.0, "mu", 0.3), scn.Event(2.0, "speed", 30.0)))
-    st = scn.ScenarioState(sc)
+    st = ScenarioState(sc)
     assert not st.advance_to(0.5)
     assert st.advance_to(1.0) and st.params() == VehicleParams(v=20.0, mu=0.3)
     assert st.advance_to(2.5) and st.params().v == 30.0
@@ -154,7 +155,7 @@ blowout = { wheel = "rr" }
                                dist.SideWindGust(t_start=1.0), dist.TyreBlowout(t_start=2.0, wheel="rr", mass=1500.0))
     assert sc.first_disturbance_time == 0.5
     # The loads at t are those of the disturbances themselves, added.
-    state = scn.ScenarioState(sc)
+    state = ScenarioState(sc)
     assert state.loads(0.4) == dist.NO_LOADS
     assert state.loads(1.2) == sc.disturbances[0].at(1.2) + sc.disturbances[1].at(1.2)
     # A disturbance shocks the driver like a mu change: the panic reaction time starts.

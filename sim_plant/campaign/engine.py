@@ -8,7 +8,7 @@ scalar oracle ``reference.run`` has them:
 
 1. the scenario's event at its onset (the M_z step, the driver's panic window) and the
    disturbances' loads at t (``loads``);
-2. the driver model (``scenario.ScenarioState.driver_angle``): frozen during the panic time,
+2. the driver model (``scenario_play.ScenarioState.driver_angle``): frozen during the panic time,
    then a slow correction of the yaw rate;
 3. the actuator's command handling (``actuator.Actuator``) takes the command sent the step
    before through its own authority limit, on the plausibility bits of the last status frame

@@ -5,7 +5,7 @@ node's arithmetic, built from the product's scalar classes only.
 loop delay) and the controller node's cycle (``firmware_py.controller.node.ControllerNode.control``)
 with the bus taken out:
 
-* the plant: ``scenario.ScenarioState`` (events, loads, the driver model), ``plants.Car`` (the
+* the plant: ``scenario_play.ScenarioState`` (events, loads, the driver model), ``plants.Car`` (the
   nonlinear car; its a_y from ``Car.outputs`` at the actuator's position as the step begins),
   ``actuator.Actuator`` (the command handling and its authority limit) and
   ``actuator_dynamics.PositionActuator``, ``sensors.Sensors`` (every channel read every step,
@@ -37,6 +37,7 @@ from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE
 from sim_plant.car import scenario as scn
+from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator import Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
@@ -76,7 +77,7 @@ def authority_limit(config: mr.ControllerConfig) -> float:
 # few lines that read best in the order the bus runs them.
 def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002) -> ReferenceRun:
     """Play ``sc`` with the controller ``config`` (None: none, and no monitor) in the loop."""
-    scene = scn.ScenarioState(sc)
+    scene = ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
     position = PositionActuator(sc.actuator, ts)
     sensors = Sensors(sc.sensor_config, ts)

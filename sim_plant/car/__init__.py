@@ -10,6 +10,7 @@
   redundant ones: lateral acceleration, the second steering channel); ``sensor_faults``: wrong
   values in well-formed frames (stuck, bias, scale, drift, noise, frozen).
 * ``scenario``: operating point, events, driver model; built-ins and TOML files;
+  ``scenario_play`` plays one step by step (``ScenarioState``);
   ``model_files``: reading the actuator and sensor TOML files.
 * ``options``: the command-line options that choose the car.
 

@@ -62,6 +62,7 @@ from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG
                                VEHICLE_SENSORS)
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
+from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
 from sim_plant.car.options import add_car_args, add_sensor_fault_arg
@@ -109,7 +110,7 @@ class PlantNode:
         self.bus, self.sc, self.mode, self.ts = bus, sc, mode, ts
         self.delay_steps = delay_steps
         self.contract = c = contract or mrsteer_dbc.load()
-        self.scene = scn.ScenarioState(sc)
+        self.scene = ScenarioState(sc)
         self.plant = Car(sc.plant, self.scene.params(), ts)
         # The ideal actuator is the command handling alone (today's plant, exactly).
         self.position = None if sc.actuator == ActuatorModelConfig.ideal() else PositionActuator(sc.actuator, ts)

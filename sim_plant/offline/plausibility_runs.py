@@ -28,6 +28,7 @@ from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 import mrsteer_dbc
 from sim_plant.car import scenario as scn
+from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, Sensors
@@ -103,7 +104,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
         guard: bool = True) -> MonitorRun:
     every = cycles(ts)
-    scene = scn.ScenarioState(sc)
+    scene = ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
     actuator = PositionActuator(sc.actuator, ts)
     sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
