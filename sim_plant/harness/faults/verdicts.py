@@ -18,6 +18,7 @@ from pathlib import Path
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from mrsteer_dbc import secoc
+from mrsteer_dbc.e2e import COUNTER_MODULO
 from mrsteer_dbc import names
 from sim_plant.harness.faults.evidence import Evidence, gather, stalled, stall_gaps
 from sim_plant.harness.faults.rows import Row
@@ -123,10 +124,17 @@ def check_alive(e: Evidence, v: Verdict) -> None:
 def check_command_rate(e: Evidence, v: Verdict) -> None:
     # The controller's own commands respect its rate limit, faults and restarts included
     # (bus resolution 1e-6 rad); across a kill the next instance starts again from zero.
+    # Per controller cycle, counted by the commands' alive counter: a command the log's decode
+    # does not accept (around a SecOC epoch change) leaves two cycles between its neighbours.
     killed_at, restarted = e.killed_at, e.restarted
+    c = mrsteer_dbc.load()
+    cid = c.frame_id(names.MSG_CMD)
+    counter_at = {t: d.counter for t, f, data in e.frames if f == cid and (d := c.decode(f, data)) is not None}
     for (ta, a), (tb, b) in zip(e.angles, e.angles[1:]):
         crash = killed_at is not None and ta <= killed_at and (restarted is None or tb >= restarted)
-        if not crash and abs(b - a) > RATE_LIMIT * e.setup.ts + 2e-6:
+        ca, cb = counter_at.get(ta), counter_at.get(tb)
+        cycles = max(1, (cb - ca) % COUNTER_MODULO) if ca is not None and cb is not None else 1
+        if not crash and abs(b - a) > cycles * RATE_LIMIT * e.setup.ts + 2e-6:
             v.fails.append(f"command stepped {math.degrees(abs(b - a)):.4f} deg in one cycle")
             break
 
