@@ -13,10 +13,12 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.plausibility import PlausibilityConfig
 from mrsteer_dbc import names
+from mrsteer_dbc.e2e import COUNTER_MODULO
 from sim_plant.car import scenario as scn
 from sim_plant.harness import faults as F
 from sim_plant.harness.faults.evidence import Evidence, Status, Trace
-from sim_plant.harness.faults.settings import CURVE, scenario_spec
+from sim_plant.harness.faults.settings import CURVE, RATE_LIMIT, scenario_spec
+from sim_plant.harness.faults.verdicts import Verdict, check_command_rate
 from sim_plant.harness.faults.verdicts_plausibility import (check_plausibility, check_quiet_monitor, error_series,
                                                             exceeded_at)
 from sim_plant.nodes.fault_bridge import SENSOR_KINDS
@@ -86,6 +88,7 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
     first_active = cmds[0][0]
     faults_after = [t for t, s in cmds if s == mr.STATUS_FAULT and t > first_active]
     return Evidence(row, F.Setup(), 0, None, None, trace, bridge, {}, {}, {}, vehicle, ctl, cmds, angles,
+                    [k % COUNTER_MODULO for k in range(len(angles))],
                     [(s.t, s.cause) for s in statuses], faults_after, statuses, end)
 
 
@@ -239,3 +242,19 @@ def test_a_fault_that_comes_and_goes_is_not_latched_unless_a_stall_explains_it()
     # the same after 30 ms without sensor frames: an input timed out, the right answer
     fails, _, _ = _judge(evidence(_row(), episode=(1.1, 1.11), gap=True))
     assert fails == [], fails
+
+
+def test_command_rate_verdict_counts_cycles_by_the_commands_alive_counter() -> None:
+    base = evidence(_row())
+    step = 1.5 * RATE_LIMIT * TS  # more than one cycle's limit, less than two cycles'
+    angles = [(0.0, 0.0), (TS, step)]
+
+    def judged(counters: list[int]) -> list[str]:
+        v = Verdict()
+        check_command_rate(replace(base, angles=angles, cmd_counters=counters), v)
+        return v.fails
+
+    assert judged([3, 4])[0].startswith("command stepped")  # one cycle apart: over the limit
+    assert judged([3, 5]) == []  # a command between them the log did not accept: two cycles
+    assert judged([14, 1]) == []  # two cycles across the counter's wrap (0..14)
+    assert judged([14, 0])  # one cycle across it

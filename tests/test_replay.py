@@ -231,7 +231,7 @@ def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # The wheel is held in paper-fig9, so a driver-angle frame a late cycle may or may not have
     # drained cannot change a command (docs/can-runtime.md would not say which it was).
-    for attempt in range(3):
+    for _ in range(3):
         proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "hil", "run", "--scenario", "paper-fig9", "--mode",
                                "realtime", "--duration", "0.7", "--out", str(tmp_path)], capture_output=True,
                                text=True, cwd=ROOT, timeout=300, env=os.environ.copy())

@@ -89,6 +89,7 @@ class Evidence:
     frames: list[Frame]  # the controller's bus
     cmds: list[tuple[float, float]]  # (t, AuxSteerCmd_State) of every accepted command to the run's end
     angles: list[tuple[float, float]]  # (t, AuxSteerCmd_Angle) of the same
+    cmd_counters: list[int]  # the alive counter of each of the same (the controller's cycle)
     causes: list[tuple[float, int]]  # (t, CtrlStatus_Cause)
     faults_after: list[float]  # times of FAULT commands after the controller first became active
     statuses: list[Status]  # every decoded MRS_CtrlStatus to the run's end
@@ -117,6 +118,7 @@ def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, 
         json.loads(ctl_json.read_text()) if ctl_json.exists() else None,
         {side: json.loads((work / f"logger-{side}.json").read_text())["frames"] for side in ("vehicle", "controller")},
         vehicle_frames, frames, cmds, [(t, d.signals["AuxSteerCmd_Angle"]) for t, d in accepted],
+        [d.counter for _, d in accepted],
         [(t, int(d.signals["CtrlStatus_Cause"])) for t, d in statuses if d is not None],
         [t for t, s in cmds if s == mr.STATUS_FAULT and first_active is not None and t > first_active],
         status_list, cutoff)

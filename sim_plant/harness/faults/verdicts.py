@@ -127,13 +127,10 @@ def check_command_rate(e: Evidence, v: Verdict) -> None:
     # Per controller cycle, counted by the commands' alive counter: a command the log's decode
     # does not accept (around a SecOC epoch change) leaves two cycles between its neighbours.
     killed_at, restarted = e.killed_at, e.restarted
-    c = mrsteer_dbc.load()
-    cid = c.frame_id(names.MSG_CMD)
-    counter_at = {t: d.counter for t, f, data in e.frames if f == cid and (d := c.decode(f, data)) is not None}
-    for (ta, a), (tb, b) in zip(e.angles, e.angles[1:]):
+    steps = zip(e.angles, e.angles[1:], e.cmd_counters, e.cmd_counters[1:])
+    for (ta, a), (tb, b), ca, cb in steps:
         crash = killed_at is not None and ta <= killed_at and (restarted is None or tb >= restarted)
-        ca, cb = counter_at.get(ta), counter_at.get(tb)
-        cycles = max(1, (cb - ca) % COUNTER_MODULO) if ca is not None and cb is not None else 1
+        cycles = max(1, (cb - ca) % COUNTER_MODULO)
         if not crash and abs(b - a) > cycles * RATE_LIMIT * e.setup.ts + 2e-6:
             v.fails.append(f"command stepped {math.degrees(abs(b - a)):.4f} deg in one cycle")
             break
