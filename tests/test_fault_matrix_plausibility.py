@@ -8,6 +8,7 @@ import math
 from dataclasses import replace
 
 import pytest
+from scipy import signal
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
@@ -15,7 +16,9 @@ from firmware_py.plausibility import PlausibilityConfig
 from mrsteer_dbc import names
 from mrsteer_dbc.e2e import COUNTER_MODULO
 from sim_plant.car import scenario as scn
+from sim_plant.car.vehicle import VehicleParams, steering_tf
 from sim_plant.harness import faults as F
+from sim_plant.harness.faults.caused_yaw import caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, Status, Trace
 from sim_plant.harness.faults.settings import CURVE, RATE_LIMIT, scenario_spec
 from sim_plant.harness.faults.verdicts import Verdict, check_command_rate
@@ -258,3 +261,25 @@ def test_command_rate_verdict_counts_cycles_by_the_commands_alive_counter() -> N
     assert judged([3, 5]) == []  # a command between them the log did not accept: two cycles
     assert judged([14, 1]) == []  # two cycles across the counter's wrap (0..14)
     assert judged([14, 0])  # one cycle across it
+
+
+def _step_trace(delta: float, t_on: float = 1.01, end: float = 4.0, dt: float = 1e-3) -> Trace:
+    t = [k * dt for k in range(int(round(end / dt)) + 1)]
+    applied = [U0 + (delta if x >= t_on - 1e-12 else 0.0) for x in t]
+    wall = [1000.0 + x for x in t]
+    cols = {"t_s": t, "aux_applied_rad": applied, "aux_cmd_rad": applied, "wall_s": wall,
+            "v_m_s": [20.0] * len(t), "mu": [1.0] * len(t)}
+    return Trace(t, applied, applied, wall, cols)
+
+
+def test_caused_yaw_is_the_linear_cars_response_to_the_commands_change_since_the_onset() -> None:
+    delta = math.radians(1.0)
+    tf = steering_tf(VehicleParams(v=20.0, mu=1.0))
+    _, r = signal.step(signal.lti(tf.num, tf.den), T=[k * 1e-3 for k in range(2991)])
+    expected = delta * float(max(abs(r)))  # the continuous step response's peak over the same 2.99 s
+    e = replace(evidence(_row()), trace=_step_trace(delta))
+    assert caused_yaw(e, 1001.0) == pytest.approx(expected, rel=2e-3)
+    # What the command held at the onset causes no yaw; a change before the onset is not counted.
+    assert caused_yaw(replace(e, trace=_step_trace(0.0)), 1001.0) == 0.0
+    assert caused_yaw(replace(e, trace=_step_trace(delta, t_on=0.5)), 1001.0) == 0.0
+    assert caused_yaw(e, 2000.0) is None  # no step after the onset

@@ -17,7 +17,8 @@ the controller or the plant.  Every row is then judged from what was logged and 
   rejected frames counted, the actuator's fade after a controller crash;
 * the sensor rows (a wrong value in well-formed frames, issue 18): the plausibility fault
   within 300 ms of the error leaving the monitor's bound, cause 0x80, the command faded to zero
-  at 6 deg/s, both latched; and in every no-fault row, no plausibility fault bit at all.
+  at 6 deg/s, both latched; and in every no-fault row, no plausibility fault bit at all.  Beside
+  these, a sensor row reports (does not judge) the yaw rate the command caused (``caused_yaw``).
 
 Rows marked SecOC run controller and plant with a fresh random key (``$MRSTEER_SECOC_KEY``).  A
 16-bit MAC lets a random guess through with probability 2^-16, so those rows allow up to
@@ -25,7 +26,8 @@ Rows marked SecOC run controller and plant with a fresh random key (``$MRSTEER_S
 
 The package, by concern: ``settings`` (the numbers, ``Setup``), ``rows`` (the matrix), ``run``
 (running a row and the matrix), ``evidence`` and ``verdicts`` (reading a row's files; ``judge``
-and its checks), ``verdicts_plausibility`` (the sensor rows' and the quiet monitor's checks),
+and its checks), ``verdicts_plausibility`` (the sensor rows' and the quiet monitor's checks), ``caused_yaw``
+(the yaw rate a sensor row's command caused, from the plant's trace),
 ``cli`` (``mrsteer faults`` and its table).
 """
 

@@ -36,6 +36,7 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, PlausibilityConfig
 from mrsteer_dbc import names
+from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET, caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
@@ -206,6 +207,9 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         fails.append("no command ever in state FAULT")
         return None
     check_fade(e, fails, observed, t_cmd)
+    if (caused := caused_yaw(e, start)) is not None:
+        observed.append(f"the command's change caused at most {caused:.3f} rad/s of yaw (not judged; issue 18's "
+                        f"target {CAUSED_YAW_TARGET:g}: {'met' if caused < CAUSED_YAW_TARGET else 'NOT met'})")
     return cycles
 
 
