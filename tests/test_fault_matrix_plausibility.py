@@ -272,14 +272,23 @@ def _step_trace(delta: float, t_on: float = 1.01, end: float = 4.0, dt: float = 
     return Trace(t, applied, applied, wall, cols)
 
 
-def test_caused_yaw_is_the_linear_cars_response_to_the_commands_change_since_the_onset() -> None:
-    delta = math.radians(1.0)
+def test_caused_yaw_is_the_linear_cars_response_to_the_commands_excursion_since_the_onset() -> None:
+    delta = math.radians(-1.0)  # away from zero, beyond the onset's U0 (-1.81 deg)
     tf = steering_tf(VehicleParams(v=20.0, mu=1.0))
     _, r = signal.step(signal.lti(tf.num, tf.den), T=[k * 1e-3 for k in range(2991)])
-    expected = delta * float(max(abs(r)))  # the continuous step response's peak over the same 2.99 s
+    expected = abs(delta) * float(max(abs(r)))  # the continuous step response's peak over the same 2.99 s
     e = replace(evidence(_row()), trace=_step_trace(delta))
     assert caused_yaw(e, 1001.0) == pytest.approx(expected, rel=2e-3)
-    # What the command held at the onset causes no yaw; a change before the onset is not counted.
-    assert caused_yaw(replace(e, trace=_step_trace(0.0)), 1001.0) == 0.0
+    # Past zero the excursion counts from zero: U0 + 2.31 deg is 0.5 deg beyond it.
+    past = caused_yaw(replace(e, trace=_step_trace(-U0 + math.radians(0.5))), 1001.0)
+    assert past == pytest.approx(0.5 * expected, rel=2e-3)
+    # Between the held value and zero (a fade, the safe state) nothing counts; nor a change
+    # before the onset.
+    assert caused_yaw(replace(e, trace=_step_trace(-U0)), 1001.0) == 0.0
+    assert caused_yaw(replace(e, trace=_step_trace(0.5 * -U0)), 1001.0) == 0.0
     assert caused_yaw(replace(e, trace=_step_trace(delta, t_on=0.5)), 1001.0) == 0.0
     assert caused_yaw(e, 2000.0) is None  # no step after the onset
+    # A command still moving at the onset: the healthy one is unknown, no figure.
+    moving = _step_trace(math.radians(-0.3), t_on=0.95)  # more than STEADY_MOVE (0.25 deg) in the last 0.1 s
+    assert caused_yaw(replace(e, trace=moving), 1001.0) is None
+    assert caused_yaw(replace(e, trace=moving), 1001.06) is not None  # 0.1 s after the step: steady

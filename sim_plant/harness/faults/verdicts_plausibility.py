@@ -208,8 +208,10 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         return None
     check_fade(e, fails, observed, t_cmd)
     if (caused := caused_yaw(e, start)) is not None:
-        observed.append(f"the command's change caused at most {caused:.3f} rad/s of yaw (not judged; issue 18's "
+        observed.append(f"the command caused at most {caused:.3f} rad/s of yaw (not judged; issue 18's "
                         f"target {CAUSED_YAW_TARGET:g}: {'met' if caused < CAUSED_YAW_TARGET else 'NOT met'})")
+    else:
+        observed.append("the yaw the command caused is not estimated: the command was moving at the onset")
     return cycles
 
 
