@@ -263,32 +263,66 @@ def test_command_rate_verdict_counts_cycles_by_the_commands_alive_counter() -> N
     assert judged([14, 0])  # one cycle across it
 
 
-def _step_trace(delta: float, t_on: float = 1.01, end: float = 4.0, dt: float = 1e-3) -> Trace:
+def _step_trace(delta: float, t_on: float = 1.01, end: float = 4.0, dt: float = 1e-3,
+                width: int | None = None) -> Trace:
+    """The applied angle U0, then U0 + delta from t_on (for ``width`` steps only, if given)."""
     t = [k * dt for k in range(int(round(end / dt)) + 1)]
-    applied = [U0 + (delta if x >= t_on - 1e-12 else 0.0) for x in t]
+    k_on = int(round(t_on / dt))
+    applied = [U0 + (delta if k >= k_on and (width is None or k < k_on + width) else 0.0) for k in range(len(t))]
     wall = [1000.0 + x for x in t]
     cols = {"t_s": t, "aux_applied_rad": applied, "aux_cmd_rad": applied, "wall_s": wall,
             "v_m_s": [20.0] * len(t), "mu": [1.0] * len(t)}
     return Trace(t, applied, applied, wall, cols)
 
 
+def _peak(u: list[float], dt: float = 1e-3) -> float:
+    """The continuous linear car's (20 m/s, mu 1) peak |r| for the input u held over each step."""
+    tf = steering_tf(VehicleParams(v=20.0, mu=1.0))
+    _, r, _ = signal.lsim(signal.lti(tf.num, tf.den), u, [k * dt for k in range(len(u))], interp=False)
+    return float(max(abs(r)))
+
+
 def test_caused_yaw_is_the_linear_cars_response_to_the_commands_excursion_since_the_onset() -> None:
     delta = math.radians(-1.0)  # away from zero, beyond the onset's U0 (-1.81 deg)
-    tf = steering_tf(VehicleParams(v=20.0, mu=1.0))
-    _, r = signal.step(signal.lti(tf.num, tf.den), T=[k * 1e-3 for k in range(2991)])
-    expected = abs(delta) * float(max(abs(r)))  # the continuous step response's peak over the same 2.99 s
-    e = replace(evidence(_row()), trace=_step_trace(delta))
-    assert caused_yaw(e, 1001.0) == pytest.approx(expected, rel=2e-3)
+    e = replace(evidence(_row()), trace=_step_trace(delta, width=20))
+    # A 20 ms pulse: its peak shows a step too many or too few (5 % each) that a step's would not.
+    pulse = [0.0] * 10 + [delta] * 20 + [0.0] * 2960
+    assert caused_yaw(e, 1001.0).value == pytest.approx(_peak(pulse), rel=2e-3)
+    # The car's step is the trace's: a 2 ms trace, the same pulse in 10 steps.
+    coarse = replace(e, trace=_step_trace(delta, dt=2e-3, width=10))
+    assert caused_yaw(coarse, 1001.0).value == pytest.approx(_peak([0.0] * 5 + [delta] * 10 + [0.0] * 1480, 2e-3),
+                                                             rel=2e-3)
+    # The held value is the last step's at or before the onset, not the next one's, which may
+    # already apply the answer to the first falsified frame.
+    answered = replace(e, trace=_step_trace(delta, t_on=1.001, width=20))
+    assert caused_yaw(answered, 1001.0005).value == pytest.approx(_peak([delta] * 20 + [0.0] * 2980), rel=2e-3)
     # Past zero the excursion counts from zero: U0 + 2.31 deg is 0.5 deg beyond it.
-    past = caused_yaw(replace(e, trace=_step_trace(-U0 + math.radians(0.5))), 1001.0)
-    assert past == pytest.approx(0.5 * expected, rel=2e-3)
+    past = caused_yaw(replace(e, trace=_step_trace(-U0 + math.radians(0.5))), 1001.0).value
+    assert past == pytest.approx(_peak([0.0] * 10 + [math.radians(0.5)] * 2980), rel=2e-3)
     # Between the held value and zero (a fade, the safe state) nothing counts; nor a change
     # before the onset.
-    assert caused_yaw(replace(e, trace=_step_trace(-U0)), 1001.0) == 0.0
-    assert caused_yaw(replace(e, trace=_step_trace(0.5 * -U0)), 1001.0) == 0.0
-    assert caused_yaw(replace(e, trace=_step_trace(delta, t_on=0.5)), 1001.0) == 0.0
-    assert caused_yaw(e, 2000.0) is None  # no step after the onset
-    # A command still moving at the onset: the healthy one is unknown, no figure.
-    moving = _step_trace(math.radians(-0.3), t_on=0.95)  # more than STEADY_MOVE (0.25 deg) in the last 0.1 s
-    assert caused_yaw(replace(e, trace=moving), 1001.0) is None
-    assert caused_yaw(replace(e, trace=moving), 1001.06) is not None  # 0.1 s after the step: steady
+    assert caused_yaw(replace(e, trace=_step_trace(-U0)), 1001.0).value == 0.0
+    assert caused_yaw(replace(e, trace=_step_trace(0.5 * -U0)), 1001.0).value == 0.0
+    assert caused_yaw(replace(e, trace=_step_trace(delta, t_on=0.5)), 1001.0).value == 0.0
+
+
+def test_caused_yaw_says_why_it_gives_no_figure() -> None:
+    e = replace(evidence(_row()), trace=_step_trace(math.radians(-1.0)))
+    assert caused_yaw(e, 2000.0).reason == "the plant's trace does not span the onset"
+    # A command still moving at the onset (0.6 deg in its last 0.1 s): the healthy one is unknown.
+    moving = replace(e, trace=_step_trace(math.radians(-0.6), t_on=0.95))
+    assert caused_yaw(moving, 1001.0).reason == "the command was moving at the onset"
+    assert caused_yaw(moving, 1001.06).value == 0.0  # 0.1 s after that step: steady again
+    nonlinear = replace(e, setup=replace(e.setup, plant="nonlinear"))
+    assert caused_yaw(nonlinear, 1001.0).value is None
+    assert caused_yaw(replace(e, trace=Trace([0.0], [0.0], [0.0], [0.0])), 1001.0).value is None
+
+
+def test_a_sensor_row_reports_the_caused_yaw_detected_or_not() -> None:
+    trace = _step_trace(math.radians(-1.0), t_on=ONSET + 0.05)
+    trace = replace(trace, wall=trace.t, columns={**trace.columns, "wall_s": trace.t})  # the builder's clock
+    for detect in (0.2, None):
+        fails: list[str] = []
+        observed: list[str] = []
+        check_plausibility(replace(evidence(_row(), detect=detect), trace=trace), fails, observed)
+        assert any(o.startswith("the command caused at most 0.1") and o.endswith("NOT met)") for o in observed), observed

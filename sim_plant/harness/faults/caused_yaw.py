@@ -2,58 +2,82 @@
 command causes stays below 0.05 rad/s"), from the plant's trace.
 
 What the faulty sensor's command is measured against: anything between what the healthy
-controller would hold and the safe state is not caused by the fault. The healthy controller's
-value is the applied angle at the onset, where the row starts in a steady state
-(``STEADY_MOVE``). The safe state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets
-the car yaw at 0.2 rad/s, but that is the car without the controller, not the fault. The
-command's *excursion* is the applied angle's distance outside [min(0, a0), max(0, a0)]. The
-figure is the peak yaw rate the excursion gives the linear car. That car is the plant's own
-(eqs. 14/16, exact ZOH at the plant's step, the trace's speed and friction at the onset, the
-scenario's mass), and the figure is exact for it by superposition.
+controller would hold and the safe state is not counted. The healthy controller's value is the
+applied angle at the onset, where the row starts in a steady state (``STEADY_MOVE``). The safe
+state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets the car yaw at
+0.2 rad/s, but that is the car without the controller, not the fault. The same holds when the
+faulty controller backs off toward zero before its report, which it is allowed to do at any
+time.
 
-The matrix reports this figure and does not judge it, because the target is not met for a yaw
-rate stuck while the car is not turning: docs/controller.md, "What the 50 ms redundant frame
-allows".
+The command's *excursion* is the applied angle's distance outside [min(0, a0), max(0, a0)].
+The figure is the peak yaw rate the excursion gives the linear car. That car is the plant's own
+(eqs. 14/16, exact ZOH at the plant's step, the trace's speed and friction at the onset, the
+scenario's mass), so the figure is exact for it by superposition. It is computed only when the
+run's car is that linear car with the ideal actuator, whose applied angle is the car's input.
+
+This is not the campaign's ``fault_yaw_rate``, which is |r − r of the fault-free twin| and so
+counts the fade and any backing-off as well (docs/campaigns.md). On a straight road with no
+disturbance the two are the same. The matrix reports the figure and does not judge it, because
+the target is not met in every row: docs/faults.md, "The sensor rows".
 """
 
 from __future__ import annotations
 
 import bisect
+from dataclasses import dataclass
 
 from sim_plant.car import scenario
+from sim_plant.car.actuator_dynamics import ActuatorModelConfig
+from sim_plant.car.plants import LINEAR
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 from sim_plant.harness.faults.evidence import Evidence
 from sim_plant.harness.faults.settings import CURVE, CURVE_SCENARIO
 
-#: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s.
+#: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s (met at or below
+#: it, as a campaign's criteria are).
 CAUSED_YAW_TARGET = 0.05
 #: The onset counts as a steady state when the applied angle moved less than this in the
-#: ``STEADY_TIME`` before it (rad, 0.25 deg). The held value then stands for the healthy
-#: controller's. Measured on the baselines' traces from the sensor rows' onset (1.0 s): they moved
-#: 0.03 deg (paper-fig9) and 0.19 deg (the curve, still settling), and the figure on them is
-#: 0.0004 and 0.008 rad/s. The frozen row starts in the yaw moment's transient and gets none.
-STEADY_MOVE = 4.4e-3
+#: ``STEADY_TIME`` before it (rad, 0.5 deg). The held value then stands for the healthy
+#: controller's. Measured on the baselines' traces from the sensor rows' onset (1.0 s), they moved
+#: 0.03 deg (paper-fig9) and 0.19 deg (the curve, still settling), and the figure there, the
+#: floor of a fault-free run, is 0.0004 and 0.00001 rad/s. The frozen row starts in the yaw
+#: moment's transient (degrees in 0.1 s) and gets none.
+STEADY_MOVE = 8.7e-3
 STEADY_TIME = 0.1
 
 
-def caused_yaw(e: Evidence, start: float) -> float | None:
+@dataclass(frozen=True)
+class CausedYaw:
+    """The figure (rad/s), or ``None`` with the reason there is none."""
+
+    value: float | None
+    reason: str = ""
+
+
+def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     """The largest |r| the applied angle's excursion (the module's docstring) from ``start``
     (epoch s, the fault's onset on the trace's wall clock) to the run's end gives the linear
-    car.  ``None`` when the applied angle was still moving before the onset, because the healthy
-    command is then unknown (the frozen row starts in the yaw moment's transient); also ``None``
-    when the trace has no step after ``start`` or no speed and friction columns."""
+    car, or why there is none."""
+    setup = e.setup
+    sc = CURVE_SCENARIO if e.row.scenario == CURVE else scenario.load(e.row.scenario)
+    if setup.plant not in (None, LINEAR) or setup.actuator not in (None, "ideal") or not (
+            sc.plant == LINEAR and sc.actuator == ActuatorModelConfig.ideal()):
+        return CausedYaw(None, "the run's car is not the linear one with the ideal actuator")
     tr, cols = e.trace, e.trace.columns
-    i0 = bisect.bisect_left(tr.wall, start)
-    if i0 >= len(tr.t) - 1 or "v_m_s" not in cols or "mu" not in cols:
-        return None
+    if "v_m_s" not in cols or "mu" not in cols:
+        return CausedYaw(None, "the plant's trace has no speed and friction")
+    # The last step at or before the onset: a bridge fault's first falsified frame is stamped
+    # after the step that sent it, and the step after may already apply the answer to it.
+    i0 = bisect.bisect_right(tr.wall, start) - 1
+    if i0 < 0 or i0 >= len(tr.t) - 1:
+        return CausedYaw(None, "the plant's trace does not span the onset")
     before = [a for t, a in zip(tr.t[:i0 + 1], tr.applied[:i0 + 1]) if t >= tr.t[i0] - STEADY_TIME]
     if max(before) - min(before) > STEADY_MOVE:
-        return None
-    sc = CURVE_SCENARIO if e.row.scenario == CURVE else scenario.load(e.row.scenario)
+        return CausedYaw(None, "the command was moving at the onset")
     car = DiscretePlant(VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass), tr.t[i0 + 1] - tr.t[i0])
     a0, peak = tr.applied[i0], 0.0
     low, high = min(0.0, a0), max(0.0, a0)
     for a in tr.applied[i0:]:
         car.advance(a - min(max(a, low), high), 0.0)
         peak = max(peak, abs(float(car.x[1])))
-    return peak
+    return CausedYaw(peak)

@@ -126,6 +126,8 @@ def check_command_rate(e: Evidence, v: Verdict) -> None:
     # (bus resolution 1e-6 rad); across a kill the next instance starts again from zero.
     # Per controller cycle, counted by the commands' alive counter: a command the log's decode
     # does not accept (around a SecOC epoch change) leaves two cycles between its neighbours.
+    # Fifteen or more missing in a row alias to fewer (the counter runs 0..14), which only makes
+    # the check stricter there.
     killed_at, restarted = e.killed_at, e.restarted
     steps = zip(e.angles, e.angles[1:], e.cmd_counters, e.cmd_counters[1:])
     for (ta, a), (tb, b), ca, cb in steps:

@@ -154,9 +154,17 @@ def _first_fault(e: Evidence, start: float) -> tuple[float | None, float | None,
 
 
 def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> int | None:
-    """A sensor row: detection, report, fade and latch (the module's docstring).  Returns the
-    detection in controller cycles from the error leaving its bound (``None``: not a sensor row,
-    or not detected)."""
+    """A sensor row: detection, report, fade and latch (the module's docstring), then the yaw
+    rate its command caused, detected or not (reported, not judged).  Returns the detection in
+    controller cycles from the error leaving its bound (``None``: not a sensor row, or not
+    detected)."""
+    cycles = _check_sensor_row(e, fails, observed)
+    if e.row.plausibility and (start := onset(e)) is not None:
+        report_caused_yaw(e, start, observed)
+    return cycles
+
+
+def _check_sensor_row(e: Evidence, fails: list[str], observed: list[str]) -> int | None:
     row, ts = e.row, e.setup.ts
     if not row.plausibility:
         return None
@@ -207,12 +215,18 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
         fails.append("no command ever in state FAULT")
         return None
     check_fade(e, fails, observed, t_cmd)
-    if (caused := caused_yaw(e, start)) is not None:
-        observed.append(f"the command caused at most {caused:.3f} rad/s of yaw (not judged; issue 18's "
-                        f"target {CAUSED_YAW_TARGET:g}: {'met' if caused < CAUSED_YAW_TARGET else 'NOT met'})")
-    else:
-        observed.append("the yaw the command caused is not estimated: the command was moving at the onset")
     return cycles
+
+
+def report_caused_yaw(e: Evidence, start: float, observed: list[str]) -> None:
+    """The yaw rate the row's command caused (``caused_yaw``), as an observation: not judged."""
+    caused = caused_yaw(e, start)
+    if caused.value is None:
+        observed.append(f"caused yaw not estimated: {caused.reason}")
+    else:
+        met = "met" if caused.value <= CAUSED_YAW_TARGET else "NOT met"
+        observed.append(f"the command caused at most {caused.value:.4f} rad/s of yaw (not judged; issue 18's "
+                        f"target {CAUSED_YAW_TARGET:g}: {met})")
 
 
 def redundancy_trouble(e: Evidence, start: float, until: float) -> str | None:
