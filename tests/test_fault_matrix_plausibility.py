@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 from scipy import signal
@@ -21,7 +22,7 @@ from sim_plant.harness import faults as F
 from sim_plant.harness.faults.caused_yaw import caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, Status, Trace
 from sim_plant.harness.faults.settings import CURVE, RATE_LIMIT, scenario_spec
-from sim_plant.harness.faults.verdicts import Verdict, check_command_rate
+from sim_plant.harness.faults.verdicts import Verdict, check_command_rate, judge
 from sim_plant.harness.faults.verdicts_plausibility import (check_plausibility, check_quiet_monitor, error_series,
                                                             exceeded_at)
 from sim_plant.nodes.fault_bridge import SENSOR_KINDS
@@ -326,3 +327,10 @@ def test_a_sensor_row_reports_the_caused_yaw_detected_or_not() -> None:
         observed: list[str] = []
         check_plausibility(replace(evidence(_row(), detect=detect), trace=trace), fails, observed)
         assert any(o.startswith("the command caused at most 0.1") and o.endswith("NOT met)") for o in observed), observed
+
+
+def test_a_row_whose_processes_left_no_statistics_fails_with_the_reason(tmp_path: Path) -> None:
+    (tmp_path / "plant.json").write_text("{}")
+    result = judge(_row(), tmp_path, 0, None, None)
+    assert not result.passed
+    assert "no bridge.json, logger-vehicle.json" in result.failures[0] and "stack" in result.failures[0]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from sim_plant.harness.processes import RunError, spawn_preloaded, stop, wait_for_socket, wait_stderr
+from sim_plant.harness.processes import RunError, spawn, spawn_preloaded, stop, wait_for_socket, wait_stderr
 
 
 def test_a_preloaded_node_reports_its_usage_error_and_status(tmp_path: Path) -> None:
@@ -78,3 +78,21 @@ def test_a_plain_script_can_supervise_preloaded_nodes(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count("script ran") == 1
     assert "usage:" in (tmp_path / "bridge.stdout").read_text()
+
+
+def test_a_bus_process_hung_at_sigterm_leaves_its_threads_stacks_before_it_is_killed(tmp_path: Path) -> None:
+    # run_node's process ignores nothing, but this one's loop never looks at its stop flag.
+    script = (
+        "import can, time, sys\n"
+        "from firmware_py.platform.lifecycle import run_node\n"
+        "def hang():\n"
+        "    while True:\n"
+        "        time.sleep(0.01)\n"
+        "bus = can.Bus(interface='virtual', channel='hung')\n"
+        "sys.exit(run_node('hung node', bus, hang, lambda *a: None, ready='running'))\n")
+    p = spawn("hung", [sys.executable, "-c", script], tmp_path, dict(os.environ))
+    wait_stderr(p, "running", timeout=60)
+    stop(p, timeout=0.3)
+    assert p.popen.returncode == -signal.SIGKILL
+    err = (tmp_path / "hung.stderr").read_text()
+    assert "most recent call first" in err and "in hang" in err, err

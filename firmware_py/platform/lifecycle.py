@@ -3,6 +3,7 @@ shutdown and the outputs written at exit."""
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import sys
 from pathlib import Path
@@ -26,6 +27,13 @@ def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[]
     """
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    try:
+        # A supervisor that finds the process still running long after SIGTERM sends SIGUSR1
+        # before it kills it (sim_plant.harness.processes.stop), so that where every thread
+        # hung is on stderr afterwards.
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    except (AttributeError, ValueError, OSError, RuntimeError):
+        pass  # stderr is no file (a test capturing it): no stacks, nothing else changes
     if ready is not None:
         print(f"{prog}: {ready}", file=sys.stderr, flush=True)
     code = 0

@@ -168,12 +168,23 @@ def wait_for_socket(channel: str, broker: Proc) -> None:
         time.sleep(0.02)
 
 
+#: s a process still running after ``stop``'s timeout gets to write its threads' stacks
+STACKS_GRACE = 1.0
+
+
 def stop(p: Proc, timeout: float = 10.0) -> None:
+    """SIGTERM, then after ``timeout`` s SIGUSR1 (a bus process's ``run_node`` has every thread's
+    stack written to its stderr file on it; another process may just end) and SIGKILL."""
     if p.popen.poll() is None:
         p.popen.send_signal(signal.SIGTERM)
         try:
             p.popen.wait(timeout)
         except subprocess.TimeoutExpired:
+            p.popen.send_signal(signal.SIGUSR1)
+            try:
+                p.popen.wait(STACKS_GRACE)
+            except subprocess.TimeoutExpired:
+                pass
             p.popen.kill()
             p.popen.wait()
     if p.popen.stdout is not None:

@@ -49,8 +49,19 @@ class Verdict:
     observed: list[str] = field(default_factory=list)
 
 
+#: What every row's processes write when they exit (``evidence.gather`` reads them all).
+STATISTICS = ("bridge.json", "plant.json", "logger-vehicle.json", "logger-controller.json", "trace.csv")
+
+
 def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
           restarted: float | None, setup: Setup = Setup()) -> RowResult:
+    missing = [name for name in STATISTICS if not (work / name).exists()]
+    if missing:
+        # The row cannot be judged; the matrix goes on with the next.  A process that hung at
+        # SIGTERM was killed (processes.stop) after writing its threads' stacks to its stderr.
+        return RowResult(row.name, row.expected, False, "", 0.0, 0.0, None, [
+            f"no {', '.join(missing)} in {work}: a process did not exit after SIGTERM and was killed "
+            f"(its stderr file there has every thread's stack)"])
     e = gather(row, work, ctl_code, killed_at, restarted, setup)
     v = Verdict()
     worst, worst_step = check_applied(e, v)
