@@ -134,6 +134,8 @@ def test_c_node_verifies_the_golden_sensor_frames_as_the_python_controller_does(
     (["--rate-hz", "fast"], 2),
     (["--no-such-flag"], 2),
     (["--k", "-3"], 2),
+    (["--slow-motion", "0.5"], 2),
+    (["--slow-motion", "nan"], 2),
 ])
 def test_command_line_errors_are_one_line_and_the_python_exit_status(c_node, tmp_path: Path, args: list[str],
                                                                       code: int) -> None:

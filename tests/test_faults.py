@@ -217,13 +217,16 @@ def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> 
     (dict(rate_hz=300.0), "rate must be one of"),
     (dict(time_scale=0.5), "time scale"),
     (dict(startup_s=-1.0), "start-up"),
+    (dict(slow_motion=0.5), "slow motion"),
+    (dict(slow_motion=float("inf")), "slow motion"),
     (dict(interface="socketcan"), "needs --channels"),
     (dict(interface="socketcan", channels=("vcan0", "vcan0")), "two different channels"),
 ])
 def test_matrix_setup_refuses_what_it_cannot_run(kwargs: dict, needle: str) -> None:
     with pytest.raises(ValueError, match=needle):
         Setup(**kwargs)
-    argv = {"rate_hz": ["--rate-hz", "300"], "time_scale": ["--time-scale", "0.5"]}.get(next(iter(kwargs)))
+    argv = {"rate_hz": ["--rate-hz", "300"], "time_scale": ["--time-scale", "0.5"],
+            "slow_motion": ["--slow-motion", "0.5"]}.get(next(iter(kwargs)))
     if argv:
         proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", *argv], capture_output=True,
                               text=True, timeout=60)
@@ -259,6 +262,15 @@ def test_a_stalled_sender_is_judged_by_bad_frames_not_cycles() -> None:
     assert not faulted_after_bad_frames(bad[:2], cmds, row, 1.0, first_fault=1.085)  # only 2 bad frames
     other = _stamped([1.001, 1.041, 1.081], C.frame_id("MRS_VehicleSpeed"))
     assert not faulted_after_bad_frames(other, cmds, row, 1.0, first_fault=1.085)  # not the faulted message
+
+
+def test_faults_run_refuses_a_keep_directory_it_cannot_create(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "faults", "run", "--only", "baseline", "--keep",
+                           str(blocker / "rows")], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
+    assert "cannot create it" in proc.stderr
 
 
 def test_matrix_will_not_judge_an_earlier_runs_files(tmp_path: Path) -> None:

@@ -16,7 +16,8 @@ from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNod
 from firmware_py.controller.options import add_calibration_args, calibration_from_args
 from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET
 from firmware_py.platform.bus_open import BusOpenError, open_bus
-from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
+from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
+                                      check_slow_motion, secoc_key)
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.realtime import apply_platform
 
@@ -45,7 +46,8 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
                    help=f"discretisation of Q (default: the calibration's, {d.method})")
     p.add_argument("--rate-limit", type=float, default=None, metavar="RAD_S",
                    help="command rate limit in rad/s (default: the calibration's, 0: off)")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds (wall time)")
+    add_slow_motion_arg(p)
     p.add_argument("--stats-out", type=Path, default=None, metavar="FILE",
                    help="write loop statistics as JSON here on exit")
     add_secoc_args(p)
@@ -66,6 +68,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error("--timeout-cycles must be at least 1")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be positive")
+    check_slow_motion(parser, args.slow_motion)
     if not 0 <= args.rt_priority <= 99:
         parser.error(f"--rt-priority must be in 0..99, got {args.rt_priority}")
     if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
@@ -85,7 +88,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
     check_output_file(parser, "--stats-out", args.stats_out)
     cfg = RuntimeConfig(rate_hz=args.rate_hz, timeout_cycles=args.timeout_cycles, trigger=args.trigger,
                         sync_offset=None if args.no_sync else args.sync_offset_us * 1e-6,
-                        duration=args.duration, secoc_key=secoc_key(args, parser), controller=ctrl)
+                        duration=args.duration, slow_motion=args.slow_motion,
+                        secoc_key=secoc_key(args, parser), controller=ctrl)
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
@@ -93,7 +97,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         return 1
     node = ControllerNode(bus, cfg)
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
+    slow = f" in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 else ""
     auth = ", commands and sensor frames authenticated (SecOC)" if cfg.secoc_key is not None else ""
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2))],
-                    ready=f"running at {args.rate_hz:g} Hz ({args.trigger} trigger{auth}) on {bus.channel_info}")
+                    ready=f"running at {args.rate_hz:g} Hz{slow} ({args.trigger} trigger{auth}) on {bus.channel_info}")

@@ -88,7 +88,10 @@ class RuntimeConfig:
     # Clock trigger: phase-lock the cycle start to this long after the yaw-rate frames'
     # arrival, so a measurement waits ~this long for its command (None: free-running grid).
     sync_offset: float | None = DEFAULT_SYNC_OFFSET
-    duration: float | None = None  # s; None runs until a signal
+    duration: float | None = None  # s of wall time; None runs until a signal
+    # Wall time per period over the period (a slow machine's bench): the law's step and every
+    # count in cycles stay those of ``rate_hz``; only the loop's clock is stretched.
+    slow_motion: float = 1.0
     secoc_key: bytes | None = None  # sign the commands, verify the sensor frames (mrsteer_dbc.secoc) when given
     controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
 
@@ -103,6 +106,7 @@ class ControllerNode:
         self.contract = contract or mrsteer_dbc.load()
         period = 1.0 / config.rate_hz
         self.period = period
+        self.wall_period = period * config.slow_motion
         c = self.contract
         # The firmware's input ranges are the DBC's: one source of truth for what is valid.
         ctrl = replace(config.controller, ts=period,
@@ -325,7 +329,7 @@ class ControllerNode:
         self.finish()
 
     def _run_on_clock(self, end: float | None) -> None:
-        period = self.period
+        period = self.wall_period
         deadline = time.monotonic()
         lateness = self.stats.lateness
         sync = self.cfg.sync_offset
@@ -370,7 +374,7 @@ class ControllerNode:
         # so that the fault path (fade to zero) still executes.  Simulated time is the plant's
         # here: a plant that is merely slow (an emulated CPU, a debugger) must not look like
         # lost input, so the wait is at least SENSORS_WATCHDOG_S of wall time.
-        wait = max(self._yaw.limit * self.period, SENSORS_WATCHDOG_S)
+        wait = max(self._yaw.limit * self.wall_period, SENSORS_WATCHDOG_S)
         while self._running:
             got = False
             msg = self._recv_unless_stopped(wait)

@@ -4,6 +4,7 @@ SecOC key options, and output paths refused before any work is done."""
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 from typing import NoReturn
@@ -38,6 +39,21 @@ def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser | None =
         if parser is None:
             raise
         parser.error(str(exc))
+
+
+SLOW_MOTION_MAX = 100.0
+
+
+def add_slow_motion_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--slow-motion", type=float, default=1.0, metavar="F",
+                   help="run F times slower than real time, for machines too slow for the loop (QEMU without "
+                   "KVM): each period lasts F times its step in wall time; the step, every count in cycles "
+                   f"and every result are unchanged (default 1, at most {SLOW_MOTION_MAX:g})")
+
+
+def check_slow_motion(parser: argparse.ArgumentParser, value: float) -> None:
+    if not (math.isfinite(value) and 1.0 <= value <= SLOW_MOTION_MAX):
+        parser.error(f"--slow-motion must be in [1, {SLOW_MOTION_MAX:g}], got {value:g}")
 
 
 def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:

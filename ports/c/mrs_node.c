@@ -93,7 +93,7 @@ static int drain(mrs_node_t *n)
 
 static int run_on_clock(mrs_node_t *n, const mrs_node_opts_t *o, double end)
 {
-    const double period = n->period, window = SYNC_WINDOW * period;
+    const double period = n->period * o->slow_motion, window = SYNC_WINDOW * period;
     const double epoch_to_mono = mono() - wall();
     double deadline = mono();
     while (running) {
@@ -164,10 +164,10 @@ static int recv_unless_stopped(mrs_node_t *n, mrs_frame_t *f, double wait)
     return 0;
 }
 
-static int run_on_sensors(mrs_node_t *n, double end)
+static int run_on_sensors(mrs_node_t *n, const mrs_node_opts_t *o, double end)
 {
     /* Simulated time is the plant's: a plant that is merely slow must not look like lost input. */
-    double wait = (double)n->in[1].limit * n->period;
+    double wait = (double)n->in[1].limit * n->period * o->slow_motion;
     if (wait < SENSORS_WATCHDOG_S) {
         wait = SENSORS_WATCHDOG_S;
     }
@@ -301,7 +301,7 @@ int main(int argc, char **argv)
     mrs_node_config_t cfg;
     mrs_bus_t bus;
     struct sigaction sa;
-    char err[512], platform[1024];
+    char err[512], platform[1024], slow[48] = "";
     int code = 0, r;
     const int parsed = mrs_node_parse(argc, argv, &o, &cfg);
     if (parsed >= 0) {
@@ -323,13 +323,16 @@ int main(int argc, char **argv)
     sa.sa_handler = on_signal; /* no SA_RESTART: a blocking wait returns on the signal */
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGINT, &sa, NULL);
-    fprintf(stderr, "%s: running at %g Hz (%s trigger%s) on %s\n", MRS_NODE_PROG, o.rate_hz,
+    if (o.slow_motion != 1.0) {
+        snprintf(slow, sizeof slow, " in %gx slow motion", o.slow_motion);
+    }
+    fprintf(stderr, "%s: running at %g Hz%s (%s trigger%s) on %s\n", MRS_NODE_PROG, o.rate_hz, slow,
             o.sensors_trigger ? "sensors" : "clock",
             cfg.secoc_key != NULL ? ", commands and sensor frames authenticated (SecOC)" : "", bus.info);
     node.stats.rss_kb_loop_start = rss_kb();
     {
         const double end = o.duration > 0.0 ? mono() + o.duration : 0.0;
-        r = o.sensors_trigger ? run_on_sensors(&node, end) : run_on_clock(&node, &o, end);
+        r = o.sensors_trigger ? run_on_sensors(&node, &o, end) : run_on_clock(&node, &o, end);
     }
     node.stats.rss_kb_loop_end = rss_kb();
     if (r != 0) {

@@ -19,7 +19,7 @@ static const char USAGE[] =
     "                [--trigger {clock,sensors}] [--sync-offset-us US] [--no-sync] [--timeout-cycles N]\n"
     "                [--calibration FILE] [--controller {limited,standard}] [--k K] [--tau TAU] [--tau-n TAU_N]\n"
     "                [--method {tustin,zoh}] [--model-delay M] [--rate-limit RAD_S] [--duration S]\n"
-    "                [--stats-out FILE] [--secoc | --secoc-key FILE] [--rt-priority P] [--cpu N]\n";
+    "                [--slow-motion F] [--stats-out FILE] [--secoc | --secoc-key FILE] [--rt-priority P] [--cpu N]\n";
 
 static const char HELP[] =
     "\nThe model-regulator controller in C on a CAN bus (SocketCAN or the mrsteer fallback bus): reads driver\n"
@@ -46,7 +46,10 @@ static const char HELP[] =
     "  --model-delay M       command delay modelled in the controller (default: the calibration's; 0 when\n"
     "                        --k, --tau or --tau-n is given)\n"
     "  --rate-limit RAD_S    command rate limit in rad/s (default: the calibration's, 0: off)\n"
-    "  --duration S          stop after S seconds\n"
+    "  --duration S          stop after S seconds (wall time)\n"
+    "  --slow-motion F       run F times slower than real time, for machines too slow for the loop: each period\n"
+    "                        lasts F times its step in wall time; the step, every count in cycles and every\n"
+    "                        result are unchanged (default 1, at most 100)\n"
     "  --stats-out FILE      write loop statistics as JSON here on exit\n"
     "  --secoc               authenticate the commands and the sensor frames with the key in $MRSTEER_SECOC_KEY\n"
     "  --secoc-key FILE      as --secoc, with the key read from FILE (32 hex digits)\n"
@@ -125,7 +128,7 @@ static int one(int argc, char **argv, int *i, raw_args_t *a, mrs_node_opts_t *o)
     static const char *const with_value[] = {
         "--interface", "--channel", "--rate-hz", "--trigger", "--sync-offset-us", "--timeout-cycles", "--calibration",
         "--controller", "--k", "--tau", "--tau-n", "--method", "--model-delay", "--rate-limit", "--duration",
-        "--stats-out", "--secoc-key", "--rt-priority", "--cpu"};
+        "--slow-motion", "--stats-out", "--secoc-key", "--rt-priority", "--cpu"};
     size_t j;
     int takes = 0;
     snprintf(name, sizeof name, "%.*s", eq != NULL ? (int)(eq - flag) : (int)strlen(flag), flag);
@@ -188,6 +191,8 @@ static int one(int argc, char **argv, int *i, raw_args_t *a, mrs_node_opts_t *o)
         return real(name, v, &a->rate_limit);
     } else if (strcmp(name, "--duration") == 0) {
         return real(name, v, &o->duration);
+    } else if (strcmp(name, "--slow-motion") == 0) {
+        return real(name, v, &o->slow_motion);
     } else if (strcmp(name, "--timeout-cycles") == 0) {
         return whole(name, v, &a->timeout_cycles);
     } else if (strcmp(name, "--model-delay") == 0) {
@@ -273,6 +278,9 @@ static int check(const raw_args_t *a, mrs_node_opts_t *o, mrs_node_config_t *cfg
     if (o->duration != 0.0 && !(isfinite(o->duration) && o->duration > 0.0)) {
         return usage_error("--duration must be positive");
     }
+    if (!(isfinite(o->slow_motion) && o->slow_motion >= 1.0 && o->slow_motion <= 100.0)) {
+        return usage_error("--slow-motion must be in [1, 100], got %g", o->slow_motion);
+    }
     if (o->rt_priority < 0 || o->rt_priority > 99) {
         return usage_error("--rt-priority must be in 0..99, got %d", o->rt_priority);
     }
@@ -328,6 +336,7 @@ int mrs_node_parse(int argc, char **argv, mrs_node_opts_t *o, mrs_node_config_t 
     memset(&a, 0, sizeof a);
     o->sync = 1;
     o->cpu = -1;
+    o->slow_motion = 1.0;
     a.model_delay = -1;
     a.timeout_cycles = 10;
     a.sync_offset_us = DEFAULT_SYNC_OFFSET_US;

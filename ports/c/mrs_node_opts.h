@@ -14,7 +14,8 @@ typedef struct {
     int sensors_trigger;
     int sync; /* clock trigger: phase lock */
     double sync_offset; /* s */
-    double duration; /* s; 0: until a signal */
+    double duration; /* s of wall time; 0: until a signal */
+    double slow_motion; /* wall time per period over the period (a slow machine's bench); 1: real time */
     const char *stats_out;
     int rt_priority, cpu; /* cpu -1: not pinned */
     uint8_t key[MRS_SECOC_KEY_BYTES];

@@ -193,6 +193,7 @@ class ControllerSettings:
     stats_out: Path | None = None
     secoc: bool = False  # the key comes through the environment, never argv
     program: tuple[str, ...] | None = None  # an external controller (``controller_program``); None: Python
+    slow_motion: float | None = None  # wall time per period over the period (a slow machine)
 
 
 def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
@@ -201,7 +202,7 @@ def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
         *bus.argv(), "--rate-hz", _num(s.rate_hz), *_opt("--trigger", s.trigger), *_opt("--controller", s.q_form),
         *gains, *_opt("--rate-limit", s.rate_limit), *_opt("--duration", s.duration),
         *_opt("--rt-priority", s.rt_priority), *_opt("--cpu", s.cpu), *_opt("--stats-out", s.stats_out),
-        *_flag("--secoc", s.secoc)), s.program)
+        *_opt("--slow-motion", s.slow_motion), *_flag("--secoc", s.secoc)), s.program)
 
 
 @dataclass(frozen=True)
@@ -227,6 +228,7 @@ class PlantSettings:
     trace_out: Path | None = None  # the true state of every step, as CSV
     stats_out: Path | None = None
     secoc: bool = False
+    slow_motion: float | None = None  # realtime: wall time per step over the step (a slow machine)
 
 
 def plant(bus: BusArgs, s: PlantSettings) -> Launch:
@@ -238,7 +240,7 @@ def plant(bus: BusArgs, s: PlantSettings) -> Launch:
         *_opt("--actuator", s.actuator), *_opt("--sensors", s.sensors), *_opt("--seed", s.seed),
         *(arg for spec in s.sensor_faults for arg in ("--sensor-fault", spec)),
         *_flag("--no-controller", s.no_controller), *_opt("--trace-out", s.trace_out),
-        *_opt("--stats-out", s.stats_out), *_flag("--secoc", s.secoc)))
+        *_opt("--stats-out", s.stats_out), *_opt("--slow-motion", s.slow_motion), *_flag("--secoc", s.secoc)))
 
 
 def bridge(interface: str, vehicle: str, controller_side: str, fault: Fault, stats_out: Path | None = None) -> Launch:

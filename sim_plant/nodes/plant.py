@@ -52,7 +52,8 @@ import can
 
 import mrsteer_dbc
 from firmware_py.platform.bus_open import BusOpenError, open_bus
-from firmware_py.platform.cli import Parser, add_secoc_args, check_output_file, secoc_key
+from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
+                                      check_slow_motion, secoc_key)
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
@@ -104,10 +105,11 @@ class PlantNode:
                  delay_steps: int = 1, cmd_timeout: float = CMD_TIMEOUT_S, lockstep_timeout: float = 1.0,
                  fade_rate: float = FADE_RATE_RAD_S, contract: mrsteer_dbc.Contract | None = None,
                  expect_controller: bool = True, actuator_rate: float = RATE_LIMIT_RAD_S,
-                 secoc_key: bytes | None = None) -> None:
+                 secoc_key: bytes | None = None, slow_motion: float = 1.0) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}")
         self.bus, self.sc, self.mode, self.ts = bus, sc, mode, ts
+        self.wall_period = ts * slow_motion  # realtime: a slow machine's bench stretches the wall clock only
         self.delay_steps = delay_steps
         self.contract = c = contract or mrsteer_dbc.load()
         self.scene = ScenarioState(sc)
@@ -284,9 +286,9 @@ class PlantNode:
                 now = time.monotonic()
                 if now < deadline:
                     time.sleep(deadline - now)
-                elif now - deadline > self.ts:
+                elif now - deadline > self.wall_period:
                     self.stats.overruns += 1
-                deadline += self.ts
+                deadline += self.wall_period
             self.step(k)
         self.stats.wall_time_s = time.monotonic() - start
         return self.stats
@@ -333,6 +335,7 @@ def build_parser(prog: str = "mrsteer plant") -> argparse.ArgumentParser:
     p.add_argument("--no-controller", action="store_true",
                    help="lockstep without a controller on the bus: do not wait for commands")
     add_secoc_args(p)
+    add_slow_motion_arg(p)
     p.add_argument("--stats-out", type=Path, metavar="FILE", help="write plant statistics as JSON here")
     p.add_argument("--trace-out", type=Path, metavar="FILE", help="write the true states as CSV here")
     return p
@@ -351,6 +354,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
             parser.error(f"--{name.replace('_', '-')} must be positive")
+    check_slow_motion(parser, args.slow_motion)
     try:
         sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass,
                                                    duration=args.duration).with_models(
@@ -368,9 +372,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         return 1
     node = PlantNode(bus, sc, args.mode, 1.0 / args.rate_hz, args.delay_steps, args.cmd_timeout,
                      args.lockstep_timeout, expect_controller=not args.no_controller,
-                     actuator_rate=args.actuator_rate, secoc_key=key)
+                     actuator_rate=args.actuator_rate, secoc_key=key, slow_motion=args.slow_motion)
     node.record_trace = args.trace_out is not None
+    slow = f", in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 and args.mode == "realtime" else ""
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2)),
                      (args.trace_out, node.trace_csv)],
-                    ready=f"{sc.name} ({sc.duration:g} s, {args.mode}) on {bus.channel_info}")
+                    ready=f"{sc.name} ({sc.duration:g} s, {args.mode}) on {bus.channel_info}{slow}")

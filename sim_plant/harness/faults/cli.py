@@ -4,6 +4,7 @@ and its table."""
 from __future__ import annotations
 
 import json
+import os
 import sys
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -63,6 +64,10 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
                    f"tuned calibration (default {RATE_HZ:g})")
     r.add_argument("--time-scale", type=float, default=1.0, metavar="F",
                    help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
+    r.add_argument("--slow-motion", type=float, default=1.0, metavar="F",
+                   help="run every node F times slower than real time, for machines too slow for the loop "
+                   "(QEMU without KVM): each period lasts F times its step in wall time; the verdicts are "
+                   "judged in the car's time, unchanged (default 1)")
     r.add_argument("--startup-s", type=float, default=0.0, metavar="S",
                    help="extra scenario seconds in the restart rows for the new process to start (default 0)")
     add_car_args(r, default="ideal, the paper's linear car (the rows' scenario names none)", with_seed=False)
@@ -77,7 +82,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]
-                      args.plant, args.actuator, args.sensors)
+                      args.plant, args.actuator, args.sensors, slow_motion=args.slow_motion)
     except ValueError as exc:
         p.error(str(exc))
     try:
@@ -89,6 +94,13 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         p.error(f"--keep {args.keep} exists and is not a directory")
     if holds_files(args.keep):
         p.error(f"--keep {args.keep} is not empty: an earlier run's files would be judged as this run's")
+    if args.keep is not None:
+        try:
+            args.keep.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            p.error(f"--keep {args.keep}: cannot create it: {exc.strerror}")
+        if not os.access(args.keep, os.W_OK):
+            p.error(f"--keep {args.keep} is not writable")
     try:
         results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
     except RunError as exc:

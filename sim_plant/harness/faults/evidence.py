@@ -96,12 +96,45 @@ class Evidence:
     end: float  # the run's end: the plant's last yaw-rate frame (epoch s)
 
 
+BRIDGE_TIMES = ("t0", "first_affected", "last_affected")  # the bridge's statistics that are epoch s
+
+
+class CarClock:
+    """Wall time (epoch s) read back as the car's: a row run in slow motion ``f`` lasted ``f``
+    times its scenario in wall time, so ``ref + (t - ref) / f`` from one common reference.
+    Identity (exactly) at ``f`` = 1."""
+
+    def __init__(self, slow_motion: float, ref: float) -> None:
+        self.f, self.ref = slow_motion, ref
+
+    def __call__(self, t: float) -> float:
+        return t if self.f == 1.0 else self.ref + (t - self.ref) / self.f
+
+    def maybe(self, t: float | None) -> float | None:
+        return None if t is None else self(t)
+
+    def frames(self, frames: list[Frame]) -> list[Frame]:
+        return frames if self.f == 1.0 else [fr._replace(t=self(fr.t)) for fr in frames]
+
+    def trace(self, tr: Trace) -> Trace:
+        if self.f == 1.0:
+            return tr
+        wall = [self(w) for w in tr.wall]
+        return Trace(tr.t, tr.applied, tr.held, wall, {**tr.columns, "wall_s": wall})
+
+
 def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, restarted: float | None,
            setup: Setup) -> Evidence:
+    """Everything the row left, every time in it (frames, trace, kill and restart, the bridge's)
+    in the car's time (``CarClock``)."""
     c = mrsteer_dbc.load()
     ctl_json = work / "controller.json"
-    vehicle_frames = read_candump(work / "vehicle.log")
-    frames = read_candump(work / "controller.log")
+    raw_vehicle = read_candump(work / "vehicle.log")
+    clock = CarClock(setup.slow_motion, raw_vehicle[0].t if raw_vehicle else 0.0)
+    vehicle_frames, frames = clock.frames(raw_vehicle), clock.frames(read_candump(work / "controller.log"))
+    killed_at, restarted = clock.maybe(killed_at), clock.maybe(restarted)
+    bridge = json.loads((work / "bridge.json").read_text())
+    bridge.update({k: clock.maybe(bridge.get(k)) for k in BRIDGE_TIMES})
     cmd_id, status_id = c.frame_id(names.MSG_CMD), c.frame_id(names.MSG_STATUS)
     decoded = [(t, c.decode(fid, data)) for t, fid, data in frames if fid == cmd_id]
     cutoff = max(t for t, fid, _ in vehicle_frames
@@ -113,8 +146,8 @@ def gather(row: Row, work: Path, ctl_code: int | None, killed_at: float | None, 
     status_list = [Status(t, int(d.signals[names.SIG_STATUS_STATE]), int(d.signals[names.SIG_STATUS_PLAUS]),
                           int(d.signals[names.SIG_STATUS_CAUSE])) for t, d in statuses if d is not None and t <= cutoff]
     return Evidence(
-        row, setup, ctl_code, killed_at, restarted, read_trace(work / "trace.csv"),
-        json.loads((work / "bridge.json").read_text()), json.loads((work / "plant.json").read_text()),
+        row, setup, ctl_code, killed_at, restarted, clock.trace(read_trace(work / "trace.csv")),
+        bridge, json.loads((work / "plant.json").read_text()),
         json.loads(ctl_json.read_text()) if ctl_json.exists() else None,
         {side: json.loads((work / f"logger-{side}.json").read_text())["frames"] for side in ("vehicle", "controller")},
         vehicle_frames, frames, cmds, [(t, d.signals["AuxSteerCmd_Angle"]) for t, d in accepted],

@@ -18,6 +18,7 @@ from typing import Callable
 from mrsteer_dbc.secoc import KEY_ENV as SECOC_KEY_ENV
 from sim_plant.harness import launch
 from sim_plant.harness.faults.verdicts import RowResult, judge
+from sim_plant.nodes.fault_bridge import Fault
 from sim_plant.harness.faults.rows import ROWS, Row, plant_fault
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_LIMIT,
                                                RESTART_AT, Setup, scenario_spec)
@@ -53,15 +54,8 @@ class _RowRun:
                 self.work / f"{side}.log", iface_name=side, stats_out=self.work / f"logger-{side}.json")), stdout=True)
             loggers.append(lg)
             wait_ready(lg)
-        scale = self.setup.time_scale
-        # A sensor row's fault starts at a point of the scenario (the car's motion, which the
-        # time scale does not stretch) and lasts to the run's end, which it does.
-        start = self.row.fault.start * (1.0 if self.row.plausibility else scale)
-        fault = replace(self.row.fault, start=start, stop=self.row.fault.stop * scale)
-        if self.row.at_plant:  # the plant injects it: the bridge only forwards
-            fault = replace(fault, kind="none", signal=None)
-        bridge = self.start("bridge", launch.bridge(self.setup.interface, self.vehicle, self.controller_side, fault,
-                                                    self.work / "bridge.json"))
+        bridge = self.start("bridge", launch.bridge(self.setup.interface, self.vehicle, self.controller_side,
+                                                    bridge_fault(self.row, self.setup), self.work / "bridge.json"))
         wait_stderr(bridge, "bridging")
         return [bridge, *loggers]
 
@@ -72,7 +66,10 @@ class _RowRun:
                                       launch.write_calibration(self.work, self.setup.calibration()),
                                       rate_limit=RATE_LIMIT,
                                       stats_out=self.work / "controller.json", secoc=self.row.secoc,
-                                      program=self.setup.controller_program)))
+                                      program=self.setup.controller_program, slow_motion=self._slow())))
+
+    def _slow(self) -> float | None:
+        return None if self.setup.slow_motion == 1.0 else self.setup.slow_motion
 
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
@@ -81,12 +78,12 @@ class _RowRun:
             self.setup.rate_hz, "realtime", spec, duration=seconds, actuator_rate=ACTUATOR_RATE,
             cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
             sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
-            stats_out=self.work / "plant.json", secoc=self.row.secoc)))
+            stats_out=self.work / "plant.json", secoc=self.row.secoc, slow_motion=self._slow())))
 
     def play(self, ctl: Proc, plant: Proc, duration: float) -> tuple[Proc, float | None, float | None]:
         """Wait for the plant to finish, killing and restarting what the row says on the way:
         the controller now running, and when the victim was killed and restarted (epoch s)."""
-        row, scale = self.row, self.setup.time_scale
+        row, scale = self.row, self.setup.time_scale * self.setup.slow_motion  # wall s per scenario s
         start = time.monotonic()
         killed_at = restarted = None
         while plant.popen.poll() is None or (row.kill_plant and restarted is None):
@@ -101,12 +98,31 @@ class _RowRun:
                     ctl = self.start_controller("controller-2")
                     restarted = time.time()
                 elif row.kill_plant:
-                    plant = self.start_plant("plant-2", (DURATION - RESTART_AT) * scale + self.setup.startup_s)
+                    plant = self.start_plant("plant-2", (DURATION - RESTART_AT) * self.setup.time_scale
+                                             + self.setup.startup_s)
                     restarted = time.time()
-            if time.monotonic() - start > 120 + 2 * duration:
+            if time.monotonic() - start > 120 + 2 * duration * self.setup.slow_motion:
                 raise RunError("the plant did not finish in time")
             time.sleep(0.01)
         return ctl, killed_at, restarted
+
+
+def bridge_fault(row: Row, setup: Setup) -> Fault:
+    """The row's fault as the bridge is to inject it, in wall time: its window stretched by the
+    time scale (a sensor row's start is a point of the car's motion, which the time scale does
+    not stretch) and everything timed stretched by the slow motion (the window, a delay; a
+    flood's rate and a drift's slope slowed).  A fault the plant injects leaves the bridge
+    only forwarding."""
+    f, slow = row.fault, setup.slow_motion
+    start = f.start * (1.0 if row.plausibility else setup.time_scale)
+    fault = replace(f, start=start * slow, stop=f.stop * setup.time_scale * slow)
+    if f.kind == "delay":
+        fault = replace(fault, param=f.param * slow)
+    elif f.kind in ("flood", "sensor_drift"):
+        fault = replace(fault, param=f.param / slow)
+    if row.at_plant:
+        fault = replace(fault, kind="none", signal=None)
+    return fault
 
 
 def run_row(row: Row, work: Path, say: Callable[[str], None], setup: Setup = Setup()) -> RowResult:

@@ -14,6 +14,7 @@ from firmware_py import model_regulator as mr
 from firmware_py.authority import AuthorityConfig
 from firmware_py.controller import node as rt
 from firmware_py.controller.node import DEFAULT_RATE_HZ
+from firmware_py.platform.cli import SLOW_MOTION_MAX
 from mrsteer_dbc.busload import frame_bits
 from mrsteer_dbc import names
 from sim_plant.car import scenario
@@ -132,6 +133,11 @@ class Setup:
     # The controller process (``launch.controller_program``): None for the Python one, else the C
     # node or any external program that takes the controller's flags.
     controller_program: tuple[str, ...] | None = None
+    # Wall time per period over the period, for every node of a row (plant, controller, the
+    # bridge's delays, flood and window, the kill and restart times): a machine too slow for
+    # the loop (QEMU without KVM) runs the same car and law in slow motion.  The evidence is
+    # read back in the car's time, so every verdict and limit is unchanged.
+    slow_motion: float = 1.0
 
     def __post_init__(self) -> None:
         if self.rate_hz not in CALIBRATIONS:
@@ -139,6 +145,8 @@ class Setup:
                              f"calibration exists for each), got {self.rate_hz:g}")
         if not (math.isfinite(self.time_scale) and 1.0 <= self.time_scale <= 20.0):
             raise ValueError(f"time scale must be in [1, 20], got {self.time_scale:g}")
+        if not (math.isfinite(self.slow_motion) and 1.0 <= self.slow_motion <= SLOW_MOTION_MAX):
+            raise ValueError(f"slow motion must be in [1, {SLOW_MOTION_MAX:g}], got {self.slow_motion:g}")
         if not (math.isfinite(self.startup_s) and 0.0 <= self.startup_s <= 120.0):
             raise ValueError(f"start-up allowance must be in [0, 120] s, got {self.startup_s:g}")
         if self.channels is not None and (len(self.channels) != 2 or self.channels[0] == self.channels[1]):
