@@ -29,6 +29,10 @@ from sim_plant.harness import launch
 
 READY_TIMEOUT_S = 60.0
 RT_PRIORITY = 50  # the controllers' SCHED_FIFO priority in every loop run
+# The plant's and the broker's, with ``harness_rt``: below the controller's, on the other CPUs,
+# so that the sensor frames come on time and the figures are the controller's (a real ECU's
+# sensors do not wait for a shared CPU).
+HARNESS_RT_PRIORITY = 40
 BASELINE_NAME = "empty absolute-deadline loop, same rate, bench process, no RT priority"
 
 
@@ -129,6 +133,27 @@ _RT_LOOP = ("import json, sys\n"
             "print(json.dumps({**bare_loop_lateness(float(sys.argv[1]), float(sys.argv[2])), **granted}))\n")
 
 
+def realtime_process(pid: int, priority: int, cpus: set[int] | None) -> dict[str, Any]:
+    """SCHED_FIFO ``priority`` for every thread of process ``pid`` (threads it starts later
+    inherit it) and its CPUs, where permitted; says what was granted."""
+    out: dict[str, Any] = {"rt_priority": priority, "cpus": sorted(cpus) if cpus else None}
+    try:
+        for tid in (int(t) for t in os.listdir(f"/proc/{pid}/task")):
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+            if cpus:
+                os.sched_setaffinity(tid, cpus)
+    except (OSError, ValueError) as exc:
+        out = {"rt_priority": 0, "denied": str(exc)}
+    return out
+
+
+def harness_cpus(pin: bool) -> set[int] | None:
+    """The CPUs of the plant and the broker: every one but the pinned controller's."""
+    ctl = controller_cpu(pin)
+    cpus = set(range(os.cpu_count() or 1)) - ({ctl} if ctl is not None else set())
+    return cpus or None
+
+
 def controller_cpu(pin: bool) -> int | None:
     """The CPU a pinned controller runs on: the last one (the plant, broker and probe are not pinned)."""
     ncpu = os.cpu_count() or 1
@@ -151,11 +176,13 @@ def rt_loop_lateness(rate_hz: float, seconds: float, pin: bool = True) -> dict[s
 
 
 def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple[str, ...] | None = None,
-                baseline: bool = True) -> dict[str, Any]:
+                baseline: bool = True, harness_rt: bool = False) -> dict[str, Any]:
     """Controller (clock trigger) and plant (realtime) for ``seconds`` on a private fallback bus.
 
     ``program``: the controller process (``launch.controller_program``); None: the Python one.
-    ``baseline``: also time an empty deadline loop in this process afterwards (up to 5 s)."""
+    ``baseline``: also time an empty deadline loop in this process afterwards (up to 5 s).
+    ``harness_rt``: the broker and the plant at ``HARNESS_RT_PRIORITY`` on ``harness_cpus``."""
+    harness: dict[str, Any] = {"rt_priority": 0}
     with tempfile.TemporaryDirectory(prefix="mrsteer-bench-") as tmp:
         work = Path(tmp)
         env_channel = f"bench-{os.getpid()}-{int(rate_hz)}-{int(time.time()) % 100000}"
@@ -173,6 +200,9 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
                                                                  duration=seconds + 60.0)).command(), work / "plant.err")
             procs.append(plant)
             _wait_for(work / "plant.err", "realtime", plant)
+            if harness_rt:
+                granted = [realtime_process(p.pid, HARNESS_RT_PRIORITY, harness_cpus(pin)) for p in (broker, plant)]
+                harness = next((g for g in granted if "denied" in g), granted[0])
             ctl = _spawn(launch.controller(bus, launch.ControllerSettings(
                 rate_hz, duration=seconds, rt_priority=RT_PRIORITY, cpu=controller_cpu(pin),
                 stats_out=work / "ctl.json", program=program)).command(), work / "ctl.err")
@@ -204,6 +234,7 @@ def loop_timing(rate_hz: float, seconds: float, pin: bool = True, program: tuple
         "rss_kb": stats["rss_kb_loop_end"], "rss_growth_kb": stats["rss_kb_growth"],
         "rt_priority": stats.get("rt_priority"), "rt_priority_denied": stats.get("rt_priority_denied"),
         "cpu_affinity": stats.get("cpu_affinity"), "gc_disabled_in_loop": stats.get("gc_disabled_in_loop"),
+        "harness": harness,
     }
     if baseline:
         base = bare_loop_lateness(rate_hz, min(seconds, 5.0))

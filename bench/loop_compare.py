@@ -9,6 +9,10 @@ CPU time by kind (busy, niced, steal) and the other real-time processes (``machi
 since a shared machine is never really quiet. ``format_table`` prints the
 figures with the Python/C ratio and the C node's targets of issue 16 (lateness p99 <= 100 us,
 no missed cycle, latency p99 <= 500 us). Figures, not pass/fail: nothing here asserts timing.
+By default the plant and the broker run at SCHED_FIFO 40 on the CPUs the controller is not on
+(``CompareSettings.harness_rt``), as a real ECU's sensors do not wait for a shared CPU, and
+``/dev/cpu_dma_latency`` is held at 0 us (``CompareSettings.pm_qos``, ``cpu_latency``), as
+cyclictest holds it.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, Callable, ContextManager
 
 from mrsteer_bench import loop, machine_state as ms
+from mrsteer_bench.cpu_latency import CpuLatency
 from mrsteer_bench.cpu_load import CpuLoad
 from sim_plant.harness import launch
 
@@ -44,6 +49,12 @@ class CompareSettings:
     seconds: float  # each controller, each condition
     load_procs: int  # busy loops for the loaded condition; 0: no loaded condition
     pin: bool = True  # the controller on the last CPU (as loop_timing does), SCHED_FIFO 50 both ways
+    # The plant and the broker at SCHED_FIFO 40 on the other CPUs (loop.HARNESS_RT_PRIORITY): the
+    # sensor frames then come on time, and the latency is the controller's, not the harness's.
+    harness_rt: bool = True
+    # /dev/cpu_dma_latency held at 0 us through every condition (``cpu_latency``), as cyclictest
+    # does: an idle CPU then polls instead of halting, so a wake-up is not a VM's reschedule.
+    pm_qos: bool = True
 
 
 def empty_loops(rate_hz: float, seconds: float, pin: bool) -> dict[str, dict[str, Any]]:
@@ -74,7 +85,8 @@ def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...
     cpu0, rt0 = ms.cpu_times(), ms.realtime_processes()
     for impl in IMPLS:
         say(f"loop {name}: {impl} controller at {s.rate_hz:g} Hz for {s.seconds:g} s ...")
-        out[impl] = measure(s.rate_hz, s.seconds, pin=s.pin, program=programs[impl], baseline=False)
+        out[impl] = measure(s.rate_hz, s.seconds, pin=s.pin, program=programs[impl], baseline=False,
+                            harness_rt=s.harness_rt)
     say(f"loop {name}: empty deadline loops, without and with the real-time set-up ...")
     out["empty_loop"] = baseline(s.rate_hz, min(s.seconds, BASELINE_MAX_S), s.pin)
     out["loadavg_after"] = ms.load_average()
@@ -87,13 +99,22 @@ def _condition(name: str, s: CompareSettings, programs: dict[str, tuple[str, ...
 
 def compare(s: CompareSettings, say: Callable[[str], None], *, measure: Measure = loop.loop_timing,
             baseline: Baseline = empty_loops, load: LoadFactory = CpuLoad,
-            programs: dict[str, tuple[str, ...] | None] | None = None) -> dict[str, Any]:
+            programs: dict[str, tuple[str, ...] | None] | None = None,
+            latency: Callable[[], CpuLatency] = CpuLatency) -> dict[str, Any]:
     """Both controllers, quiet then loaded (when ``load_procs`` > 0); the load is stopped on
-    leaving its condition, also on an error or Ctrl-C. ``measure``, ``baseline``, ``load`` and
-    ``programs`` are the real ones unless given (tests give fakes)."""
+    leaving its condition, also on an error or Ctrl-C. ``measure``, ``baseline``, ``load``,
+    ``programs`` and ``latency`` are the real ones unless given (tests give fakes)."""
     if programs is None:
         say("building the C node (make -C ports/c node) ...")
         programs = {"python": None, "c": launch.controller_program("c")}
+    if not s.pm_qos:
+        return _compare(s, say, measure, baseline, load, programs, {"held": False})
+    with latency() as held:
+        return _compare(s, say, measure, baseline, load, programs, {"held": "us" in held.state, **held.state})
+
+
+def _compare(s: CompareSettings, say: Callable[[str], None], measure: Measure, baseline: Baseline,
+             load: LoadFactory, programs: dict[str, tuple[str, ...] | None], pm_qos: dict[str, Any]) -> dict[str, Any]:
     conditions = CONDITIONS if s.load_procs > 0 else CONDITIONS[:1]
     runs: dict[str, Any] = {}
     for name in conditions:
@@ -109,7 +130,7 @@ def compare(s: CompareSettings, say: Callable[[str], None], *, measure: Measure 
         "load": {"procs": s.load_procs, "kind": "busy-loop processes", "nice": os.nice(0),
                  "cpus": os.cpu_count()},
         "machine": {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()},
-        "runs": runs,
+        "runs": runs, "cpu_dma_latency": pm_qos,
         "ratios": {c: {k: ratio(float(r["python"][k]), float(r["c"][k])) for k, _ in METRICS} for c, r in runs.items()},
         "c_targets": {c: judge_c(r["c"]) for c, r in runs.items()},
     }
@@ -166,6 +187,12 @@ def format_table(res: dict[str, Any]) -> str:
     ld = res["load"]
     lines.append(f"controllers: SCHED_FIFO {rtp}, CPU affinity {py.get('cpu_affinity')}; machine: "
                  f"{res['machine']['cpus']} CPUs, {res['machine']['platform']}")
+    q = res.get("cpu_dma_latency") or {}
+    lines.append("CPU wake-up latency (PM QoS): " + (f"/dev/cpu_dma_latency held at {q['us']} us" if q.get("held")
+                                                      else f"left alone{' (denied: ' + q['denied'] + ')' if 'denied' in q else ''}"))
+    h = py.get("harness") or {}
+    lines.append("plant and broker: " + (f"SCHED_FIFO {h['rt_priority']}, CPUs {h.get('cpus')}" if h.get("rt_priority")
+                                         else f"normal priority, unpinned{' (denied: ' + h['denied'] + ')' if 'denied' in h else ''}"))
     if "loaded" in runs:
         kind = ld["kind"] if ld["procs"] != 1 else ld["kind"].replace("processes", "process")
         lines.append(f"loaded: {ld['procs']} {kind} at nice {ld['nice']}, started before and stopped after "

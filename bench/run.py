@@ -43,6 +43,10 @@ def build_parser(prog: str = "mrsteer bench") -> Parser:
     g.add_argument("--load-procs", type=int, metavar="N",
                    help="busy-loop processes of the loaded condition, at the bench's niceness (default: one per "
                    "CPU; 0: quiet only)")
+    g.add_argument("--loop-plain-machine", action="store_true",
+                   help="leave the plant and the broker at normal priority, unpinned, and the CPUs' idle states "
+                   "alone: their scheduling jitter and wake-ups then enter the figures (default: plant and broker "
+                   "at SCHED_FIFO 40 on the CPUs the controller is not on, /dev/cpu_dma_latency held at 0 us)")
     return p
 
 
@@ -153,7 +157,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer bench") -> int:
     from mrsteer_bench.loop_compare import CompareSettings
 
     loop_settings = CompareSettings(args.loop_rate_hz, args.loop_seconds or (5.0 if args.quick else 30.0),
-                                    default_procs() if args.load_procs is None else args.load_procs)
+                                    default_procs() if args.load_procs is None else args.load_procs,
+                                    harness_rt=not args.loop_plain_machine,
+                                    pm_qos=not args.loop_plain_machine)
 
     def say(msg: str) -> None:
         print(f"{prog}: {msg}", file=sys.stderr, flush=True)

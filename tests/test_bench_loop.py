@@ -38,7 +38,8 @@ def _figures(impl: str, condition: str) -> dict[str, Any]:
     return {"implementation": impl, "cycles": 1000, "latency_samples": 990, "rt_priority": 50,
             "cpu_affinity": [1], "lateness_p50_us": 10.0 * k, "lateness_p99_us": 50.0 * k,
             "lateness_max_us": 300.0 * k, "missed_cycles": 3 if impl == "python" else 0,
-            "latency_p50_us": 100.0 * k, "latency_p99_us": (400.0 if condition == "quiet" else 900.0) * k}
+            "latency_p50_us": 100.0 * k, "latency_p99_us": (400.0 if condition == "quiet" else 900.0) * k,
+            "harness": {"rt_priority": 40, "cpus": [0]}}
 
 
 class Recorder:
@@ -49,9 +50,12 @@ class Recorder:
         self.load_on = False
         self.loads: list[tuple[int, float]] = []
         self.fail_on = fail_on
+        self.harness_rt: list[bool] = []
 
-    def measure(self, rate_hz: float, seconds: float, *, pin: bool, program: Any, baseline: bool) -> dict[str, Any]:
+    def measure(self, rate_hz: float, seconds: float, *, pin: bool, program: Any, baseline: bool,
+                harness_rt: bool) -> dict[str, Any]:
         impl = "python" if program is None else "c"
+        self.harness_rt.append(harness_rt)
         condition = "loaded" if self.load_on else "quiet"
         self.calls.append((impl, condition, baseline))
         if self.fail_on == f"{impl} {condition}":
@@ -74,7 +78,7 @@ class Recorder:
 
 
 def _compare(rec: Recorder, procs: int = 2) -> dict[str, Any]:
-    return lc.compare(lc.CompareSettings(500.0, 30.0, procs), lambda _: None, measure=rec.measure,
+    return lc.compare(lc.CompareSettings(500.0, 30.0, procs, pm_qos=False), lambda _: None, measure=rec.measure,
                       baseline=rec.baseline, load=rec.load, programs={"python": None, "c": ("mrs_node",)})
 
 
@@ -129,6 +133,82 @@ def test_table_shows_both_controllers_the_ratio_and_the_targets() -> None:
     assert rows["missed cycles"] == ["3", "0", "-", "3", "0", "-", "0", "in", "30", "s", "yes/yes"]
     assert rows["empty loop, RT+pin (us)"] == ["4/5/6,", "7", "missed"] * 2
     assert "2 busy-loop processes" in table and "fallback bus" in table and "SCHED_FIFO 50" in table
+    assert "plant and broker: SCHED_FIFO 40, CPUs [0]" in table
+
+
+def test_the_harness_runs_at_real_time_priority_unless_asked_not_to() -> None:
+    rec = Recorder()
+    _compare(rec)
+    assert rec.harness_rt == [True] * 4
+    plain = Recorder()
+    lc.compare(lc.CompareSettings(500.0, 30.0, 0, harness_rt=False), lambda _: None, measure=plain.measure,
+               baseline=plain.baseline, load=plain.load, programs={"python": None, "c": ("mrs_node",)})
+    assert plain.harness_rt == [False, False]
+
+
+def test_the_cpu_latency_bound_is_written_held_and_released(tmp_path: Path) -> None:
+    import struct
+
+    from mrsteer_bench.cpu_latency import CpuLatency
+
+    dev = tmp_path / "cpu_dma_latency"
+    dev.write_bytes(b"")
+    with CpuLatency(0, dev) as held:
+        assert held.state == {"us": 0} and held.fd is not None
+        assert os.readlink(f"/proc/self/fd/{held.fd}") == str(dev)  # open while held
+    assert held.fd is None and struct.unpack("i", dev.read_bytes()) == (0,)
+    with CpuLatency(0, tmp_path / "none") as missing:
+        assert "denied" in missing.state and "none" in missing.state["denied"] and missing.fd is None
+    with pytest.raises(ValueError, match="latency bound"):
+        CpuLatency(-1)
+
+
+def test_compare_holds_the_cpu_latency_bound_unless_asked_not_to() -> None:
+    entered: list[bool] = []
+
+    class Fake:
+        state = {"us": 0}
+
+        def __enter__(self) -> "Fake":
+            entered.append(True)
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            entered.append(False)
+
+    rec = Recorder()
+    res = lc.compare(lc.CompareSettings(500.0, 30.0, 2), lambda _: None, measure=rec.measure, baseline=rec.baseline,
+                     load=rec.load, programs={"python": None, "c": ("mrs_node",)}, latency=Fake)
+    assert entered == [True, False] and res["cpu_dma_latency"] == {"held": True, "us": 0}
+    assert "/dev/cpu_dma_latency held at 0 us" in lc.format_table(res)
+    res = lc.compare(lc.CompareSettings(500.0, 30.0, 0, pm_qos=False), lambda _: None, measure=rec.measure,
+                     baseline=rec.baseline, load=rec.load, programs={"python": None, "c": ("mrs_node",)}, latency=Fake)
+    assert entered == [True, False] and res["cpu_dma_latency"] == {"held": False}
+    assert "CPU wake-up latency (PM QoS): left alone" in lc.format_table(res)
+
+
+def test_a_harness_process_gets_sched_fifo_on_every_thread_and_its_cpus() -> None:
+    from mrsteer_bench import loop
+
+    child = subprocess.Popen([sys.executable, "-c", "import threading, time\n"
+                              "threading.Thread(target=time.sleep, args=(30,), daemon=True).start()\n"
+                              "time.sleep(30)\n"])
+    try:
+        time.sleep(0.3)  # its second thread is up
+        cpus = {os.cpu_count() - 1} if (os.cpu_count() or 1) > 1 else {0}
+        got = loop.realtime_process(child.pid, loop.HARNESS_RT_PRIORITY, cpus)
+        if "denied" in got:
+            pytest.skip(f"SCHED_FIFO not permitted here: {got['denied']}")
+        tids = [int(t) for t in os.listdir(f"/proc/{child.pid}/task")]
+        assert len(tids) == 2 and got == {"rt_priority": loop.HARNESS_RT_PRIORITY, "cpus": sorted(cpus)}
+        for tid in tids:
+            assert os.sched_getscheduler(tid) == os.SCHED_FIFO
+            assert os.sched_getparam(tid).sched_priority == loop.HARNESS_RT_PRIORITY
+            assert os.sched_getaffinity(tid) == cpus
+    finally:
+        child.kill()
+        child.wait()
+    assert loop.realtime_process(child.pid, 40, None)["rt_priority"] == 0  # gone: said, not raised
 
 
 def test_cpu_load_starts_its_processes_and_stops_them() -> None:
