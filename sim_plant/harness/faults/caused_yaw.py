@@ -26,12 +26,11 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass
 
-from sim_plant.car import scenario
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.car.plants import LINEAR
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 from sim_plant.harness.faults.evidence import Evidence
-from sim_plant.harness.faults.settings import CURVE, CURVE_SCENARIO
+from sim_plant.harness.faults.settings import row_scenario
 
 #: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s (met at or below
 #: it, as a campaign's criteria are).
@@ -59,7 +58,7 @@ def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     (epoch s, the fault's onset on the trace's wall clock) to the run's end gives the linear
     car, or why there is none."""
     setup = e.setup
-    sc = CURVE_SCENARIO if e.row.scenario == CURVE else scenario.load(e.row.scenario)
+    sc = row_scenario(e.row.scenario)
     if setup.plant not in (None, LINEAR) or setup.actuator not in (None, "ideal") or not (
             sc.plant == LINEAR and sc.actuator == ActuatorModelConfig.ideal()):
         return CausedYaw(None, "the run's car is not the linear one with the ideal actuator")
@@ -71,7 +70,7 @@ def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     i0 = bisect.bisect_right(tr.wall, start) - 1
     if i0 < 0 or i0 >= len(tr.t) - 1:
         return CausedYaw(None, "the plant's trace does not span the onset")
-    before = [a for t, a in zip(tr.t[:i0 + 1], tr.applied[:i0 + 1]) if t >= tr.t[i0] - STEADY_TIME]
+    before = tr.applied[bisect.bisect_left(tr.t, tr.t[i0] - STEADY_TIME, hi=i0 + 1):i0 + 1]
     if max(before) - min(before) > STEADY_MOVE:
         return CausedYaw(None, "the command was moving at the onset")
     car = DiscretePlant(VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass), tr.t[i0 + 1] - tr.t[i0])

@@ -96,6 +96,8 @@ class Evidence:
     end: float  # the run's end: the plant's last yaw-rate frame (epoch s)
 
 
+#: What every row's processes write when they exit (``gather`` reads them all).
+STATISTICS = ("bridge.json", "plant.json", "logger-vehicle.json", "logger-controller.json", "trace.csv")
 BRIDGE_TIMES = ("t0", "first_affected", "last_affected")  # the bridge's statistics that are epoch s
 
 

@@ -88,12 +88,17 @@ def scenario_toml(sc: scenario.Scenario, faults: tuple[SensorFault, ...] = ()) -
     return "\n".join(lines) + "\n"
 
 
+def row_scenario(name: str) -> scenario.Scenario:
+    """The scenario a row names: the matrix's own curve, or a built-in."""
+    return CURVE_SCENARIO if name == CURVE else scenario.load(name)
+
+
 def scenario_spec(name: str, work: Path, fault: SensorFault | None = None) -> str:
     """What the plant's ``--scenario`` takes for a row: a built-in name as it is, or (the curve,
     or any scenario with a sensor fault for the plant to inject) a file written into ``work``."""
     if name != CURVE and fault is None:
         return name
-    sc = CURVE_SCENARIO if name == CURVE else scenario.load(name)
+    sc = row_scenario(name)
     path = work / "scenario.toml"
     path.write_text(scenario_toml(sc, () if fault is None else (fault,)))
     return str(path)

@@ -20,7 +20,7 @@ from firmware_py import model_regulator as mr
 from mrsteer_dbc import secoc
 from mrsteer_dbc.e2e import COUNTER_MODULO
 from mrsteer_dbc import names
-from sim_plant.harness.faults.evidence import Evidence, gather, stalled, stall_gaps
+from sim_plant.harness.faults.evidence import STATISTICS, Evidence, gather, stalled, stall_gaps
 from sim_plant.harness.faults.rows import Row
 from sim_plant.harness.faults.verdicts_plausibility import check_plausibility, check_quiet_monitor
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
@@ -49,10 +49,6 @@ class Verdict:
     observed: list[str] = field(default_factory=list)
 
 
-#: What every row's processes write when they exit (``evidence.gather`` reads them all).
-STATISTICS = ("bridge.json", "plant.json", "logger-vehicle.json", "logger-controller.json", "trace.csv")
-
-
 def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
           restarted: float | None, setup: Setup = Setup()) -> RowResult:
     missing = [name for name in STATISTICS if not (work / name).exists()]
@@ -60,8 +56,8 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
         # The row cannot be judged; the matrix goes on with the next.  A process that hung at
         # SIGTERM was killed (processes.stop) after writing its threads' stacks to its stderr.
         return RowResult(row.name, row.expected, False, "", 0.0, 0.0, None, [
-            f"no {', '.join(missing)} in {work}: a process did not exit after SIGTERM and was killed "
-            f"(its stderr file there has every thread's stack)"])
+            f"no {', '.join(missing)} in {work}: a process died, or did not exit after SIGTERM and was "
+            f"killed (then its stderr file there has every thread's stack)"])
     e = gather(row, work, ctl_code, killed_at, restarted, setup)
     v = Verdict()
     worst, worst_step = check_applied(e, v)

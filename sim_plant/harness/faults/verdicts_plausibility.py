@@ -158,17 +158,17 @@ def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> in
     rate its command caused, detected or not (reported, not judged).  Returns the detection in
     controller cycles from the error leaving its bound (``None``: not a sensor row, or not
     detected)."""
-    cycles = _check_sensor_row(e, fails, observed)
-    if e.row.plausibility and (start := onset(e)) is not None:
+    if not e.row.plausibility:
+        return None
+    start = onset(e)
+    cycles = _check_sensor_row(e, start, fails, observed)
+    if start is not None:
         report_caused_yaw(e, start, observed)
     return cycles
 
 
-def _check_sensor_row(e: Evidence, fails: list[str], observed: list[str]) -> int | None:
-    row, ts = e.row, e.setup.ts
-    if not row.plausibility:
-        return None
-    start = onset(e)
+def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observed: list[str]) -> int | None:
+    ts = e.setup.ts
     if start is None:
         fails.append("the fault never hit a frame")
         return None
