@@ -200,9 +200,9 @@ def test_controller_filters_are_installed_in_the_kernel() -> None:
 # matrix runs at 100 Hz (with the calibration tuned for 100 Hz) in 4x slow motion (every node's
 # period 40 ms of wall time: the plant keeps up, so the loop is the car's), with 5 scenario
 # seconds (20 s of wall time) for the restarted Python controller to come up.  Every check is the
-# same as on the fallback bus, judged in the car's time.  tools/vcan-vm-test runs the Python
-# controller's matrix only with MRSTEER_VCAN_MATRIX=1 and the C node's by default (docs/faults.md,
-# "State on real SocketCAN").
+# same as on the fallback bus, judged in the car's time.  tools/vcan-vm-test runs it with the
+# Python controller and with the C node (MRSTEER_VCAN_MATRIX=0 / MRSTEER_VCAN_C_MATRIX=0 leave
+# them out; docs/faults.md, "State on real SocketCAN").
 VM_SETUP = dict(rate_hz=100.0, slow_motion=4.0, startup_s=5.0)
 
 
