@@ -135,16 +135,26 @@ _RT_LOOP = ("import json, sys\n"
 
 def realtime_process(pid: int, priority: int, cpus: set[int] | None) -> dict[str, Any]:
     """SCHED_FIFO ``priority`` for every thread of process ``pid`` (threads it starts later
-    inherit it) and its CPUs, where permitted; says what was granted."""
-    out: dict[str, Any] = {"rt_priority": priority, "cpus": sorted(cpus) if cpus else None}
+    inherit it) and its CPUs, where permitted; says what was granted.  All or nothing: where
+    one thread is refused, those already changed go back to normal priority."""
+    changed: list[int] = []
     try:
         for tid in (int(t) for t in os.listdir(f"/proc/{pid}/task")):
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-            if cpus:
-                os.sched_setaffinity(tid, cpus)
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+                changed.append(tid)
+                if cpus:
+                    os.sched_setaffinity(tid, cpus)
+            except ProcessLookupError:
+                continue  # the thread ended meanwhile: nothing to set
     except (OSError, ValueError) as exc:
-        out = {"rt_priority": 0, "denied": str(exc)}
-    return out
+        for tid in changed:
+            try:
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            except OSError:
+                pass  # gone, or no longer ours to change
+        return {"rt_priority": 0, "denied": str(exc)}
+    return {"rt_priority": priority, "cpus": sorted(cpus) if cpus else None}
 
 
 def harness_cpus(pin: bool) -> set[int] | None:
@@ -155,7 +165,8 @@ def harness_cpus(pin: bool) -> set[int] | None:
 
 
 def controller_cpu(pin: bool) -> int | None:
-    """The CPU a pinned controller runs on: the last one (the plant, broker and probe are not pinned)."""
+    """The CPU a pinned controller runs on: the last one (the probe is not pinned; the plant and
+    the broker, with ``harness_rt``, are on the others: ``harness_cpus``)."""
     ncpu = os.cpu_count() or 1
     return ncpu - 1 if pin and ncpu > 1 else None
 

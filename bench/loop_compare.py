@@ -190,7 +190,8 @@ def format_table(res: dict[str, Any]) -> str:
     q = res.get("cpu_dma_latency") or {}
     lines.append("CPU wake-up latency (PM QoS): " + (f"/dev/cpu_dma_latency held at {q['us']} us" if q.get("held")
                                                       else f"left alone{' (denied: ' + q['denied'] + ')' if 'denied' in q else ''}"))
-    h = py.get("harness") or {}
+    harness = [runs[c][i].get("harness") or {} for c in conds for i in IMPLS]
+    h = next((x for x in harness if "denied" in x), harness[0])  # a refusal in any run shows
     lines.append("plant and broker: " + (f"SCHED_FIFO {h['rt_priority']}, CPUs {h.get('cpus')}" if h.get("rt_priority")
                                          else f"normal priority, unpinned{' (denied: ' + h['denied'] + ')' if 'denied' in h else ''}"))
     if "loaded" in runs:

@@ -1,5 +1,5 @@
 """``mrsteer bench [--quick] [--json] [--only NAME] [--loop-seconds S] [--loop-rate-hz HZ]
-[--load-procs N]``: every benchmark, a table and JSON."""
+[--load-procs N] [--loop-plain-machine]``: every benchmark, a table and JSON."""
 
 from __future__ import annotations
 
@@ -148,18 +148,22 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt  # SIGTERM unwinds like Ctrl-C: every node and the CPU load are stopped
 
 
+def loop_settings_of(args: argparse.Namespace) -> CompareSettings:
+    """The loop comparison the command line asks for."""
+    from mrsteer_bench.cpu_load import default_procs
+    from mrsteer_bench.loop_compare import CompareSettings
+
+    return CompareSettings(args.loop_rate_hz, args.loop_seconds or (5.0 if args.quick else 30.0),
+                           default_procs() if args.load_procs is None else args.load_procs,
+                           harness_rt=not args.loop_plain_machine, pm_qos=not args.loop_plain_machine)
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "mrsteer bench") -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     _check(parser, args)
     names = args.only or NAMES
-    from mrsteer_bench.cpu_load import default_procs
-    from mrsteer_bench.loop_compare import CompareSettings
-
-    loop_settings = CompareSettings(args.loop_rate_hz, args.loop_seconds or (5.0 if args.quick else 30.0),
-                                    default_procs() if args.load_procs is None else args.load_procs,
-                                    harness_rt=not args.loop_plain_machine,
-                                    pm_qos=not args.loop_plain_machine)
+    loop_settings = loop_settings_of(args)
 
     def say(msg: str) -> None:
         print(f"{prog}: {msg}", file=sys.stderr, flush=True)

@@ -143,3 +143,9 @@ def test_signalled_servers_refuse_impossible_outputs_and_survive_a_full_disk(tmp
     _, err = p.communicate(timeout=60)
     assert p.returncode == 1 and f"cannot write {stats}: File too large" in err and "Traceback" not in err
     assert [q.name for q in tmp_path.iterdir()] == (["log.txt"] if server == "logger" else [])
+
+
+@pytest.mark.parametrize("extra,needle", [(["--slow-motion", "0.5"], "--slow-motion must be in [1, 100]"),
+                                          (["--slow-motion", "2"], "--slow-motion is for --mode realtime")])
+def test_a_plant_refuses_slow_motion_it_cannot_run(extra: list[str], needle: str) -> None:
+    _one_line_error(_run(*NODES["plant"], *extra), 2, needle)

@@ -141,7 +141,7 @@ def test_the_harness_runs_at_real_time_priority_unless_asked_not_to() -> None:
     _compare(rec)
     assert rec.harness_rt == [True] * 4
     plain = Recorder()
-    lc.compare(lc.CompareSettings(500.0, 30.0, 0, harness_rt=False), lambda _: None, measure=plain.measure,
+    lc.compare(lc.CompareSettings(500.0, 30.0, 0, harness_rt=False, pm_qos=False), lambda _: None, measure=plain.measure,
                baseline=plain.baseline, load=plain.load, programs={"python": None, "c": ("mrs_node",)})
     assert plain.harness_rt == [False, False]
 
@@ -194,7 +194,10 @@ def test_a_harness_process_gets_sched_fifo_on_every_thread_and_its_cpus() -> Non
                               "threading.Thread(target=time.sleep, args=(30,), daemon=True).start()\n"
                               "time.sleep(30)\n"])
     try:
-        time.sleep(0.3)  # its second thread is up
+        deadline = time.monotonic() + 30.0
+        while len(os.listdir(f"/proc/{child.pid}/task")) < 2:  # its second thread is up
+            assert time.monotonic() < deadline and child.poll() is None
+            time.sleep(0.02)
         cpus = {os.cpu_count() - 1} if (os.cpu_count() or 1) > 1 else {0}
         got = loop.realtime_process(child.pid, loop.HARNESS_RT_PRIORITY, cpus)
         if "denied" in got:
@@ -209,6 +212,26 @@ def test_a_harness_process_gets_sched_fifo_on_every_thread_and_its_cpus() -> Non
         child.kill()
         child.wait()
     assert loop.realtime_process(child.pid, 40, None)["rt_priority"] == 0  # gone: said, not raised
+
+
+def test_a_refused_thread_puts_the_others_back_and_is_reported(monkeypatch: pytest.MonkeyPatch) -> None:
+    from mrsteer_bench import loop
+
+    calls: list[tuple[int, int]] = []
+
+    def setscheduler(tid: int, policy: int, param: object) -> None:
+        calls.append((tid, policy))
+        if tid == 13 and policy == os.SCHED_FIFO:
+            raise PermissionError(1, "Operation not permitted")
+        if tid == 12:
+            raise ProcessLookupError(3, "No such process")  # ended meanwhile: skipped, not a refusal
+
+    monkeypatch.setattr(loop.os, "listdir", lambda path: ["11", "12", "13"])
+    monkeypatch.setattr(loop.os, "sched_setscheduler", setscheduler)
+    monkeypatch.setattr(loop.os, "sched_setaffinity", lambda tid, cpus: None)
+    got = loop.realtime_process(99, 40, {0})
+    assert got["rt_priority"] == 0 and "not permitted" in got["denied"]
+    assert calls == [(11, os.SCHED_FIFO), (12, os.SCHED_FIFO), (13, os.SCHED_FIFO), (11, os.SCHED_OTHER)]
 
 
 def test_cpu_load_starts_its_processes_and_stops_them() -> None:
@@ -328,3 +351,12 @@ def test_real_time_empty_loop_runs_with_the_controllers_set_up() -> None:
     ncpu = os.cpu_count() or 1
     if ncpu > 1 and "cpu_denied" not in r:
         assert r["cpu_affinity"] == [ncpu - 1]
+
+
+def test_the_plain_machine_flag_turns_both_set_ups_off() -> None:
+    from mrsteer_bench.run import build_parser, loop_settings_of
+
+    plain = loop_settings_of(build_parser().parse_args(["--loop-plain-machine", "--load-procs", "1"]))
+    assert (plain.harness_rt, plain.pm_qos, plain.load_procs) == (False, False, 1)
+    default = loop_settings_of(build_parser().parse_args([]))
+    assert default.harness_rt and default.pm_qos

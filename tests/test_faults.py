@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 import mrsteer_dbc
 from firmware_py.controller import node as rt
 from mrsteer_dbc import E2EStatus
-from sim_plant.nodes.fault_bridge import Bridge, Fault
+from sim_plant.nodes.fault_bridge import HISTORY, Bridge, Fault
 from sim_plant.harness import faults as F
 from sim_plant.harness.faults import CALIBRATIONS, ROWS, Setup, format_table, run_matrix
 from sim_plant.harness.faults.verdicts import faulted_after_bad_frames
@@ -83,6 +83,24 @@ def test_substitution_sends_the_old_frame_instead(bridge) -> None:
     (_, out), = b.transform(_yaw(0, 0.5), 101.0)  # the 16th frame: counter 0 again after 0..14
     old = C.decode(YAW, bytes(out.data))
     assert old.status is E2EStatus.OK and old.counter == 0 and old.signals["YawRate_YawRate"] == 0.0
+
+
+@pytest.mark.parametrize("kind", ["substitute", "replay"])
+def test_without_that_much_history_a_frame_is_forwarded_and_not_counted(bridge, kind: str) -> None:
+    b = bridge(kind, 3.0)
+    sent = [b.transform(_yaw(k), 101.0 + 0.002 * k) for k in range(5)]  # all inside the window
+    assert [len(out) for out in sent] == [1, 1, 1, 1 if kind == "substitute" else 2, 1 if kind == "substitute" else 2]
+    assert all(bytes(out[0][1].data) == bytes(_yaw(k).data) for k, out in enumerate(sent[:3]))
+    assert b.stats.affected == 2  # the 4th and 5th frames, which had 3 before them
+
+
+def test_a_substitution_is_as_old_at_every_matrix_rate() -> None:
+    from sim_plant.harness.faults.run import bridge_fault
+
+    row = next(r for r in ROWS if r.fault.kind == "substitute")
+    depths = {rate: bridge_fault(row, Setup(rate_hz=rate)).param for rate in CALIBRATIONS}
+    assert depths == {1000.0: 300, 500.0: 150, 200.0: 60, 100.0: 30}  # 0.3 s, counter-aligned (15)
+    assert all(d <= HISTORY for d in depths.values())
 
 
 def test_the_forger_takes_the_next_counters_with_a_valid_crc(channel: str) -> None:

@@ -23,8 +23,9 @@ def test_controller_settings_reach_the_controller_as_given(tmp_path: Path) -> No
     cal = replace(mr.plain_law(mr.ControllerConfig(), 43.1, 0.0212, 0.02), model_delay_steps=2)
     s = launch.ControllerSettings(333.3333333333333, launch.write_calibration(tmp_path, cal), trigger="sensors",
                                   q_form="standard", rate_limit=0.6981317007977318, duration=2.5, rt_priority=50,
-                                  cpu=1, stats_out=Path("/tmp/x/controller.json"), secoc=True)
+                                  cpu=1, stats_out=Path("/tmp/x/controller.json"), secoc=True, slow_motion=2.5)
     a = controller_parser().parse_args(list(launch.controller(BUS, s).argv))
+    assert a.slow_motion == 2.5
     assert (a.interface, a.channel, a.rate_hz, a.trigger, a.controller) == ("mrsteer", "chan-1", 333.3333333333333,
                                                                             "sensors", "standard")
     assert a.calibration == cal  # the file read back is the calibration, bit for bit
@@ -43,8 +44,10 @@ def test_unset_controller_settings_leave_the_nodes_defaults() -> None:
 def test_plant_settings_reach_the_plant_as_given() -> None:
     s = launch.PlantSettings(200.0, "lockstep", "handover", duration=3.25, delay_steps=2, actuator_rate=1.0471975511965976,
                              cmd_timeout=0.02, v=27.5, mu=0.3, mz=-4000.0, no_controller=True,
-                             trace_out=Path("w/plant_trace.csv"), stats_out=Path("w/plant.json"), secoc=True)
+                             trace_out=Path("w/plant_trace.csv"), stats_out=Path("w/plant.json"), secoc=True,
+                             slow_motion=3.0)
     a = plant_parser().parse_args(list(launch.plant(BUS, s).argv))
+    assert a.slow_motion == 3.0
     assert (a.channel, a.rate_hz, a.mode, a.scenario, a.duration, a.delay_steps) == ("chan-1", 200.0, "lockstep",
                                                                                        "handover", 3.25, 2)
     assert (a.actuator_rate, a.cmd_timeout, a.v, a.mu, a.mz) == (1.0471975511965976, 0.02, 27.5, 0.3, -4000.0)

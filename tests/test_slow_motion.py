@@ -77,3 +77,44 @@ def test_a_row_in_slow_motion_is_judged_as_in_real_time(tmp_path: Path, impl: st
     assert plant["overruns"] <= plant["steps"] // 20
     ctl = json.loads((tmp_path / "01" / "controller.json").read_text())
     assert abs(ctl["cycles"] - plant["steps"]) <= plant["steps"] // 10  # one law step per car step
+
+
+def test_gather_reads_every_time_of_a_slow_row_in_the_cars_time(tmp_path: Path) -> None:
+    """A made-up row directory in 2x slow motion: the frames of both logs, the trace's wall
+    column, the kill and restart and the bridge's window all come back as ref + (t - ref) / 2."""
+    import can
+
+    import mrsteer_dbc
+    from mrsteer_dbc import names
+    from sim_plant.harness.faults.evidence import gather
+    from sim_plant.nodes.candump_log import format_line
+
+    c = mrsteer_dbc.load()
+    ref = 1.7e9 + 0.25  # the vehicle's first frame
+
+    def log(path: Path, frames: list[tuple[float, str, dict[str, float]]]) -> None:
+        path.write_text("".join(format_line(can.Message(timestamp=t, arbitration_id=c.frame_id(name),
+                                                        data=c.encode(name, values, k % 15), is_extended_id=False), "x")
+                                for k, (t, name, values) in enumerate(frames)))
+
+    yaw = (names.MSG_YAW, {names.SIG_YAW_RATE: 0.0})
+    log(tmp_path / "vehicle.log", [(ref + 0.002 * k, *yaw) for k in range(6)])
+    log(tmp_path / "controller.log", [(ref + 0.004, *yaw), (ref + 0.006, names.MSG_CMD, {
+        "AuxSteerCmd_State": 1, "AuxSteerCmd_Angle": 0.0, "AuxSteerCmd_MeasCounter": 0, "AuxSteerCmd_FvEpoch": 0,
+        "AuxSteerCmd_FvCounter": 0, "AuxSteerCmd_MAC": 0})])
+    (tmp_path / "trace.csv").write_text("t_s,aux_applied_rad,aux_cmd_rad,wall_s\n0,0,0,%.6f\n0.002,0,0,%.6f\n"
+                                        % (ref, ref + 0.004))
+    times = {"t0": ref, "first_affected": ref + 0.006, "last_affected": ref + 0.01}
+    (tmp_path / "bridge.json").write_text(json.dumps({**times, "affected": 2}))
+    (tmp_path / "plant.json").write_text("{}")
+    for side in ("vehicle", "controller"):
+        (tmp_path / f"logger-{side}.json").write_text('{"frames": 6}')
+    e = gather(ROW["baseline"], tmp_path, None, ref + 0.008, ref + 0.01, Setup(slow_motion=2.0))
+    car = pytest.approx
+    assert [f.t for f in e.vehicle_frames] == car([ref + 0.001 * k for k in range(6)], abs=1e-6)
+    assert [f.t for f in e.frames] == car([ref + 0.002, ref + 0.003], abs=1e-6)
+    assert [t for t, _ in e.cmds] == car([ref + 0.003], abs=1e-6) and e.end == car(ref + 0.005, abs=1e-6)
+    assert e.trace.wall == car([ref, ref + 0.002], abs=1e-6) and e.trace.t == [0.0, 0.002]
+    assert (e.killed_at, e.restarted) == (car(ref + 0.004, abs=1e-6), car(ref + 0.005, abs=1e-6))
+    assert [e.bridge[k] for k in times] == car([ref, ref + 0.003, ref + 0.005], abs=1e-6)
+    assert e.bridge["affected"] == 2  # counts are not times

@@ -22,7 +22,8 @@ replay             after each frame, also send the frame of the same message ``p
                    earlier again (recorded traffic played back by an attacker)
 substitute         send the frame of the same message ``param`` frames earlier *instead* (a
                    man in the middle; with ``param`` 15 the alive counter is what the receiver
-                   expects, so E2E alone cannot tell)
+                   expects, so E2E alone cannot tell); while fewer than ``param`` frames of the
+                   message were seen, both forward the frame as it is and do not count it
 out_of_range       first physical signal set to ``param`` (outside the DBC range), E2E valid
 flood              also send 8-byte frames of an unused ID (0x7F0) on the controller side,
                    ``param`` per s (sent in bursts as they fall due)
@@ -66,7 +67,7 @@ KINDS = ("none", "drop", "delay", "duplicate", "reorder", "corrupt_payload", "co
 SENSORS = names.SENSORS
 COMMAND = names.MSG_CMD
 FLOOD_ID = 0x7F0
-HISTORY = 256  # frames kept per message for replay and substitution
+HISTORY = 1024  # frames kept per message for replay and substitution (2 s of commands at 500 Hz)
 # E2E and SecOC fields (the DBC's naming): out_of_range sets the first signal that is none of these.
 PROTECTION_SUFFIXES = ("_CRC", "_Counter", "_FvEpoch", "_FvCounter", "_MAC")
 
@@ -171,6 +172,8 @@ class Bridge:
         kind = f.kind
         if kind in ("none", "flood"):
             return [(now, msg)]
+        if kind in ("replay", "substitute") and len(hist) <= int(f.param):
+            return [(now, msg)]  # not that many frames yet: forwarded as it is, and not counted
         self._mark(now)
         data = bytearray(msg.data)
         if kind == "drop":
@@ -195,13 +198,9 @@ class Bridge:
         elif kind == "wrong_length":
             data = data[:-1]
         elif kind == "replay":
-            back = int(f.param)
-            if len(hist) <= back:
-                return [(now, msg)]
-            return [(now, msg), (now, _copy(msg, hist[-1 - back][1]))]
+            return [(now, msg), (now, _copy(msg, hist[-1 - int(f.param)][1]))]
         elif kind == "substitute":
-            back = int(f.param)
-            data = bytearray(hist[-1 - back][1]) if len(hist) > back else data
+            data = bytearray(hist[-1 - int(f.param)][1])
         elif kind == "spoof_command":
             return [(now, msg), (now, _copy(msg, self._forge(msg)))]
         elif kind == "out_of_range":

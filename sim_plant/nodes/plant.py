@@ -355,6 +355,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
         if not (math.isfinite(value) and value > 0):
             parser.error(f"--{name.replace('_', '-')} must be positive")
     check_slow_motion(parser, args.slow_motion)
+    if args.slow_motion != 1.0 and args.mode != "realtime":
+        parser.error("--slow-motion is for --mode realtime (lockstep already waits for the controller)")
     try:
         sc = scn.load(args.scenario).with_overrides(v=args.v, mu=args.mu, mz=args.mz, mass=args.mass,
                                                    duration=args.duration).with_models(
@@ -374,7 +376,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
                      args.lockstep_timeout, expect_controller=not args.no_controller,
                      actuator_rate=args.actuator_rate, secoc_key=key, slow_motion=args.slow_motion)
     node.record_trace = args.trace_out is not None
-    slow = f", in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 and args.mode == "realtime" else ""
+    slow = f", in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 else ""
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2)),
                      (args.trace_out, node.trace_csv)],

@@ -19,8 +19,8 @@ from sim_plant.nodes.candump_log import Frame, read_candump
 
 @dataclass(frozen=True)
 class Trace:
-    """Plant time, applied angle, the command the actuator holds and the wall clock (epoch s)
-    of every plant step."""
+    """Plant time, applied angle, the command the actuator holds and the wall clock (epoch s;
+    in ``Evidence``, the car's time: ``CarClock``) of every plant step."""
 
     t: list[float]
     applied: list[float]
@@ -72,8 +72,9 @@ class Status:
 
 @dataclass(frozen=True)
 class Evidence:
-    """One row's run: what the runner did (exit status, kill and restart times, epoch s) and
-    what was recorded."""
+    """One row's run: what the runner did (exit status, kill and restart times) and what was
+    recorded.  Every time in it is epoch s read as the car's time (``CarClock``: the wall
+    clock itself at slow motion 1)."""
 
     row: Row
     setup: Setup

@@ -20,8 +20,8 @@ from sim_plant.harness import launch
 from sim_plant.harness.faults.verdicts import RowResult, judge
 from sim_plant.nodes.fault_bridge import Fault
 from sim_plant.harness.faults.rows import ROWS, Row, plant_fault
-from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_LIMIT,
-                                               RESTART_AT, Setup, scenario_spec)
+from sim_plant.harness.faults.settings import (ACTUATOR_RATE, DRAIN_TIMEOUT, DURATION, KILL_AT, RATE_HZ,
+                                               RATE_LIMIT, RESTART_AT, Setup, scenario_spec)
 from sim_plant.harness.processes import Proc, RunError, stop, wait_for_socket, wait_ready, wait_stderr
 
 
@@ -111,13 +111,17 @@ def bridge_fault(row: Row, setup: Setup) -> Fault:
     """The row's fault as the bridge is to inject it, in wall time: its window stretched by the
     time scale (a sensor row's start is a point of the car's motion, which the time scale does
     not stretch) and everything timed stretched by the slow motion (the window, a delay; a
-    flood's rate and a drift's slope slowed).  A fault the plant injects leaves the bridge
-    only forwarding."""
+    flood's rate and a drift's slope slowed); a substitution as deep as the same age at the
+    matrix's rate.  A fault the plant injects leaves the bridge only forwarding."""
     f, slow = row.fault, setup.slow_motion
     start = f.start * (1.0 if row.plausibility else setup.time_scale)
     fault = replace(f, start=start * slow, stop=f.stop * setup.time_scale * slow)
     if f.kind == "delay":
         fault = replace(fault, param=f.param * slow)
+    elif f.kind == "substitute":
+        # The rows give a substitution's depth in frames at the shipped rate (150: 0.3 s, and a
+        # multiple of the alive counter's 15): the same age at the matrix's rate.
+        fault = replace(fault, param=round(f.param * setup.rate_hz / RATE_HZ))
     elif f.kind in ("flood", "sensor_drift"):
         fault = replace(fault, param=f.param / slow)
     if row.at_plant:

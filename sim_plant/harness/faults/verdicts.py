@@ -242,6 +242,9 @@ def check_rejections(e: Evidence, v: Verdict) -> None:
     """Frames refused by the controller (every bad one, no foreign one let in) and by the plant;
     the flood's rate."""
     row, bridge, plant, ctl_stats = e.row, e.bridge, e.plant, e.ctl_stats
+    if (row.fault.kind != "none" and not row.at_plant and not bridge["affected"] and row.detect_within is None
+            and not row.plausibility):
+        v.fails.append("the fault never hit a frame")  # the rows that must fault say so themselves
     if ctl_stats is not None:
         rejected = ctl_stats["rx_rejected"]
         v.observed.append(f"controller rejected {rejected}")
@@ -251,7 +254,10 @@ def check_rejections(e: Evidence, v: Verdict) -> None:
             v.fails.append(f"{ctl_stats['rx_ignored']} foreign frames reached the controller process")
     if row.fault.kind == "flood":
         rate = bridge["injected_to_controller"] / ((row.fault.stop - row.fault.start) * e.setup.time_scale)
-        v.observed.append(f"flood {rate:.0f} frames/s, {100.0 * rate / FLOOD_CAPACITY:.0f} % of a 500 kbit/s bus")
+        # The bus's load is a wall-time figure: in slow motion the flood is that much thinner.
+        wall = rate / e.setup.slow_motion
+        slow = "" if e.setup.slow_motion == 1.0 else f" of the car's time ({wall:.0f} per wall second)"
+        v.observed.append(f"flood {rate:.0f} frames/s{slow}, {100.0 * wall / FLOOD_CAPACITY:.0f} % of a 500 kbit/s bus")
     if row.plant_rejects:
         if plant["cmd_rejected"] < bridge["affected"]:
             v.fails.append(f"plant rejected {plant['cmd_rejected']} of {bridge['affected']} corrupted commands")

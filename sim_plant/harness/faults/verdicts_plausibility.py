@@ -6,7 +6,8 @@ A sensor row (``Row.plausibility`` set) must show, counted from when the fault's
 the monitor's bound (for a step fault: its onset, the first falsified frame):
 
 * **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms;
-  in wall time or in controller cycles, as the other rows count on a starved machine), or, if
+  in time (the car's, ``evidence.CarClock``) or in controller cycles, as the other rows count on
+  a starved machine), or, if
   no command shows it, the first ``MRS_CtrlStatus`` with a fault bit in
   ``CtrlStatus_Plausibility`` within 300 ms plus its cycle (100 ms); or any time after the onset
   but before the error left its bound (early); nothing before the onset;
@@ -76,7 +77,7 @@ def _bound(signal: str, cfg: PlausibilityConfig, r: float, v: float) -> float:
 
 def onset(e: Evidence) -> float | None:
     """When the fault first made a value wrong (epoch s): the bridge's first falsified frame, or
-    for a fault the plant injects, the first plant step at its start (the trace's wall clock)."""
+    for a fault the plant injects, the first plant step at its start (the trace's wall clock), both as the car's time (``evidence.CarClock``)."""
     if not e.row.at_plant:
         return e.bridge["first_affected"]
     tr = e.trace
@@ -192,7 +193,7 @@ def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observ
         then = max((abs(err) / bound for t_, err, bound in series if start <= t_ <= t_det), default=0.0)
         observed.append(f"reported before the error stayed over its bound (it was {then:.2f}x of it), so after "
                         f"the onset:")
-    # The command shows the state every cycle: it is the measure, in wall time or, as the other
+    # The command shows the state every cycle: it is the measure, in time or, as the other
     # rows count (a starved controller runs its cycles late), in its cycles.  Only without it
     # does the status (every STATUS_CYCLE) count, with its cycle allowed.
     cycles = None if t_cmd is None else sum(1 for t_, _ in e.cmds if ref <= t_ <= t_cmd)
@@ -209,7 +210,7 @@ def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observ
     elif not (cmd_ok or st_ok):
         fails.append(f"plausibility fault reported late ({shown}; allowed {1e3 * PLAUS_DETECT:.0f} ms)")
     elif t_cmd is not None and t_cmd - ref > PLAUS_DETECT + 2 * ts:
-        observed.append(f"late in wall time only: the controller ran {cycles} cycles in {1e3 * (t_cmd - ref):.0f} ms")
+        observed.append(f"late in time only: the controller ran {cycles} cycles in {1e3 * (t_cmd - ref):.0f} ms")
     check_report(e, fails, t_cmd, t_st)
     if t_cmd is None:
         fails.append("no command ever in state FAULT")
