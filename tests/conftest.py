@@ -77,3 +77,27 @@ def lockstep_traffic(log: "os.PathLike[str] | str") -> dict[str, list]:
 
 
 __all__ = ["lockstep_traffic", "polymul", "polyadd", "P"]
+
+
+#: Rows of a realtime fault matrix that may fail once on a shared machine and be run again.
+MATRIX_RERUN_MAX = 2
+
+
+def matrix_with_one_rerun(run, rows, keep):
+    """``run(rows, keep)`` (a realtime fault matrix), and the rows that failed, if no more than
+    ``MATRIX_RERUN_MAX``, once more in ``keep / "rerun"``: a realtime row on a machine shared
+    with other jobs is occasionally late when the machine stalls its processes (the plant's
+    frames 3-7 ms apart instead of 2, seen in CI), which no row can tell from a late controller.
+    A row that fails twice, or more rows than that, fail the test; a rerun is reported as a
+    warning with the first run's failures, so it is never silent."""
+    import warnings
+
+    results = run(rows, keep)
+    failed = [r for r in results if not r.passed]
+    if not failed or len(failed) > MATRIX_RERUN_MAX:
+        return results
+    names = {r.name for r in failed}
+    again = {r.name: r for r in run(tuple(row for row in rows if row.name in names), keep / "rerun")}
+    warnings.warn("fault matrix rows run again after failing once: " + "; ".join(
+        f"{r.name}: {', '.join(r.failures)} -> {'PASS' if again[r.name].passed else 'FAIL again'}" for r in failed))
+    return [again.get(r.name, r) for r in results]

@@ -24,6 +24,8 @@ from sim_plant.harness.faults.verdicts import faulted_after_bad_frames
 from sim_plant.harness.processes import RunError
 from sim_plant.nodes.candump_log import Frame
 
+from conftest import matrix_with_one_rerun
+
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
 YAW = C.frame_id("MRS_YawRate")
@@ -209,7 +211,7 @@ def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
 
 
 def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
-    results = run_matrix(ROWS, keep=tmp_path)
+    results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep), ROWS, tmp_path)
     table = format_table(results)
     assert all(r.passed for r in results), table
     assert len(results) == len(ROWS) >= 20
@@ -357,3 +359,32 @@ def test_faults_run_secoc_judges_a_row_with_the_sensor_frames_authenticated(caps
     # Every replay 1 back was refused by the controller's MAC, not only counted as rejected.
     refused = int(result["observed"].split("controller: ")[1].split(" sensor frames failed SecOC")[0])
     assert refused >= 190
+
+
+def test_a_matrix_row_that_fails_once_is_run_again_and_reported() -> None:
+    from dataclasses import replace as dc_replace
+
+    from sim_plant.harness.faults.verdicts import RowResult
+
+    def result(name: str, ok: bool) -> RowResult:
+        return RowResult(name, "", ok, "", 0.0, 0.0, None, [] if ok else ["late"])
+
+    calls: list[tuple[str, ...]] = []
+
+    def run(outcome: dict[str, list[bool]]):
+        def go(rows, keep):
+            calls.append(tuple(r.name for r in rows))
+            return [result(r.name, outcome[r.name].pop(0)) for r in rows]
+        return go
+
+    rows = tuple(dc_replace(ROWS[0], name=n) for n in "abc")
+    with pytest.warns(UserWarning, match="b: late -> PASS"):
+        res = matrix_with_one_rerun(run({"a": [True], "b": [False, True], "c": [True]}), rows, Path("/x"))
+    assert [r.passed for r in res] == [True, True, True] and calls == [("a", "b", "c"), ("b",)]
+    calls.clear()
+    with pytest.warns(UserWarning, match="FAIL again"):
+        res = matrix_with_one_rerun(run({"a": [False, False], "b": [True], "c": [True]}), rows, Path("/x"))
+    assert [r.passed for r in res] == [False, True, True]
+    calls.clear()
+    res = matrix_with_one_rerun(run({"a": [False], "b": [False], "c": [False]}), rows, Path("/x"))  # too many
+    assert calls == [("a", "b", "c")] and not any(r.passed for r in res)
