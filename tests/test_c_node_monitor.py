@@ -74,6 +74,7 @@ class Drive:
     redundant: bool = True
     jitter: bool = False  # every 3rd redundant frame 10 periods late, the yaw frame of every 4th's period lost
     slow: int = 1  # the sender steps once every `slow` control periods (a plant behind real time)
+    burst: int = 0  # every 2nd redundant frame comes in one drain with the frames of the `burst` periods before it
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -106,6 +107,11 @@ class Drive:
                 period.append(frame)
             out.append(late.pop(k, []) + period)
             out += [[] for _ in range(self.slow - 1)]  # the sender's step took this many periods more
+        n = every[names.MSG_REDUNDANT]
+        for k in range(n, len(out), 2 * n) if self.burst else ():  # a stall, then its frames at once
+            stalled = [f for period in out[k - self.burst:k] for f in period]
+            out[k - self.burst:k] = [[] for _ in range(self.burst)]
+            out[k] = stalled + out[k]
         return out
 
 
@@ -220,6 +226,18 @@ def test_a_sender_slower_than_the_loop_keeps_the_monitors_clock_as_in_python(sec
     # redundant frames, 25 samples apart by their counters, stay in time and nothing is withheld
     # (counted in control periods they would be 50 apart: DEGRADED for good).
     cmds, statuses = _run(secoc_check, Drive(seconds=2.0, slow=2))
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    assert set(plaus[1:]) == {0}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
+
+
+def test_a_redundant_frame_drained_in_a_burst_with_the_samples_before_it_stays_in_time_as_in_python(
+        secoc_check: Path) -> None:
+    # A stall of 5 periods ends with its frames drained at once: the yaw-rate samples before the
+    # redundant frame belong to its interval (25 samples by the counters), not to the next one's.
+    # Counted at the period's end instead, this sample (21 of 25) and the next (29) were both
+    # withheld: DEGRADED for 100 ms and, in a fault, the kinematic window restarted (200 ms).
+    cmds, statuses = _run(secoc_check, Drive(seconds=2.0, burst=5))
     plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
     assert set(plaus[1:]) == {0}
     assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}

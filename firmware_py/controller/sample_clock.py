@@ -47,13 +47,16 @@ class SampleClock:
     def redundant_frame(self, counter: int) -> None:
         """A redundant sample is in time when it arrived within ``REDUNDANT_JITTER_CYCLES`` samples
         of what its alive counter says elapsed since the one before (the first one is)."""
+        # The yaw-rate samples drained before it in this cycle are not yet in red_samples (the
+        # tick adds the cycle's count): they belong to this interval, and not to the next.
+        before = self.samples
         if self.red_counter >= 0:
             expected = ((counter - self.red_counter) % COUNTER_MODULO) * self.red_expected
-            self.redundant_in_time = abs(self.red_samples - expected) <= REDUNDANT_JITTER_CYCLES
+            self.redundant_in_time = abs(self.red_samples + before - expected) <= REDUNDANT_JITTER_CYCLES
         else:
             self.redundant_in_time = True
         self.red_counter = counter
-        self.red_samples = 0
+        self.red_samples = -before
 
     def tick(self) -> None:
         """End of the cycle's reading: the samples counted move to the redundant frame's count."""

@@ -111,16 +111,21 @@ void mrs_node_free(mrs_node_t *n)
  * (mrs_node_rx.c) calls it on each accepted one. */
 void mrs_node_time_redundant(mrs_node_t *n, unsigned counter)
 {
+    /* The yaw-rate samples drained before it in this period are not yet in red_cycles (the
+     * period adds its count): they belong to this interval, and not to the next. */
+    const long limit = n->in[1].limit;
+    const long before = n->yaw_samples < limit ? n->yaw_samples : limit;
     if (n->red_counter >= 0) {
         const unsigned delta =
             (counter + MRS_E2E_COUNTER_MODULO - (unsigned)n->red_counter) % MRS_E2E_COUNTER_MODULO;
         const double expected = (double)delta * n->red_expected;
-        n->red_usable = fabs((double)n->red_cycles - expected) <= (double)MRS_REDUNDANT_JITTER_CYCLES;
+        n->red_usable =
+            fabs((double)(n->red_cycles + before) - expected) <= (double)MRS_REDUNDANT_JITTER_CYCLES;
     } else {
         n->red_usable = 1;
     }
     n->red_counter = (int)counter;
-    n->red_cycles = 0;
+    n->red_cycles = -before;
 }
 
 /* The yaw-rate samples since the last period, by the accepted frames' alive counter (a lost
