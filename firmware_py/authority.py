@@ -29,7 +29,8 @@ class AuthorityConfig:
     ts: float = 0.002
     u_max: float = math.radians(3.0)  # magnitude: the actuator's range
     rate_max: float = 10.0  # rad/s: a 6 deg reversal in >= 10.5 ms; above the law's needs (docs/controller.md)
-    fade_rate: float = math.radians(6.0)  # rad/s toward 0 on a fault or when the time is up
+    fade_rate: float = math.radians(6.0)  # rad/s toward 0 when the time is up: a hand-back to the driver
+    fault_fade_rate: float = math.radians(30.0)  # rad/s toward 0 on a plausibility fault: a wrong command
     panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
     engage: float = math.radians(0.1)  # |u| above this counts as intervening
     rearm_time: float = 1.0  # s of |u| <= engage before the window starts afresh
@@ -40,6 +41,7 @@ class AuthorityCoefficients:
     u_max: float
     du_max: float
     fade_step: float
+    fault_fade_step: float
     window_steps: int
     engage: float
     rearm_steps: int
@@ -62,21 +64,22 @@ def reset_authority(s: AuthorityState) -> None:
 def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
     check_positive(cfg, tuple(vars(cfg)))
     return AuthorityCoefficients(u_max=cfg.u_max, du_max=cfg.rate_max * cfg.ts, fade_step=cfg.fade_rate * cfg.ts,
+                                 fault_fade_step=cfg.fault_fade_rate * cfg.ts,
                                  window_steps=max(1, round(cfg.panic_window / cfg.ts)), engage=cfg.engage,
                                  rearm_steps=max(1, round(cfg.rearm_time / cfg.ts)))
 
 
 def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int) -> float:
     """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
-    +-u_max, moving at most ``rate_max``; faded to zero at ``fade_rate`` on a plausibility fault
-    or a non-finite request, and once the intervention has lasted ``panic_window`` unless the
-    inputs are known consistent (every check running: no DEGRADED).  ``s.flags`` says which
+    +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
+    fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
+    ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).  ``s.flags`` says which
     bound acted."""
     flags = 0
     du = c.du_max
     if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):
         target = 0.0
-        du = c.fade_step
+        du = c.fault_fade_step
         flags |= AUTH_FAULT
     elif s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
         target = 0.0

@@ -182,8 +182,8 @@ def test_stuck_yaw_rate_is_a_plausibility_fault_faded_to_zero_as_in_python(secoc
     # and the count over the bound take 300 ms of this drive: a bound, not a target.
     assert k_fault - k_stuck <= 0.35 * RATE_HZ
     assert set(states[k_fault:]) == {mr.STATUS_FAULT}  # latched
-    # The limiter fades at its rate from where the command was: zero within |u| / fade_rate.
-    fade = au.AuthorityConfig().fade_rate
+    # The limiter fades at its fault rate from where the command was: zero within |u| / 30 deg/s.
+    fade = math.radians(30.0)
     u0 = abs(cmds[k_fault - 1][names.SIG_CMD_ANGLE])
     k_zero = k_fault + int(math.ceil(u0 / fade * RATE_HZ)) + 1
     assert u0 > 1e-3 and all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[k_zero:])

@@ -33,7 +33,7 @@ ONSET = 1.0
 END = 2.6
 R = 0.0203  # rad/s: paper-fig9's yaw rate from 1.0 s
 U0 = math.radians(-1.81)
-FADE = math.radians(6.0)
+FADE = math.radians(30.0)  # the authority limiter's fade on a plausibility fault
 
 
 def _row(name: str = "yaw-rate offset +3 deg/s") -> F.Row:

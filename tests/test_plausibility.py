@@ -148,10 +148,12 @@ def test_authority_bounds_magnitude_and_rate_and_fades_on_a_fault() -> None:
     u = [au.authority_step(c, s, 0.1, 0) for _ in range(30)]
     assert u[0] == pytest.approx(10.0 * TS) and s.flags == au.AUTH_MAGNITUDE  # rate, then the range
     assert max(u) == pytest.approx(D(3.0))
-    u = [au.authority_step(c, s, 0.04, pl.PLAUS_YAW) for _ in range(100)]
-    assert u[0] == pytest.approx(D(3.0) - D(6.0) * TS) and s.flags == au.AUTH_FAULT
-    assert u[-1] == pytest.approx(D(3.0) - 100 * D(6.0) * TS)
-    assert au.authority_step(c, s, math.nan, 0) < u[-1]  # a non-finite request fades too
+    u = [au.authority_step(c, s, 0.04, pl.PLAUS_YAW) for _ in range(20)]
+    # a fault's command is wrong: it fades at 30 deg/s (3 deg in 0.1 s), five times the hand-back's 6
+    assert u[0] == pytest.approx(D(3.0) - D(30.0) * TS) and s.flags == au.AUTH_FAULT
+    assert u[-1] == pytest.approx(D(3.0) - 20 * D(30.0) * TS)
+    assert au.authority_step(c, s, math.nan, 0) == pytest.approx(u[-1] - D(30.0) * TS)  # a non-finite request too
+    assert [au.authority_step(c, s, 0.04, pl.PLAUS_STEER) for _ in range(31)][-1] == 0.0
 
 
 def test_authority_ends_an_intervention_at_the_panic_window_only_when_degraded() -> None:
@@ -241,6 +243,6 @@ def test_a_sensor_fault_is_reported_within_300_ms(v: float, mu: float, sensor: s
     assert reported is not None and reported >= onset  # found, and not before it happened
     assert exceeded is None or reported - exceeded <= 0.3
     assert exceeded is not None or reported <= onset + 0.3  # (a frozen value is found before its error grows)
-    # the command fades once it is reported (at 6 deg/s; the 20 ms actuator follows)
-    after = r.t >= reported + abs(r.aux[r.t >= reported][0]) / D(6.0) + 0.15
+    # the command fades once it is reported (at 30 deg/s; the 20 ms actuator follows)
+    after = r.t >= reported + abs(r.aux[r.t >= reported][0]) / D(30.0) + 0.15
     assert abs(r.aux[after]).max() < D(0.01)

@@ -43,8 +43,8 @@ static void print_defaults(void)
            m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
            m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r, m.kin_gap, m.mu_min, m.actuator_tau);
-    printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
-           a.panic_window, a.engage, a.rearm_time);
+    printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
+           a.fault_fade_rate, a.panic_window, a.engage, a.rearm_time);
 }
 
 int main(void)
@@ -92,22 +92,23 @@ int main(void)
     mg.mu_min = v[21];
     mg.actuator_tau = v[22];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
-        read_numbers(line + 9, v, 7) != 0) {
+        read_numbers(line + 9, v, 8) != 0) {
         return 2;
     }
     ag.ts = v[0];
     ag.u_max = v[1];
     ag.rate_max = v[2];
     ag.fade_rate = v[3];
-    ag.panic_window = v[4];
-    ag.engage = v[5];
-    ag.rearm_time = v[6];
+    ag.fault_fade_rate = v[4];
+    ag.panic_window = v[5];
+    ag.engage = v[6];
+    ag.rearm_time = v[7];
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g\n", mc.model_alpha, mc.k_us,
-           (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m, mc.moment_m, mc.cf_m,
-           ac.du_max, ac.fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps, (int)mc.kin_gap_steps,
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g\n", mc.model_alpha,
+           mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m, mc.moment_m, mc.cf_m,
+           ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps, (int)mc.kin_gap_steps,
            mc.lat_span, mc.aux_alpha);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);

@@ -344,7 +344,8 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg)
     cfg->ts = 0.002;
     cfg->u_max = 0.05235987755982989; /* 3 deg */
     cfg->rate_max = 10.0;
-    cfg->fade_rate = 0.10471975511965978; /* 6 deg/s */
+    cfg->fade_rate = 0.10471975511965978;       /* 6 deg/s: a hand-back to the driver */
+    cfg->fault_fade_rate = 0.5235987755982988;  /* 30 deg/s: a wrong command */
     cfg->panic_window = 2.0;
     cfg->engage = 0.0017453292519943296; /* 0.1 deg */
     cfg->rearm_time = 1.0;
@@ -353,12 +354,13 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg)
 int mrs_authority_configure(const mrs_authority_config_t *g, mrs_authority_coeffs_t *c)
 {
     if (!positive(g->ts) || !positive(g->u_max) || !positive(g->rate_max) || !positive(g->fade_rate) ||
-        !positive(g->panic_window) || !positive(g->engage) || !positive(g->rearm_time)) {
+        !positive(g->fault_fade_rate) || !positive(g->panic_window) || !positive(g->engage) || !positive(g->rearm_time)) {
         return -1;
     }
     c->u_max = g->u_max;
     c->du_max = g->rate_max * g->ts;
     c->fade_step = g->fade_rate * g->ts;
+    c->fault_fade_step = g->fault_fade_rate * g->ts;
     c->window_steps = steps_of(g->panic_window, g->ts);
     c->engage = g->engage;
     c->rearm_steps = steps_of(g->rearm_time, g->ts);
@@ -381,7 +383,7 @@ double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t
     double target, d, u;
     if ((plaus_bits & MRS_PLAUS_FAULT) != 0u || !(u_request > -1e3 && u_request < 1e3)) {
         target = 0.0;
-        du = c->fade_step;
+        du = c->fault_fade_step;
         flags |= MRS_AUTH_FAULT;
     } else if (s->engaged >= c->window_steps && (plaus_bits & MRS_PLAUS_DEGRADED) != 0u) {
         target = 0.0;

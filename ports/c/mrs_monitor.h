@@ -74,11 +74,11 @@ typedef struct {
 } mrs_monitor_state_t;
 
 typedef struct {
-    double ts, u_max, rate_max, fade_rate, panic_window, engage, rearm_time;
+    double ts, u_max, rate_max, fade_rate, fault_fade_rate, panic_window, engage, rearm_time;
 } mrs_authority_config_t;
 
 typedef struct {
-    double u_max, du_max, fade_step;
+    double u_max, du_max, fade_step, fault_fade_step;
     int32_t window_steps;
     double engage;
     int32_t rearm_steps;

@@ -50,7 +50,7 @@ class BatchAuthority:
         over, under = request > c.u_max, request < -c.u_max
         target = np.where(over, c.u_max, np.where(under, -c.u_max, request))
         flags |= np.where(~fading & (over | under), au.AUTH_MAGNITUDE, 0)
-        du = np.where(fading, c.fade_step, c.du_max)
+        du = np.where(fault, c.fault_fade_step, np.where(timed_out, c.fade_step, c.du_max))
         d = target - self.u
         up, down = d > du, d < -du
         d = np.where(up, du, np.where(down, -du, d))
@@ -66,7 +66,7 @@ class BatchAuthority:
         fault = (plaus_bits & PLAUS_FAULT) != 0
         if fault.any():
             request = np.where(fault, 0.0, u_request)
-            du = np.where(fault, c.fade_step, c.du_max)
+            du = np.where(fault, c.fault_fade_step, c.du_max)
             low = -du
         else:
             request, du, low = u_request, c.du_max, -c.du_max

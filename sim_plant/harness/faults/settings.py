@@ -50,10 +50,10 @@ FLOOD_CAPACITY = 500e3 / frame_bits(8, worst_case=False)
 
 # Sensor-fault rows (a wrong value in well-formed frames, found by the plausibility monitor).
 PLAUS_DETECT = 0.3  # s from the error exceeding its bound to the fault on the bus (issue 18's target)
-PLAUS_FADE = AuthorityConfig().fade_rate  # rad/s, the authority limiter's fade on a plausibility fault
+PLAUS_FADE = AuthorityConfig().fault_fade_rate  # rad/s, the authority limiter's fade on a plausibility fault
 STATUS_CYCLE = mrsteer_dbc.load().cycle_time_s(names.MSG_STATUS) or 0.1  # s, MRS_CtrlStatus
 PLAUS_START = 1.0  # s: the paper-fig9 car is in its steady state (r 0.020 rad/s, aux -1.81 deg)
-PLAUS_DURATION = 2.6  # s of scenario: detection (<= 0.3 s) and a fade from 3 deg (0.5 s) fit after 1.0 s
+PLAUS_DURATION = 2.6  # s of scenario: detection (<= 0.3 s), a fade from 3 deg (0.1 s) and its latch fit after 1.0 s
 #: The second scenario of the sensor rows: the paper's car at 20 m/s on mu 1, the driver turning
 #: the wheel at a steady rate to 1.5 deg of front-wheel angle over 0.4 s from 0.5 s, then holding
 #: it (the issue's "driver steers 1.5 deg into a curve": r 0.168 rad/s, a_y 3.4 m/s^2 from 1.4 s).

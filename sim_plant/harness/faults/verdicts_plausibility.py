@@ -13,7 +13,7 @@ the monitor's bound (for a step fault: its onset, the first falsified frame):
   but before the error left its bound (early); nothing before the onset;
 * **report**: the first status after that command with a fault bit, cause 0x80 and state FAULT,
   and the row's bit (the check watching the faulted signal) by the end;
-* **fade**: the command back at exactly zero within ``|u at detection| / PLAUS_FADE`` (6 deg/s)
+* **fade**: the command back at exactly zero within ``|u at detection| / PLAUS_FADE`` (30 deg/s)
   plus two cycles (counted in commands on the bus, as the limiter fades once a period), never
   growing on the way;
 * **latched**: every later command FAULT at zero, every later status still reporting it, to the
