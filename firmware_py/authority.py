@@ -73,8 +73,8 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
     """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
     +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
     fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
-    ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).  ``s.flags`` says which
-    bound acted."""
+    ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).
+    ``s.flags`` says which bound acted."""
     flags = 0
     du = c.du_max
     if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):

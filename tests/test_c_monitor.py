@@ -131,8 +131,8 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                            check=True).stdout.split()
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
-                mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps, mc.kin_gap_steps,
-                mc.lat_span, mc.aux_alpha]
+                mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

@@ -106,10 +106,10 @@ int main(void)
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g\n", mc.model_alpha,
-           mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m, mc.moment_m, mc.cf_m,
-           ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps, (int)ac.rearm_steps, (int)mc.kin_gap_steps,
-           mc.lat_span, mc.aux_alpha);
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g\n",
+           mc.model_alpha, mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m,
+           mc.moment_m, mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps,
+           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);
     while (fgets(line, sizeof line, stdin) != NULL) {

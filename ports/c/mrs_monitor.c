@@ -354,7 +354,8 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg)
 int mrs_authority_configure(const mrs_authority_config_t *g, mrs_authority_coeffs_t *c)
 {
     if (!positive(g->ts) || !positive(g->u_max) || !positive(g->rate_max) || !positive(g->fade_rate) ||
-        !positive(g->fault_fade_rate) || !positive(g->panic_window) || !positive(g->engage) || !positive(g->rearm_time)) {
+        !positive(g->fault_fade_rate) || !positive(g->panic_window) || !positive(g->engage) ||
+        !positive(g->rearm_time)) {
         return -1;
     }
     c->u_max = g->u_max;
