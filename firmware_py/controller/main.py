@@ -17,7 +17,7 @@ from firmware_py.controller.options import add_calibration_args, calibration_fro
 from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET
 from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
-                                      check_slow_motion, secoc_key)
+                                      check_slow_motion, secoc_key, slow_motion_suffix)
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.realtime import apply_platform
 
@@ -97,7 +97,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         return 1
     node = ControllerNode(bus, cfg)
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
-    slow = f" in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 else ""
+    slow = slow_motion_suffix(args.slow_motion)
     auth = ", commands and sensor frames authenticated (SecOC)" if cfg.secoc_key is not None else ""
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2))],

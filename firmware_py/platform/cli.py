@@ -51,9 +51,23 @@ def add_slow_motion_arg(p: argparse.ArgumentParser) -> None:
                    f"and every result are unchanged (default 1, at most {SLOW_MOTION_MAX:g})")
 
 
+def slow_motion_problem(value: float) -> str | None:
+    """What is wrong with a slow-motion factor, or None: the one range check behind every
+    ``--slow-motion`` (the nodes' and the fault matrix's)."""
+    if math.isfinite(value) and 1.0 <= value <= SLOW_MOTION_MAX:
+        return None
+    return f"--slow-motion must be in [1, {SLOW_MOTION_MAX:g}], got {value:g}"
+
+
 def check_slow_motion(parser: argparse.ArgumentParser, value: float) -> None:
-    if not (math.isfinite(value) and 1.0 <= value <= SLOW_MOTION_MAX):
-        parser.error(f"--slow-motion must be in [1, {SLOW_MOTION_MAX:g}], got {value:g}")
+    problem = slow_motion_problem(value)
+    if problem is not None:
+        parser.error(problem)
+
+
+def slow_motion_suffix(value: float) -> str:
+    """The ready line's " in Fx slow motion", empty at real time (the C node prints the same)."""
+    return f" in {value:g}x slow motion" if value != 1.0 else ""
 
 
 def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:

@@ -142,6 +142,11 @@ def _num(value: float) -> str:
     return repr(float(value))  # repr: every digit, so the node gets exactly this float
 
 
+def _slow_motion(factor: float) -> list[str]:
+    """``--slow-motion F``, left off at real time: an external controller need not know the flag."""
+    return _opt("--slow-motion", None if factor == 1.0 else factor)
+
+
 def _opt(flag: str, value: float | int | str | Path | None) -> list[str]:
     """``flag value``, or nothing for ``None``; a float in full, an int (a count) as one."""
     if value is None:
@@ -193,7 +198,7 @@ class ControllerSettings:
     stats_out: Path | None = None
     secoc: bool = False  # the key comes through the environment, never argv
     program: tuple[str, ...] | None = None  # an external controller (``controller_program``); None: Python
-    slow_motion: float | None = None  # wall time per period over the period (a slow machine)
+    slow_motion: float = 1.0  # wall time per period over the period (a slow machine)
 
 
 def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
@@ -202,7 +207,7 @@ def controller(bus: BusArgs, s: ControllerSettings) -> Launch:
         *bus.argv(), "--rate-hz", _num(s.rate_hz), *_opt("--trigger", s.trigger), *_opt("--controller", s.q_form),
         *gains, *_opt("--rate-limit", s.rate_limit), *_opt("--duration", s.duration),
         *_opt("--rt-priority", s.rt_priority), *_opt("--cpu", s.cpu), *_opt("--stats-out", s.stats_out),
-        *_opt("--slow-motion", s.slow_motion), *_flag("--secoc", s.secoc)), s.program)
+        *_slow_motion(s.slow_motion), *_flag("--secoc", s.secoc)), s.program)
 
 
 @dataclass(frozen=True)
@@ -228,7 +233,7 @@ class PlantSettings:
     trace_out: Path | None = None  # the true state of every step, as CSV
     stats_out: Path | None = None
     secoc: bool = False
-    slow_motion: float | None = None  # realtime: wall time per step over the step (a slow machine)
+    slow_motion: float = 1.0  # realtime: wall time per step over the step (a slow machine)
 
 
 def plant(bus: BusArgs, s: PlantSettings) -> Launch:
@@ -240,7 +245,7 @@ def plant(bus: BusArgs, s: PlantSettings) -> Launch:
         *_opt("--actuator", s.actuator), *_opt("--sensors", s.sensors), *_opt("--seed", s.seed),
         *(arg for spec in s.sensor_faults for arg in ("--sensor-fault", spec)),
         *_flag("--no-controller", s.no_controller), *_opt("--trace-out", s.trace_out),
-        *_opt("--stats-out", s.stats_out), *_opt("--slow-motion", s.slow_motion), *_flag("--secoc", s.secoc)))
+        *_opt("--stats-out", s.stats_out), *_slow_motion(s.slow_motion), *_flag("--secoc", s.secoc)))
 
 
 def bridge(interface: str, vehicle: str, controller_side: str, fault: Fault, stats_out: Path | None = None) -> Launch:

@@ -53,7 +53,7 @@ import can
 import mrsteer_dbc
 from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
-                                      check_slow_motion, secoc_key)
+                                      check_slow_motion, secoc_key, slow_motion_suffix)
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
@@ -376,7 +376,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
                      args.lockstep_timeout, expect_controller=not args.no_controller,
                      actuator_rate=args.actuator_rate, secoc_key=key, slow_motion=args.slow_motion)
     node.record_trace = args.trace_out is not None
-    slow = f", in {args.slow_motion:g}x slow motion" if args.slow_motion != 1.0 else ""
+    slow = slow_motion_suffix(args.slow_motion)
     return run_node(prog, bus, node.run, node.stop,
                     [(args.stats_out, lambda: json.dumps(node.stats.summary(), indent=2)),
                      (args.trace_out, node.trace_csv)],

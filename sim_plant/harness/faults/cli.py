@@ -78,29 +78,29 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     every = secured_rows() if args.secoc else ROWS
     rows = tuple(row for row in every if not args.only or any(o.lower() in row.name.lower() for o in args.only))
     if not rows:
-        p.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
+        r.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]
                       args.plant, args.actuator, args.sensors, slow_motion=args.slow_motion)
     except ValueError as exc:
-        p.error(str(exc))
+        r.error(str(exc))
     try:
         setup = replace(setup, controller_program=program_of(args))
     except LaunchError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
-        p.error(f"--keep {args.keep} exists and is not a directory")
+        r.error(f"--keep {args.keep} exists and is not a directory")
     if holds_files(args.keep):
-        p.error(f"--keep {args.keep} is not empty: an earlier run's files would be judged as this run's")
+        r.error(f"--keep {args.keep} is not empty: an earlier run's files would be judged as this run's")
     if args.keep is not None:
         try:
             args.keep.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            p.error(f"--keep {args.keep}: cannot create it: {exc.strerror}")
+            r.error(f"--keep {args.keep}: cannot create it: {exc.strerror}")
         if not os.access(args.keep, os.W_OK):
-            p.error(f"--keep {args.keep} is not writable")
+            r.error(f"--keep {args.keep} is not writable")
     try:
         results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
     except RunError as exc:

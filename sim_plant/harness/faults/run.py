@@ -66,10 +66,7 @@ class _RowRun:
                                       launch.write_calibration(self.work, self.setup.calibration()),
                                       rate_limit=RATE_LIMIT,
                                       stats_out=self.work / "controller.json", secoc=self.row.secoc,
-                                      program=self.setup.controller_program, slow_motion=self._slow())))
-
-    def _slow(self) -> float | None:
-        return None if self.setup.slow_motion == 1.0 else self.setup.slow_motion
+                                      program=self.setup.controller_program, slow_motion=self.setup.slow_motion)))
 
     def start_plant(self, name: str, seconds: float) -> Proc:
         # A killed plant writes nothing: its statistics and trace are the next one's files.
@@ -78,7 +75,7 @@ class _RowRun:
             self.setup.rate_hz, "realtime", spec, duration=seconds, actuator_rate=ACTUATOR_RATE,
             cmd_timeout=self.setup.cmd_timeout, plant=self.setup.plant, actuator=self.setup.actuator,
             sensors=self.setup.sensors, trace_out=self.work / "trace.csv",
-            stats_out=self.work / "plant.json", secoc=self.row.secoc, slow_motion=self._slow())))
+            stats_out=self.work / "plant.json", secoc=self.row.secoc, slow_motion=self.setup.slow_motion)))
 
     def play(self, ctl: Proc, plant: Proc, duration: float) -> tuple[Proc, float | None, float | None]:
         """Wait for the plant to finish, killing and restarting what the row says on the way:

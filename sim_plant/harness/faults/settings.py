@@ -14,7 +14,7 @@ from firmware_py import model_regulator as mr
 from firmware_py.authority import AuthorityConfig
 from firmware_py.controller import node as rt
 from firmware_py.controller.node import DEFAULT_RATE_HZ
-from firmware_py.platform.cli import SLOW_MOTION_MAX
+from firmware_py.platform.cli import slow_motion_problem
 from mrsteer_dbc.busload import frame_bits
 from mrsteer_dbc import names
 from sim_plant.car import scenario
@@ -150,8 +150,8 @@ class Setup:
                              f"calibration exists for each), got {self.rate_hz:g}")
         if not (math.isfinite(self.time_scale) and 1.0 <= self.time_scale <= 20.0):
             raise ValueError(f"time scale must be in [1, 20], got {self.time_scale:g}")
-        if not (math.isfinite(self.slow_motion) and 1.0 <= self.slow_motion <= SLOW_MOTION_MAX):
-            raise ValueError(f"slow motion must be in [1, {SLOW_MOTION_MAX:g}], got {self.slow_motion:g}")
+        if (problem := slow_motion_problem(self.slow_motion)) is not None:
+            raise ValueError(problem)
         if not (math.isfinite(self.startup_s) and 0.0 <= self.startup_s <= 120.0):
             raise ValueError(f"start-up allowance must be in [0, 120] s, got {self.startup_s:g}")
         if self.channels is not None and (len(self.channels) != 2 or self.channels[0] == self.channels[1]):
