@@ -2,7 +2,7 @@
 
 An independent limit on how far and how long the auxiliary command may act, whatever computed
 it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
-``authority_step(c, s, u_request, plaus_bits)`` once per control period (scalar arithmetic, no
+``authority_step(c, s, u_request, plaus_bits, cut)`` once per control period (scalar arithmetic, no
 allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
 bit (float64) in ``ports/c/mrs_monitor.c``; the reasoning is in docs/controller.md, "Bounded
 authority".  Meant to run where the command leaves the controller and again at the actuator.
@@ -69,17 +69,20 @@ def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
                                  rearm_steps=max(1, round(cfg.rearm_time / cfg.ts)))
 
 
-def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int) -> float:
+def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int,
+                   cut: int = 0) -> float:
     """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
     +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
     fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
     ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).
-    ``s.flags`` says which bound acted."""
+    ``cut`` nonzero with a fault (the node passes the monitor's ``CHECK_YAW_PAIR``): the fault
+    was found while its command is still building, so the command is removed at ``rate_max``,
+    not faded.  ``s.flags`` says which bound acted."""
     flags = 0
     du = c.du_max
     if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):
         target = 0.0
-        du = c.fault_fade_step
+        du = c.du_max if cut != 0 and (plaus_bits & PLAUS_FAULT) != 0 else c.fault_fade_step
         flags |= AUTH_FAULT
     elif s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
         target = 0.0

@@ -30,15 +30,22 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    still works when the lateral acceleration is missing.
 3. **Steering pair**: the driver's angle against the steering sensor's second channel, at each
    new redundant sample.
-4. **Frozen**: a value that does not change at all (bit for bit) for ``frozen_time`` while its
+4. **Yaw-rate pair**: the yaw rate against the yaw-rate sensor's second element, sampled with it
+   (``MRS_YawRate`` carries both once the bus has the channel; until then NaN pauses it): the
+   mean of their difference over ``YAW_PAIR_WINDOW`` samples (10 ms).  No motion of the car
+   moves that residual, so its bound sits just above the two elements' noise and offsets, and a
+   stuck or scaled element is found while the command it drove is still small; the limiter then
+   removes the command at its rate bound (``authority_step``'s ``cut``), not at the fault fade.
+5. **Frozen**: a value that does not change at all (bit for bit) for ``frozen_time`` while its
    partner (yaw rate <-> a_y / v, one steering channel <-> the other) moves by more than
    ``frozen_move_*``: a real sensor's noise toggles its LSB, so an unchanging value while the
    car's motion changes is a frozen output.
 
 Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
 within it, and trips at ``*_count``; 2 likewise per control period, tripping at
-``model_time``.  A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing
-redundant input (NaN: the node's freshness check) pauses the checks that need it and sets
+``model_time``; 4 trips on one window over its bound (at other rates than 500 Hz its
+``YAW_PAIR_WINDOW`` samples span another time).  A trip latches (until ``reset_monitor``: the
+next ignition cycle).  A missing redundant input (NaN: the node's freshness check) pauses the checks that need it and sets
 DEGRADED; below ``speed_min`` every check pauses and its counters restart.
 
 ``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
@@ -63,16 +70,19 @@ PLAUS_FAULT = PLAUS_YAW | PLAUS_STEER
 CHECK_KINEMATIC = 0x01  # yaw rate against a_y / v
 CHECK_MODEL = 0x02  # yaw rate against the nominal car's response to the steering
 CHECK_STEER_PAIR = 0x04  # the two steering channels
+CHECK_YAW_PAIR = 0x100  # the two yaw-rate elements (C: the flags are 16 bits)
 FROZEN_YAW = 0x08
 FROZEN_LAT = 0x10
 FROZEN_STEER = 0x20
 FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
-YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT
+YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
+#: Yaw-rate samples the pair's difference is averaged over: 10 ms at 500 Hz.
+YAW_PAIR_WINDOW = 5
 
 # The nominal car is the controller's own (section 3, mu = 1): one owner, firmware_py.calibration.
 
@@ -110,6 +120,9 @@ class PlausibilityConfig:
     # The actuator's nominal lag: ``aux_cmd_applied`` is the command sent the period before,
     # and the angle it puts on the car follows it by a first-order lag of this (docs/controller.md)
     actuator_tau: float = 0.025
+    # |mean of r - r_2 over YAW_PAIR_WINDOW samples| <= this, rad/s: above two elements' noise
+    # (0.028 deg/s/sqrt(Hz)) and offsets (0.3 deg/s each, opposite) by 5.4 SDs (docs/controller.md)
+    yaw_pair_bound: float = 0.03
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,6 +152,8 @@ class MonitorCoefficients:
     cf_m: float  # c_f / m
     lat_span: float  # 1 / mu_min - 1: how far the family's a_y term reaches beyond mu = 1's
     aux_alpha: float  # the actuator's lag per period: 1 - exp(-ts / actuator_tau)
+    yaw_pair_bound: float
+    inv_yaw_pair_bound: float
 
 
 class MonitorState:
@@ -149,7 +164,7 @@ class MonitorState:
                  "st_last", "st_same", "st_ref", "st2_last", "st2_same", "st2_ref", "latched", "flags", "bits",
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
-                 "lat_beta_prev", "aux_lag")
+                 "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -184,12 +199,17 @@ def reset_monitor(s: MonitorState) -> None:
     s.aux_lag = 0.0  # the auxiliary angle on the car: the command lagged by actuator_tau
     s.kin_idx = 0
     s.kin_n = 0  # samples in the window so far
+    s.yaw_pair = [0.0] * YAW_PAIR_WINDOW  # the last samples of r - r_2 (C: double[5])
+    s.yaw_pair_idx = 0
+    s.yaw_pair_n = 0  # samples in the window so far
+    s.yaw_pair_err = 0.0
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
-                          "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau"))
+                          "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
+                          "yaw_pair_bound"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel"):
@@ -215,7 +235,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
-        aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau))
+        aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
+        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound)
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -226,15 +247,18 @@ def check_positive(cfg: object, names: tuple[str, ...]) -> None:
             raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# One control period; long because it is the four checks inline, in the order the C port has
+# One control period; long because it is the five checks inline, in the order the C port has
 # them (no calls, by the porting rules), each a few lines.
 def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
-                 yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float) -> int:
+                 yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float,
+                 yaw_rate_redundant: float = math.nan) -> int:
     """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
     detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
     monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
     a missing input: a missing primary input pauses every check (step() faults on it), a
-    missing redundant one the checks that need it (DEGRADED)."""
+    missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
+    yaw-rate sensor's second element, pauses its pair check when NaN without DEGRADED: the bus
+    does not carry it yet, and with the default every result is as without the check."""
     flags = s.latched
     # A NaN fails every comparison: these are False for NaN and +-inf.
     primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
@@ -252,6 +276,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     if not primary_ok:
         # Paused (too slow, or step() faults on the input): restart the windows, keep the latch.
         s.kin_count = s.pair_count = s.model_count = 0
+        s.yaw_pair_n = 0
         s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
         s.kin_n = 0
         s.started = False
@@ -302,6 +327,26 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             s.latched |= CHECK_MODEL
     elif s.model_count > 0:
         s.model_count -= 1
+
+    # --- 4. yaw-rate pair: the mean of r - r_2 over the last YAW_PAIR_WINDOW samples
+    if -1e3 < yaw_rate_redundant < 1e3:
+        i = s.yaw_pair_idx
+        s.yaw_pair[i] = yaw_rate - yaw_rate_redundant
+        i += 1
+        if i >= YAW_PAIR_WINDOW:
+            i = 0
+        s.yaw_pair_idx = i
+        if s.yaw_pair_n < YAW_PAIR_WINDOW:
+            s.yaw_pair_n += 1
+        if s.yaw_pair_n >= YAW_PAIR_WINDOW:
+            e = (s.yaw_pair[0] + s.yaw_pair[1] + s.yaw_pair[2] + s.yaw_pair[3] + s.yaw_pair[4]) * (
+                1.0 / YAW_PAIR_WINDOW)
+            e = -e if e < 0.0 else e
+            s.yaw_pair_err = e * c.inv_yaw_pair_bound
+            if e > c.yaw_pair_bound:
+                s.latched |= CHECK_YAW_PAIR
+    else:
+        s.yaw_pair_n = 0  # the window restarts when the second element is back
 
     if s.since < 1000000:
         s.since += 1
@@ -381,7 +426,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     if st2_ok:
         s.steer2_prev = delta_driver_redundant
 
-    # --- 4. frozen: unchanged for frozen_steps counted while the partner is away from where it
+    # --- 5. frozen: unchanged for frozen_steps counted while the partner is away from where it
     #     was at this value's last change.  A partner from the 50 ms frame (a_y / v for the yaw
     #     rate, the second channel for the driver's angle) is taken at its first sample after
     #     that change: the sample held then may be up to a frame old.
@@ -453,6 +498,6 @@ class PlausibilityMonitor:
         self.state = MonitorState()
 
     def step(self, delta_driver: float, delta_driver_redundant: float, yaw_rate: float, lat_accel: float,
-             speed: float, aux_cmd_applied: float) -> int:
+             speed: float, aux_cmd_applied: float, yaw_rate_redundant: float = math.nan) -> int:
         return monitor_step(self.coefficients, self.state, delta_driver, delta_driver_redundant, yaw_rate,
-                            lat_accel, speed, aux_cmd_applied)
+                            lat_accel, speed, aux_cmd_applied, yaw_rate_redundant)

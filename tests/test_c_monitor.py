@@ -16,6 +16,7 @@ import pytest
 from firmware_py import authority as au
 from firmware_py import plausibility as pl
 from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.sensors import SensorConfig
 from sim_plant.offline import plausibility_runs as pr
 
 PORT = Path(__file__).resolve().parents[1] / "ports" / "c"
@@ -43,10 +44,10 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
     mc, ac = pl.configure(m), au.configure_authority(a)
     ms, ast = pl.MonitorState(), au.AuthorityState()
     out = []
-    for dd, dd2, r, ay, v, aux, u in rows:
-        bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux)
-        u_out = au.authority_step(ac, ast, u, bits)
-        out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags))
+    for dd, dd2, r, ay, v, aux, u, r2 in rows:
+        bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
+        u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CHECK_YAW_PAIR)
+        out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err))
     return out
 
 
@@ -59,16 +60,17 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     out = []
     for line in lines[1:]:
         f = line.split()
-        out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6])))
+        out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7])))
     return out
 
 
-def _run_rows(sc) -> list[tuple[float, ...]]:
-    r = pr.run(sc)
+def _run_rows(sc, second_yaw: SensorConfig | None = None) -> list[tuple[float, ...]]:
+    r = pr.run(sc, second_yaw=second_yaw)
     h = r.held
     aux = np.concatenate([[0.0], r.aux[:-1]])  # the angle acting on the car at each period
     return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"],
-                                                         h["lat_accel"], h["speed"], aux, r.aux)]
+                                                         h["lat_accel"], h["speed"], aux, r.aux,
+                                                         h["yaw_rate_redundant"])]
 
 
 def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
@@ -79,12 +81,15 @@ def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
             held = [rng.gauss(0, 2), rng.gauss(0, 0.02)]
         if k % 400 == 0:
             speed = rng.choice((3.0, 12.0, 25.0, 40.0))
+        if k % 300 == 0:
+            apart = rng.choice((0.0, 0.0, 0.0, 0.05))  # now and then the yaw-rate pair disagrees
         row = [rng.gauss(0, 0.02), held[1], rng.gauss(0, 0.1), held[0], speed, rng.gauss(0, 0.02),
                rng.gauss(0, 0.06)]
+        row.append(row[2] + apart + rng.gauss(0, 0.01))
         if rng.random() < 0.002:
-            row[rng.randrange(7)] = math.nan
+            row[rng.randrange(8)] = math.nan
         if rng.random() < 0.001:
-            row[rng.randrange(7)] = rng.choice((math.inf, -math.inf))
+            row[rng.randrange(8)] = rng.choice((math.inf, -math.inf))
         rows.append(tuple(row))
     return rows
 
@@ -96,6 +101,9 @@ CASES = {
     "frozen second steering channel": lambda: _run_rows(pr.steady_curve(30.0, 0.5).with_sensor_faults(
         (SensorFault("steer_redundant", "frozen", 0.1),))),
     "random inputs with NaN and inf": lambda: _random_rows(7),
+    "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
+        pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
+        SensorConfig(seed=99)),
 }
 
 
@@ -114,10 +122,11 @@ def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
-    for bits, f, *_, af in out:
+    for bits, f, *_, af, _yaw_pair_err in out:
         flags |= f
         auth |= af
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
+    assert flags & pl.CHECK_YAW_PAIR
     assert auth & au.AUTH_FAULT and auth & au.AUTH_RATE
 
 
@@ -132,7 +141,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
-                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha]
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

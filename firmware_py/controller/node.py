@@ -270,7 +270,9 @@ class ControllerNode:
         for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
                                    values[2], self.command)
-        u = au.authority_step(self.authority_coeffs, self.authority, u, bits)
+        # the yaw-rate pair's fault is found while its command builds: removed at once, not faded
+        u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
+                              self.monitor.flags & pl.CHECK_YAW_PAIR)
         state = self.state.status
         if bits & pl.PLAUS_FAULT:
             state = mr.STATUS_FAULT

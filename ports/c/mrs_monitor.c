@@ -30,6 +30,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->kin_gap = 0.15;
     cfg->mu_min = 0.5;
     cfg->actuator_tau = 0.025;
+    cfg->yaw_pair_bound = 0.03;
 }
 
 static int positive(double x)
@@ -48,7 +49,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
 {
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
-                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau};
+                        g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
+                        g->yaw_pair_bound};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -86,6 +88,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->cf_m = g->nominal_c_f / g->nominal_mass;
     c->lat_span = 1.0 / g->mu_min - 1.0;
     c->aux_alpha = 1.0 - exp(-g->ts / g->actuator_tau);
+    c->yaw_pair_bound = g->yaw_pair_bound;
+    c->inv_yaw_pair_bound = 1.0 / g->yaw_pair_bound;
     return 0;
 }
 
@@ -120,6 +124,12 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     }
     s->kin_idx = 0;
     s->kin_n = 0;
+    for (i = 0; i < MRS_YAW_PAIR_WINDOW; ++i) {
+        s->yaw_pair[i] = 0.0;
+    }
+    s->yaw_pair_idx = 0;
+    s->yaw_pair_n = 0;
+    s->yaw_pair_err = 0.0;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -167,9 +177,9 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
 
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
-                         double aux_cmd_applied)
+                         double aux_cmd_applied, double yaw_rate_redundant)
 {
-    uint8_t flags = s->latched;
+    uint16_t flags = s->latched;
     const int primary_ok = (delta_driver > -1e3 && delta_driver < 1e3) && (yaw_rate > -1e3 && yaw_rate < 1e3) &&
                            (speed >= c->speed_min && speed < 1e3) &&
                            (aux_cmd_applied > -1e3 && aux_cmd_applied < 1e3);
@@ -189,6 +199,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     }
     if (!primary_ok) {
         s->kin_count = s->pair_count = s->model_count = 0;
+        s->yaw_pair_n = 0;
         s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
         s->kin_n = 0;
         s->started = 0u;
@@ -230,6 +241,29 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     bound = c->model_margin + c->model_rel * rm;
     s->model_err = e / bound;
     MRS_COUNT(s->model_count, e > bound, c->model_steps, MRS_CHECK_MODEL);
+    /* 4. yaw-rate pair */
+    if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
+        int32_t i = s->yaw_pair_idx;
+        s->yaw_pair[i] = yaw_rate - yaw_rate_redundant;
+        i += 1;
+        if (i >= MRS_YAW_PAIR_WINDOW) {
+            i = 0;
+        }
+        s->yaw_pair_idx = i;
+        if (s->yaw_pair_n < MRS_YAW_PAIR_WINDOW) {
+            s->yaw_pair_n += 1;
+        }
+        if (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW) {
+            e = MRS_MAG((s->yaw_pair[0] + s->yaw_pair[1] + s->yaw_pair[2] + s->yaw_pair[3] + s->yaw_pair[4]) *
+                        (1.0 / MRS_YAW_PAIR_WINDOW));
+            s->yaw_pair_err = e * c->inv_yaw_pair_bound;
+            if (e > c->yaw_pair_bound) {
+                s->latched |= MRS_CHECK_YAW_PAIR;
+            }
+        }
+    } else {
+        s->yaw_pair_n = 0;
+    }
 
     if (s->since < 1000000) {
         s->since += 1;
@@ -292,7 +326,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     if (st2_ok) {
         s->steer2_prev = delta_driver_redundant;
     }
-    /* 4. frozen */
+    /* 5. frozen */
     if (yaw_rate != s->yaw_last) {
         s->yaw_last = yaw_rate;
         s->yaw_same = 0;
@@ -377,14 +411,14 @@ void mrs_authority_reset(mrs_authority_state_t *s)
 }
 
 double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
-                          uint8_t plaus_bits)
+                          uint8_t plaus_bits, uint8_t cut)
 {
     uint8_t flags = 0u;
     double du = c->du_max;
     double target, d, u;
     if ((plaus_bits & MRS_PLAUS_FAULT) != 0u || !(u_request > -1e3 && u_request < 1e3)) {
         target = 0.0;
-        du = c->fault_fade_step;
+        du = (cut != 0u && (plaus_bits & MRS_PLAUS_FAULT) != 0u) ? c->du_max : c->fault_fade_step;
         flags |= MRS_AUTH_FAULT;
     } else if (s->engaged >= c->window_steps && (plaus_bits & MRS_PLAUS_DEGRADED) != 0u) {
         target = 0.0;

@@ -28,10 +28,12 @@
 #define MRS_FROZEN_STEER 0x20u
 #define MRS_FROZEN_STEER_2 0x40u
 #define MRS_MISSING 0x80u
-#define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT)
+#define MRS_CHECK_YAW_PAIR 0x100u
+#define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
 
 #define MRS_KIN_WINDOW 4
+#define MRS_YAW_PAIR_WINDOW 5
 
 /* Authority limiter flags. */
 #define MRS_AUTH_MAGNITUDE 0x01u
@@ -50,6 +52,7 @@ typedef struct {
     double kin_gap; /* s without a usable redundant sample before the kinematic window restarts */
     double mu_min;  /* the kinematic check's family of nominal cars: every friction in [mu_min, 1] */
     double actuator_tau; /* the actuator's nominal lag behind the command sent, s */
+    double yaw_pair_bound; /* |mean of r - r_2 over MRS_YAW_PAIR_WINDOW samples|, rad/s */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -61,16 +64,19 @@ typedef struct {
     int32_t model_steps, frozen_steps, kin_gap_steps;
     double frozen_move_yaw, frozen_move_steer, wheelbase, k_us, ts, inv_cs_m, moment_m, cf_m;
     double lat_span, aux_alpha; /* 1 / mu_min - 1; 1 - exp(-ts / actuator_tau) */
+    double yaw_pair_bound, inv_yaw_pair_bound;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
-    uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, latched, flags, bits;
-    int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since;
+    uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, bits;
+    uint16_t latched, flags;
+    int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
     double lat_prev, steer2_prev, r_model, raw_prev, beta_prev, lat_beta_prev, aux_lag;
     double yaw_last, yaw_ref, lat_last, lat_ref, st_last, st_ref, st2_last, st2_ref;
     double kin_err, pair_err, model_err;
     double kin_raw[MRS_KIN_WINDOW], kin_comp[MRS_KIN_WINDOW], kin_lat[MRS_KIN_WINDOW];
+    double yaw_pair[MRS_YAW_PAIR_WINDOW], yaw_pair_err;
 } mrs_monitor_state_t;
 
 typedef struct {
@@ -94,16 +100,18 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg);
 /* 0 on success, -1 if the calibration is invalid. */
 int mrs_monitor_configure(const mrs_monitor_config_t *cfg, mrs_monitor_coeffs_t *c);
 void mrs_monitor_reset(mrs_monitor_state_t *s);
-/* One control period; returns the CtrlStatus_Plausibility bits. NaN marks a missing input. */
+/* One control period; returns the CtrlStatus_Plausibility bits. NaN marks a missing input;
+ * a NaN yaw_rate_redundant pauses the yaw-rate pair check without DEGRADED (not on the bus yet). */
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
-                         double aux_cmd_applied);
+                         double aux_cmd_applied, double yaw_rate_redundant);
 
 void mrs_authority_default_config(mrs_authority_config_t *cfg);
 int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);
 void mrs_authority_reset(mrs_authority_state_t *s);
-/* The command allowed this period for u_request (rad), given the monitor's bits. */
+/* The command allowed this period for u_request (rad), given the monitor's bits; cut nonzero
+ * with a fault (the monitor's MRS_CHECK_YAW_PAIR) removes the command at rate_max, not faded. */
 double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
-                          uint8_t plaus_bits);
+                          uint8_t plaus_bits, uint8_t cut);
 
 #endif

@@ -268,9 +268,10 @@ int mrs_node_control(mrs_node_t *n)
      * the first); the limiter bounds this period's request with the monitor's verdict. */
     for (k = 0; k < steps; ++k) {
         n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
-                                    (double)values[2], n->command);
+                                    (double)values[2], n->command, NAN);
     }
-    n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus);
+    n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
+                                    (uint8_t)((n->mon_s.flags & MRS_CHECK_YAW_PAIR) != 0u));
     state = n->state.status;
     if (n->plaus & MRS_PLAUS_FAULT) {
         state = MRS_STATUS_FAULT;

@@ -104,9 +104,10 @@ int main(int argc, char **argv)
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
         for (k = 0; k < (int)v[5]; ++k) {
-            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev);
+            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, NAN);
         }
-        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus);
+        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
+                                    (uint8_t)((mon_s.flags & MRS_CHECK_YAW_PAIR) != 0u));
         state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
         printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
     }

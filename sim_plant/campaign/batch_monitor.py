@@ -13,6 +13,10 @@ code row by row and period by period: the bits, the flags, the counters, the res
 again as the actuator's own limit.  ``BatchMonitor.step`` has a shortcut for the periods
 between redundant samples, ``BatchAuthority.step`` one for periods without DEGRADED (each the
 scalar's branches for such a period, checked by the same tests).
+
+Not here yet: the yaw-rate pair (``monitor_step``'s ``yaw_rate_redundant``, ``authority_step``'s
+``cut``).  The engine's sensors have no second yaw-rate element, so the scalar code, given NaN
+for it, does what these do (docs/controller.md, "A second yaw-rate channel", step 4).
 """
 
 from __future__ import annotations

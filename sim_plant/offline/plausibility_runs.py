@@ -10,14 +10,20 @@ what the controller sees; its bits go through ``authority_step`` to the actuator
 the lead's integration fades the command (until then: ``guard=False`` leaves the command as
 step() gave it).
 
+``second_yaw`` adds the yaw-rate sensor's second element (issue 18's decision,
+docs/controller.md "A second yaw-rate channel"): a sensor of its own configuration (noise stream,
+offset), never faulted, sampled with the first as one ``MRS_YawRate`` frame would carry both,
+for the monitor's pair check.  The bus does not carry it yet; without it the loop is as before.
+
 The error of a faulted sensor is measured against a second, fault-free copy of the same sensor
 models (same seed, same streams), so it is the fault's own contribution, noise excluded.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -31,7 +37,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
-from sim_plant.car.sensors import CHANNELS, Sensors
+from sim_plant.car.sensors import CHANNELS, SensorConfig, Sensors
 
 #: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
 _MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.MSG_SPEED,
@@ -54,7 +60,7 @@ class MonitorRun:
     error: np.ndarray  # the faulted sensor's error (0 without a fault)
     fault_sensor: str | None
     margins: dict[str, float]  # each check's largest residual over the run / its bound
-    held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel
+    held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel (and yaw_rate_redundant)
     beta: np.ndarray
 
     def first(self, mask: np.ndarray) -> float | None:
@@ -102,12 +108,13 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 # each of its stages is a few lines that read best in order.
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
-        guard: bool = True) -> MonitorRun:
+        guard: bool = True, second_yaw: SensorConfig | None = None) -> MonitorRun:
     every = cycles(ts)
     scene = ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
     actuator = PositionActuator(sc.actuator, ts)
     sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
+    second = Sensors(replace(second_yaw, faults=()), ts) if second_yaw is not None else None
     faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
     reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
     mon = pl.PlausibilityMonitor(monitor if monitor is not None else pl.PlausibilityConfig(ts=ts))
@@ -115,9 +122,9 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     ast = au.AuthorityState()
     n = int(round(sc.duration / ts)) + 1
     out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
-    seen = {ch: np.zeros(n) for ch in CHANNELS}
-    held: dict[str, float] = {}
-    margins = dict.fromkeys(("kinematic", "steer_pair", "model"), 0.0)
+    seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant")}
+    held: dict[str, float] = {"yaw_rate_redundant": math.nan}
+    margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair"), 0.0)
     pipeline: deque[float] = deque([0.0])
     applied = 0.0
     for k in range(n):
@@ -135,6 +142,11 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
         if faulted is not None:
             out["err"][k] = read[faulted] - getattr(clean, faulted)(truth[faulted])
+        if second is not None:
+            second.at(t)
+            r_2 = second.yaw_rate(truth["yaw_rate"])
+            if k % every["yaw_rate"] == 0:
+                held["yaw_rate_redundant"] = r_2
         for ch in CHANNELS:
             if k % every[ch] == 0:
                 held[ch] = read[ch]
@@ -142,16 +154,17 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         # the command sent the period before, as the controller node passes it (the monitor
         # models the actuator's lag itself)
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
-                        pipeline[0])
+                        pipeline[0], held["yaw_rate_redundant"])
         if guard:
-            u = au.authority_step(ac, ast, u, bits)
+            u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CHECK_YAW_PAIR)
         pipeline.append(u)
         applied = actuator.step(pipeline.popleft())
         out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
-        for ch in CHANNELS:
+        for ch in seen:
             seen[ch][k] = held[ch]
         st = mon.state
-        for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err)):
+        for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err),
+                           ("yaw_pair", st.yaw_pair_err)):
             margins[key] = max(margins[key], value)
         # as the plant node: the car gets the lagging actuator's mean position over the step
         car.advance(driver + actuator.mean, scene.m_z)

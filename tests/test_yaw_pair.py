@@ -1,0 +1,110 @@
+"""The yaw-rate pair check (issue 18's decision, docs/controller.md "A second yaw-rate channel"):
+the monitor compares the yaw-rate sensor's two elements over a 10 ms window, and the limiter
+removes the command at once on its fault.  Synthetic inputs against the window's arithmetic,
+then the closed loop of sim_plant.offline.plausibility_runs with a second element."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from firmware_py import authority as au
+from firmware_py import plausibility as pl
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
+from sim_plant.offline import plausibility_runs as pr
+
+TS = 0.002
+BOUND = pl.PlausibilityConfig().yaw_pair_bound
+
+
+def _flags(differences: list[float]) -> list[int]:
+    """The monitor on a straight road at 20 m/s, every input steady but the second element,
+    which is the first less each difference in turn (NaN: missing)."""
+    mon = pl.PlausibilityMonitor()
+    out = []
+    for d in differences:
+        mon.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, 0.01 - d)
+        out.append(mon.state.flags & pl.CHECK_YAW_PAIR)
+    return out
+
+
+@pytest.mark.parametrize("d", [0.031, 0.05, 0.08, 0.2, -0.04])
+def test_a_step_in_the_difference_trips_when_the_window_mean_passes_the_bound(d: float) -> None:
+    # After 10 agreeing samples the window holds j + 1 samples of d at the j-th after the step:
+    # its mean d (j + 1) / 5 passes the bound first at j = ceil(5 bound / |d|) - 1.
+    flags = _flags([0.0] * 10 + [d] * 10)
+    first = flags.index(pl.CHECK_YAW_PAIR) - 10
+    assert first == math.ceil(pl.YAW_PAIR_WINDOW * BOUND / abs(d)) - 1
+    assert all(flags[10 + first:])  # latched
+
+
+def test_a_difference_within_the_bound_never_trips() -> None:
+    assert not any(_flags([0.029, -0.029] * 500 + [0.0299] * 500))
+
+
+def test_a_missing_second_element_restarts_the_window_without_degraded() -> None:
+    mon = pl.PlausibilityMonitor()
+    bits = [mon.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, x) for x in [0.01] * 10 + [math.nan]]
+    assert bits[-1] & pl.PLAUS_DEGRADED == 0 and not mon.state.flags & pl.CHECK_YAW_PAIR
+    # four samples far apart after the gap: the window is not full again yet
+    flags = _flags([0.0] * 10 + [math.nan] + [1.0] * 5)
+    assert flags[-2] == 0 and flags[-1] == pl.CHECK_YAW_PAIR
+
+
+def test_without_the_second_element_every_result_is_as_before() -> None:
+    a, b = pl.PlausibilityMonitor(), pl.PlausibilityMonitor()
+    rng = np.random.default_rng(3)
+    for k in range(3000):
+        x = (rng.normal(0, 0.02), rng.normal(0, 0.02), rng.normal(0, 0.1), rng.normal(0, 2), 20.0, 0.0)
+        assert a.step(*x) == b.step(*x, math.nan)
+        assert a.state.flags == b.state.flags and not a.state.flags & pl.CHECK_YAW_PAIR
+
+
+def test_the_pair_fault_cuts_the_command_at_the_rate_bound() -> None:
+    c = au.configure_authority(au.AuthorityConfig())
+    for cut, periods in ((1, math.ceil(math.radians(3.0) / (10.0 * TS))), (0, round(3.0 / 30.0 / TS))):
+        s = au.AuthorityState()
+        for _ in range(50):
+            au.authority_step(c, s, 1.0, 0)  # at the 3 deg limit
+        u = [au.authority_step(c, s, 1.0, pl.PLAUS_YAW, cut) for _ in range(60)]
+        # at zero after |u| / rate periods (one more where the float steps leave a remainder)
+        assert periods - 1 <= u.index(0.0) <= periods, cut
+    s = au.AuthorityState()
+    au.authority_step(c, s, 0.01, 0)
+    # no fault, no cut: a cut alone does not remove a command
+    assert au.authority_step(c, s, 0.01, 0, 1) == pytest.approx(0.01)
+
+
+def _caused(v: float, fault: SensorFault | None, second: SensorConfig | None) -> tuple[float, pr.MonitorRun]:
+    """The largest |r - r of the fault-free twin| after the onset (the campaigns' fault_yaw_rate)
+    in a 2 m/s^2 curve on a dry road, and the faulty run."""
+    sensors = SensorConfig(seed=1, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=0.3))
+    base = replace(pr.steady_curve(v, 1.0, duration=2.0), sensors=sensors)
+    twin = pr.run(base, second_yaw=second)
+    hit = pr.run(base.with_sensor_faults((fault,)), second_yaw=second) if fault else twin
+    k = round(1.0 / TS)
+    return float(np.max(np.abs(hit.r_true[k:] - twin.r_true[k:]))), hit
+
+
+@pytest.mark.parametrize("v,fault", [(40.0, SensorFault("yaw_rate", "stuck", 1.0, 0.01)),
+                                     (10.0, SensorFault("yaw_rate", "scale", 1.0, 0.5))], ids=("stuck", "gain"))
+def test_in_closed_loop_the_pair_keeps_the_caused_yaw_under_the_target(v: float, fault: SensorFault) -> None:
+    # Issue 18's target: the faulty sensor's command causes < 0.05 rad/s.  A stuck element in the
+    # 40 m/s curve is the prototype's hardest case (docs/research/issue18-yaw-pair), a gain of
+    # 0.5 at 10 m/s today's worst gain; the elements at the top of the campaigns' noise and
+    # 0.6 deg/s apart.
+    second = SensorConfig(seed=99, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=-0.3))
+    caused, run = _caused(v, fault, second)
+    assert caused <= 0.05 and run.fault_time is not None and run.fault_time < 1.3
+    without, _ = _caused(v, fault, None)
+    assert without > 0.05  # what the pair is for: today's monitor alone lets this through
+
+
+def test_in_closed_loop_the_pair_raises_no_alarm_without_a_fault() -> None:
+    second = SensorConfig(seed=99, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=-0.3))
+    _, run = _caused(40.0, None, second)
+    assert run.fault_time is None and 0.3 < run.margins["yaw_pair"] < 1.0
