@@ -1,6 +1,10 @@
 """The DBC loaded once (strict) with each message's E2E configuration: encoding sets the
 alive counter and the CRC, decoding checks length, CRC, counter value and every signal's range.
 
+A signal whose value table names a raw value ``SNA`` (signal not available) decodes to NaN at
+that value, outside the range check, and encodes NaN (or a left-out value, when SNA is its DBC
+start value) as it: a sender without that signal's source says so in the frame.
+
 Every frame layout, range, cycle time and E2E data ID comes from ``mrsteer.dbc`` through
 cantools; nothing here knows a bit position.
 """
@@ -17,6 +21,7 @@ import cantools
 from mrsteer_dbc.e2e import COUNTER_MODULO, E2EConfig, E2EStatus, crc8_sae_j1850
 
 DBC_PATH = Path(__file__).with_name("mrsteer.dbc")
+SNA = "SNA"  # a value table's label for 'signal not available'
 
 
 class ContractError(ValueError):
@@ -49,6 +54,10 @@ class Contract:
         # optional SecOC fields are 0 unless authentication fills them.
         self._defaults = {m.name: {s.name: s.initial for s in m.signals if s.initial is not None}
                           for m in self.db.messages}
+        # The physical value cantools decodes an SNA raw value to, per signal that has one.
+        self._sna = {m.name: {s.name: s.conversion.raw_to_scaled(raw, decode_choices=False)
+                              for s in m.signals for raw, label in (s.choices or {}).items() if str(label) == SNA}
+                     for m in self.db.messages}
 
     @staticmethod
     def _e2e_config(msg: Any) -> E2EConfig | None:
@@ -97,6 +106,10 @@ class Contract:
         attr = (msg.dbc.attributes if msg.dbc is not None else {}).get("MRS_ControlLoop")
         return attr is not None and int(attr.value) == 1
 
+    def has_sna(self, name: str, signal: str) -> bool:
+        """The signal has a raw value meaning 'not available' (decoded as NaN)."""
+        return signal in self._sna[name]
+
     def signal_range(self, name: str, signal: str) -> tuple[float, float]:
         sig = self._by_name[name].get_signal_by_name(signal)
         return float(sig.minimum), float(sig.maximum)
@@ -128,6 +141,10 @@ class Contract:
         msg = self._by_name[name]
         cfg = self._e2e[name]
         full = {**self._defaults[name], **values}
+        for sig in self._sna[name]:
+            value = full.get(sig)
+            if isinstance(value, float) and math.isnan(value):
+                full[sig] = SNA
         if cfg is not None:
             if counter is None:
                 raise ValueError(f"{name} is E2E-protected: give the alive counter")
@@ -159,8 +176,12 @@ class Contract:
         counter = int(signals[cfg.counter_signal]) if cfg is not None else None
         if counter is not None and counter >= COUNTER_MODULO:
             return Decoded(msg.name, signals, E2EStatus.BAD_COUNTER, counter)
+        sna = self._sna[msg.name]
         for sig in msg.signals:
             value = signals[sig.name]
+            if sig.name in sna and value == sna[sig.name]:
+                signals[sig.name] = math.nan
+                continue
             if not math.isfinite(value) or (sig.minimum is not None and value < sig.minimum) or (
                     sig.maximum is not None and value > sig.maximum):
                 return Decoded(msg.name, signals, E2EStatus.OUT_OF_RANGE, counter)

@@ -8,8 +8,8 @@ E2E_P01Check where docs/can-runtime.md says so).
   every payload byte except the CRC byte, and the result XORed with 0xFF.  The chaining
   cancels the library's init and output XORs, so this is the bare polynomial with register
   start 0x00 and no final XOR (``Contract.e2e_crc``).  Example: MRS_YawRate (data ID 4353 =
-  0x1101) with bytes 1..6 all zero is ``BB 00 00 00 00 00 00`` (a single CRC-8/SAE-J1850 pass
-  with init and final XOR 0xFF, what mrsteer used before, gives 0x52 instead);
+  0x1101) with bytes 1..7 all zero is ``A3 00 00 00 00 00 00 00`` (a single CRC-8/SAE-J1850
+  pass with init and final XOR 0xFF, what mrsteer used before, gives 0xDF instead);
 * a 4-bit alive counter 0..14 in the ``*_Counter`` signal, incremented per frame sent.
 
 Which messages are protected, their data IDs and where the CRC and counter sit come from the

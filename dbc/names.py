@@ -27,6 +27,7 @@ VEHICLE_SENSORS = SENSORS + REDUNDANT_SENSORS  # every sensor message the vehicl
 
 SIG_STEER_ANGLE = "DriverSteer_Angle"
 SIG_YAW_RATE = "YawRate_YawRate"
+SIG_YAW_RATE_2 = "YawRate_YawRate2"  # the yaw-rate sensor's second element
 SIG_SPEED = "VehicleSpeed_Speed"
 SIG_LAT_ACCEL = "RedundantSensors_LatAccel"
 SIG_STEER_ANGLE_2 = "RedundantSensors_SteerAngle"

@@ -149,3 +149,10 @@ def test_signalled_servers_refuse_impossible_outputs_and_survive_a_full_disk(tmp
                                           (["--slow-motion", "2"], "--slow-motion is for --mode realtime")])
 def test_a_plant_refuses_slow_motion_it_cannot_run(extra: list[str], needle: str) -> None:
     _one_line_error(_run(*NODES["plant"], *extra), 2, needle)
+
+
+def test_a_bridge_refuses_an_out_of_range_value_its_frame_cannot_carry() -> None:
+    argv = SERVERS["bridge"][0]
+    proc = subprocess.run([sys.executable, *argv, "--fault", '{"kind": "out_of_range", "param": 5.0}'],
+                          capture_output=True, text=True, timeout=120)
+    _one_line_error(proc, 2, "5 does not fit YawRate_YawRate's 16-bit field (-3.2768 to 3.2767)")

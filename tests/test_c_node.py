@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -216,7 +217,7 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
     rng = random.Random(16)
     # (message, its measurements, their upper DBC bounds): the redundant frame carries two
     sensors = [(name, sigs, tuple(contract.signal_range(name, sig)[1] for sig in sigs)) for name, sigs in (
-        ("MRS_DriverSteer", ("DriverSteer_Angle",)), ("MRS_YawRate", ("YawRate_YawRate",)),
+        ("MRS_DriverSteer", ("DriverSteer_Angle",)), ("MRS_YawRate", ("YawRate_YawRate", "YawRate_YawRate2")),
         ("MRS_VehicleSpeed", ("VehicleSpeed_Speed",)),
         ("MRS_RedundantSensors", ("RedundantSensors_LatAccel", "RedundantSensors_SteerAngle")))]
     alive = dict.fromkeys([s[0] for s in sensors], 0)
@@ -236,6 +237,9 @@ def test_random_and_mutated_frames_get_the_python_controllers_verdict(c_node) ->
         elif kind == 4:  # one measurement out of range with a valid CRC (within its raw field)
             sig, hi = rng.choice(list(zip(sigs, his)))
             data = bytearray(contract.encode(name, {**values, sig: 1.02 * hi}, alive[name], strict=False))
+        elif kind == 5 and name == "MRS_YawRate":  # the second element not available (SNA), or just above it
+            second = rng.choice([math.nan, -3.2767])
+            data = bytearray(contract.encode(name, {**values, "YawRate_YawRate2": second}, alive[name], strict=False))
         frames.append((contract.frame_id(name), bytes(data)))
     got = _secoc_check(["plain"] + [f"rx {fid:X} {data.hex() or '-'}" for fid, data in frames])
     bus = can.Bus(interface="virtual", channel="c-node-fuzz")

@@ -75,6 +75,7 @@ class Drive:
     jitter: bool = False  # every 3rd redundant frame 10 periods late, the yaw frame of every 4th's period lost
     slow: int = 1  # the sender steps once every `slow` control periods (a plant behind real time)
     burst: int = 0  # every 2nd redundant frame comes in one drain with the frames of the `burst` periods before it
+    second_yaw: bool = False  # the yaw-rate frames carry the sensor's second element (the car's r); else SNA
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -91,7 +92,8 @@ class Drive:
             r_meas = STUCK if self.stuck_yaw and t >= STUCK_T else r
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
                       names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta},
-                      names.MSG_YAW: {names.SIG_YAW_RATE: r_meas}}
+                      names.MSG_YAW: {names.SIG_YAW_RATE: r_meas,
+                                      names.SIG_YAW_RATE_2: r if self.second_yaw else math.nan}}
             period = []
             for msg, n in every.items():
                 if k % n or (msg == names.MSG_REDUNDANT and not self.redundant):
@@ -192,6 +194,25 @@ def test_stuck_yaw_rate_is_a_plausibility_fault_faded_to_zero_as_in_python(secoc
     assert late and all(int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT for s in late)
     assert all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
     assert all(int(s[names.SIG_STATUS_CAUSE]) & names.CAUSE_PLAUSIBILITY for s in late)
+
+
+def test_the_yaw_rate_pair_finds_a_stuck_element_at_once_and_cuts_the_command_as_in_python(secoc_check: Path) -> None:
+    clean_cmds, clean_statuses = _run(secoc_check, Drive(second_yaw=True))
+    assert {s[names.SIG_STATUS_PLAUS] for s in clean_statuses} == {0}  # the pair agrees: no alarm
+    cmds, statuses = _run(secoc_check, Drive(seconds=1.4, stuck_yaw=True, second_yaw=True))
+    k_stuck = int(STUCK_T * RATE_HZ)
+    states = [int(c[names.SIG_CMD_STATE]) for c in cmds]
+    k_fault = states.index(mr.STATUS_FAULT)
+    # r - r2 is -0.07 rad/s from the onset: the 5-sample mean passes 0.03 with the 3rd stuck sample
+    assert k_fault - k_stuck == 2
+    assert set(states[k_fault:]) == {mr.STATUS_FAULT}
+    # Removed at the limiter's rate bound (10 rad/s), not faded at 30 deg/s.
+    u0 = abs(cmds[k_fault - 1][names.SIG_CMD_ANGLE])
+    k_zero = k_fault + int(math.ceil(u0 / au.AuthorityConfig().rate_max * RATE_HZ)) - 1  # from the fault's period
+    assert u0 > 1e-3 and all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[k_zero:])
+    assert k_zero == k_fault or abs(cmds[k_zero - 1][names.SIG_CMD_ANGLE]) > 0.0  # not sooner
+    late = [s for s in statuses if int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT]
+    assert late and all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
 
 
 def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in_python(secoc_check: Path) -> None:

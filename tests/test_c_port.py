@@ -186,5 +186,5 @@ def test_c_e2e_crc_equals_the_autosar_e2e_library(tmp_path: Path) -> None:
     got = [int(x) for x in proc.stdout.split()]
     assert len(got) == len(expected) == 6 * 300  # six E2E messages
     assert got == expected
-    assert int(subprocess.run([str(exe)], input="crc\n4353 0 52000000000000\n", capture_output=True, text=True,
-                              check=True).stdout) == 0xBB  # issue 17's demo frame
+    assert int(subprocess.run([str(exe)], input="crc\n4353 0 DF00000000000000\n", capture_output=True, text=True,
+                              check=True).stdout) == 0xA3  # issue 17's demo frame

@@ -12,6 +12,7 @@ from scipy.signal import freqz, lfilter, welch
 import mrsteer_dbc
 from sim_plant.car.actuator_dynamics import ActuatorModelConfig, PositionActuator
 from sim_plant.car.model_files import ModelFileError
+from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.car.sensors import SensorConfig, Sensors, YawRateSensorConfig, ChannelConfig
 
 TS = 0.002
@@ -225,3 +226,47 @@ def test_direct_construction_is_range_checked_too():
         ChannelConfig(noise=math.nan)
     with pytest.raises(ModelFileError, match="lowpass_hz"):
         Sensors(SensorConfig(YawRateSensorConfig(lowpass_hz=300.0)), TS)
+
+
+# ------------------------------------------------------------------ the yaw-rate sensor's second element
+
+def test_the_second_yaw_rate_element_has_its_own_stream_after_the_others():
+    # numpy's SeedSequence children by index: the channels' five, the faults', then the element's.
+    # Without filter and quantisation a reading is r + bias + sigma * that stream's next normal.
+    quiet = YawRateSensorConfig(lowpass_hz=0.0, quantise=False)
+    cfg = SensorConfig(quiet, seed=11, yaw_rate_redundant=YawRateSensorConfig(0.02, 0.5, 0.0, False),
+                       faults=(SensorFault("steer", "noise", 0.0, 0.01),))
+    s = Sensors(cfg, TS)
+    first = np.array([s.yaw_rate(0.1) for _ in range(100)])
+    second = np.array([s.yaw_rate_redundant(0.1) for _ in range(100)])
+    children = np.random.SeedSequence(11).spawn(7)
+    sigma = math.radians(0.014) * math.sqrt(0.5 / TS)
+    assert first == pytest.approx(0.1 + sigma * np.random.default_rng(children[0]).standard_normal(100), abs=1e-15)
+    sigma2 = math.radians(0.02) * math.sqrt(0.5 / TS)
+    expected = 0.1 + math.radians(0.5) + sigma2 * np.random.default_rng(children[6]).standard_normal(100)
+    assert second == pytest.approx(expected, abs=1e-15)
+
+
+def test_a_fault_on_one_yaw_rate_element_leaves_the_other_reading_the_car():
+    for faulted, read_faulted, read_other in (("yaw_rate", "yaw_rate", "yaw_rate_redundant"),
+                                              ("yaw_rate_redundant", "yaw_rate_redundant", "yaw_rate")):
+        s = Sensors(SensorConfig(exact=True, faults=(SensorFault(faulted, "stuck", 0.0, 0.01),)), TS)
+        assert [getattr(s, read_faulted)(0.2) for _ in range(3)] == [0.01] * 3
+        assert [getattr(s, read_other)(0.2) for _ in range(3)] == [0.2] * 3
+
+
+def test_the_second_elements_table_takes_the_first_ones_keys_it_leaves_out(tmp_path):
+    f = tmp_path / "sens.toml"
+    f.write_text("[yaw_rate]\nnoise_density = 0.02\nlowpass_hz = 20\n[yaw_rate_redundant]\nbias_deg_s = -0.3\n")
+    s = SensorConfig.load(str(f))
+    assert s.yaw_rate_redundant == YawRateSensorConfig(0.02, -0.3, 20.0, True)
+    assert s.yaw_rate == YawRateSensorConfig(0.02, 0.0, 20.0, True)
+    f.write_text("[yaw_rate]\nbias_deg_s = 0.4\n[yaw_rate_redundant]\nlowpass_hz = 0\n")
+    s = SensorConfig.load(str(f))  # an offset is the element's own: not taken from the first
+    assert s.yaw_rate_redundant == YawRateSensorConfig(0.014, 0.0, 0.0, True) and s.yaw_rate_redundant_present
+    f.write_text("[yaw_rate_redundant]\npresent = false\n")
+    s = SensorConfig.load(str(f))
+    assert not s.yaw_rate_redundant_present and math.isnan(Sensors(s, TS).yaw_rate_redundant(0.1))
+    f.write_text("[yaw_rate_redundant]\nbias_deg_s = 99\n")
+    with pytest.raises(ModelFileError, match="bias_deg_s"):
+        SensorConfig.load(str(f))

@@ -71,8 +71,8 @@ def test_e2e_crc_covers_data_id_and_payload(contract: mrsteer_dbc.Contract) -> N
 # E2E_P01 CRCs (data ID mode BOTH), each computed by the independent `autosar-e2e` package
 # (e2e.p01.e2e_p01_protect(..., increment_counter=False)); the first is issue 17's demo frame.
 P01_FRAMES = [
-    ("MRS_YawRate", "52000000000000", 0xBB),
-    ("MRS_YawRate", "00033132333435", 0x17),
+    ("MRS_YawRate", "DF00000000000000", 0xA3),
+    ("MRS_YawRate", "0003313233343536", 0x9A),
     ("MRS_AuxSteerCmd", "0000000000000000", 0x99),
     ("MRS_DriverSteer", "0000000000", 0x84),
     ("MRS_VehicleSpeed", "00FFFFFFFF", 0x25),
@@ -134,13 +134,13 @@ def test_corruption_is_detected(contract: mrsteer_dbc.Contract) -> None:
     assert contract.decode(fid, good + b"\x00").status is E2EStatus.BAD_LENGTH
     # A valid frame of another message cannot pass as this one: the data ID differs.
     other = contract.encode("MRS_DriverSteer", {"DriverSteer_Angle": 0.01}, counter=3)
-    assert contract.decode(fid, other + b"\x00\x00").status is E2EStatus.BAD_CRC
+    assert contract.decode(fid, other + b"\x00\x00\x00").status is E2EStatus.BAD_CRC
     assert contract.decode(0x7FF, good) is None
 
 
 def test_out_of_range_and_bad_counter_are_rejected(contract: mrsteer_dbc.Contract) -> None:
     fid = contract.frame_id("MRS_YawRate")
-    hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 5.0}, counter=1, strict=False)
+    hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 3.2}, counter=1, strict=False)
     assert contract.decode(fid, hot).status is E2EStatus.OUT_OF_RANGE
     # Counter 15 is never sent in profile 1; forge one with a correct CRC.
     data = bytearray(contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.0}, counter=1))
@@ -236,3 +236,26 @@ def test_cause_bits_and_meas_none_are_what_the_dbc_says(contract: mrsteer_dbc.Co
         assert words in plaus and int(words.split()[0]) == bit
     meas = contract.message(names.MSG_CMD).get_signal_by_name(names.SIG_CMD_MEAS)
     assert {int(k): str(v) for k, v in meas.choices.items()} == {names.MEAS_NONE: "NONE"}
+
+
+def test_the_second_yaw_rate_element_left_out_or_nan_is_sent_as_sna_and_read_as_nan(
+        contract: mrsteer_dbc.Contract) -> None:
+    fid = contract.frame_id("MRS_YawRate")
+    sig = contract.message("MRS_YawRate").get_signal_by_name("YawRate_YawRate2")
+    assert contract.has_sna("MRS_YawRate", "YawRate_YawRate2")
+    assert not contract.has_sna("MRS_YawRate", "YawRate_YawRate")
+    left_out = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1}, counter=2)
+    as_nan = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1, "YawRate_YawRate2": float("nan")}, counter=2)
+    assert left_out == as_nan
+    # Raw -32768 (bytes 4-5, little endian: 00 80), the DBC's SNA
+    assert left_out[sig.start // 8:sig.start // 8 + 2] == bytes.fromhex("0080")
+    d = contract.decode(fid, left_out)
+    assert d.status is E2EStatus.OK and d.signals["YawRate_YawRate2"] != d.signals["YawRate_YawRate2"]
+    both = contract.decode(fid, contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1, "YawRate_YawRate2": -0.25}, 3))
+    assert both.status is E2EStatus.OK and both.signals["YawRate_YawRate2"] == pytest.approx(-0.25, abs=5e-5)
+    # The raw value next to SNA is an ordinary value, out of range as before.
+    near = contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.1, "YawRate_YawRate2": -3.2767}, 4, strict=False)
+    assert contract.decode(fid, near).status is E2EStatus.OUT_OF_RANGE
+    # The first element has no SNA: its out-of-range values stay out of range.
+    assert contract.decode(fid, contract.encode("MRS_YawRate", {"YawRate_YawRate": -3.2768}, 5,
+                                                strict=False)).status is E2EStatus.OUT_OF_RANGE

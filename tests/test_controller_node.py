@@ -137,7 +137,7 @@ def test_out_of_range_value_is_rejected_with_range_cause(rig: Rig) -> None:
     for _ in range(5):
         rig.cycle(yaw=0.01)
     for _ in range(3):
-        _, sig = rig.cycle(yaw=4.0, strict=False)
+        _, sig = rig.cycle(yaw=3.2, strict=False)
     assert rig.node.stats.rx_rejected == 3 and rig.node.cause & names.CAUSE_RANGE
     assert sig["AuxSteerCmd_State"] == mr.STATUS_FAULT
 

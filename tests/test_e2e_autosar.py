@@ -77,9 +77,10 @@ def test_the_setup_matches_variant_1a() -> None:
 
 def test_the_issue_17_demo_frame() -> None:
     assert C.e2e("MRS_YawRate").data_id == 4353
-    assert _lib_protect("MRS_YawRate", bytes(7)) == bytes.fromhex("BB000000000000")
-    assert C.encode("MRS_YawRate", {"YawRate_YawRate": 0.0}, 0) == bytes.fromhex("BB000000000000")
-    assert not _lib_check("MRS_YawRate", bytes.fromhex("52000000000000"))  # the old single-pass CRC
+    assert _lib_protect("MRS_YawRate", bytes(8)) == bytes.fromhex("A300000000000000")
+    assert C.encode("MRS_YawRate", {"YawRate_YawRate": 0.0, "YawRate_YawRate2": 0.0}, 0) == bytes.fromhex(
+        "A300000000000000")
+    assert not _lib_check("MRS_YawRate", bytes.fromhex("DF00000000000000"))  # the old single-pass CRC
 
 
 @given(st.binary(max_size=24), st.integers(0, 255), st.booleans())
@@ -287,7 +288,8 @@ def test_every_frame_of_the_built_in_lockstep_scenarios_passes_the_library(chann
         counts[name] += 1
     steps = plant.stats.steps
     assert counts["MRS_YawRate"] == counts["MRS_DriverSteer"] == counts["MRS_AuxSteerCmd"] == steps
-    assert counts["MRS_VehicleSpeed"] == (steps + 4) // 5
+    every = round(C.cycle_time_s("MRS_VehicleSpeed") / node.period)  # 20 ms: every 10th step
+    assert counts["MRS_VehicleSpeed"] == (steps + every - 1) // every
     assert node.state.status in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)
 
 

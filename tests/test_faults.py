@@ -56,7 +56,7 @@ def bridge(channel: str):
                                          ("wrong_length", E2EStatus.BAD_LENGTH),
                                          ("out_of_range", E2EStatus.OUT_OF_RANGE)])
 def test_corruptions_are_the_ones_named(bridge, kind: str, status: E2EStatus) -> None:
-    b = bridge(kind, 5.0)
+    b = bridge(kind, 3.2)  # outside the range of +-3, inside the 16-bit field
     (when, out), = b.transform(_yaw(3), 101.5)
     assert when == 101.5 and C.decode(YAW, bytes(out.data)).status is status
     (_, untouched), = b.transform(_yaw(4), 102.5)  # outside the window

@@ -81,7 +81,7 @@ def test_each_rejection_names_its_check_and_cause() -> None:
         (bytes(yaw(0).data)[:6], Rejected.LENGTH, CAUSE_E2E),
         (bytes(bad_crc), Rejected.CRC, CAUSE_E2E),
         (with_crc(counter_15), Rejected.COUNTER_VALUE, CAUSE_E2E),
-        (bytes(yaw(0, 4.0, strict=False).data), Rejected.RANGE, CAUSE_RANGE),
+        (bytes(yaw(0, 3.2, strict=False).data), Rejected.RANGE, CAUSE_RANGE),
     ]
     for data, reason, cause in cases:
         got = link().accept(can.Message(arbitration_id=YAW, data=data, is_extended_id=False))
@@ -97,7 +97,7 @@ def test_each_rejection_names_its_check_and_cause() -> None:
 
 
 def test_length_then_crc_then_range() -> None:
-    out_of_range = bytearray(yaw(0, 4.0, strict=False).data)
+    out_of_range = bytearray(yaw(0, 3.2, strict=False).data)
     out_of_range[2] ^= 0x01  # still out of range, and now its CRC is wrong too
     short = bytes(out_of_range[:6])
     assert link().accept(can.Message(arbitration_id=YAW, data=short, is_extended_id=False)) is Rejected.LENGTH
@@ -112,7 +112,7 @@ def test_the_verifier_is_asked_only_about_frames_that_passed_length_crc_and_rang
     rx = link(spy)
     bad_crc = bytearray(yaw(0).data)
     bad_crc[0] ^= 0xFF
-    for data in (bytes(yaw(0).data)[:3], bytes(bad_crc), bytes(yaw(0, -3.5, strict=False).data)):
+    for data in (bytes(yaw(0).data)[:3], bytes(bad_crc), bytes(yaw(0, -3.2, strict=False).data)):
         assert type(rx.accept(can.Message(arbitration_id=YAW, data=data, is_extended_id=False))) is Rejected
     assert spy.asked == []
     good = yaw(0)
@@ -142,7 +142,7 @@ def test_a_rejected_frame_leaves_the_sequence_where_it_was() -> None:
     bad_crc = bytearray(yaw(1).data)
     bad_crc[4] ^= 0x01
     for msg in (can.Message(arbitration_id=YAW, data=bytes(bad_crc), is_extended_id=False),
-                yaw(1, 3.5, strict=False)):
+                yaw(1, 3.2, strict=False)):
         assert type(rx.accept(msg)) is Rejected
     assert rx.accept(yaw(1)).status is E2EStatus.OK  # the next counter after 0, not a repeat or a gap
 
@@ -184,8 +184,8 @@ def test_tx_counts_each_e2e_message_on_its_own_and_seals_every_frame() -> None:
 
 def test_tx_strict_false_sends_a_saturated_value_as_it_is() -> None:
     with pytest.raises(Exception):
-        TxLink(C, (MSG_YAW,)).frame(MSG_YAW, {"YawRate_YawRate": 3.5})
-    m = TxLink(C, (MSG_YAW,), strict=False).frame(MSG_YAW, {"YawRate_YawRate": 3.5})
+        TxLink(C, (MSG_YAW,)).frame(MSG_YAW, {"YawRate_YawRate": 3.2})
+    m = TxLink(C, (MSG_YAW,), strict=False).frame(MSG_YAW, {"YawRate_YawRate": 3.2})
     assert link().accept(m) is Rejected.RANGE  # the receiver range-checks
 
 

@@ -23,7 +23,7 @@ C = mrsteer_dbc.load()
 TS = 2e-3
 STEPS = 600  # 1.2 s
 ONSET = 0.7
-LSB = {names.SIG_YAW_RATE: 1e-6, names.SIG_STEER_ANGLE: 2.5e-5, names.SIG_LAT_ACCEL: 1e-3,
+LSB = {names.SIG_YAW_RATE: 1e-4, names.SIG_STEER_ANGLE: 2.5e-5, names.SIG_LAT_ACCEL: 1e-3,
        names.SIG_STEER_ANGLE_2: 2.5e-5, names.SIG_SPEED: 2e-3}
 
 
@@ -57,7 +57,7 @@ def bus_run(channel: str, faults: tuple[SensorFault, ...] = (), scenario: str = 
 def series(run, signal: str) -> tuple[np.ndarray, np.ndarray]:
     message = {names.SIG_YAW_RATE: names.MSG_YAW, names.SIG_STEER_ANGLE: names.MSG_STEER,
                names.SIG_SPEED: names.MSG_SPEED, names.SIG_LAT_ACCEL: names.MSG_REDUNDANT,
-               names.SIG_STEER_ANGLE_2: names.MSG_REDUNDANT}[signal]
+               names.SIG_STEER_ANGLE_2: names.MSG_REDUNDANT, names.SIG_YAW_RATE_2: names.MSG_YAW}[signal]
     rows = run[message]
     return np.array([t for t, _ in rows]), np.array([s[signal] for _, s in rows])
 
@@ -108,8 +108,21 @@ def test_yaw_rate_fault_kinds_on_the_bus(channel: str, clean, kind: str, value: 
     _, base = series(clean, names.SIG_YAW_RATE)
     before, after = t < ONSET - 1e-9, t >= ONSET - 1e-9
     assert np.array_equal(faulted[before], base[before])
-    assert faulted[after] == pytest.approx(expected(t[after], base[after]), abs=1.01e-6)
+    # The faulted and the clean value each rounded to the LSB (scale: 1.5 times the clean one's error)
+    assert faulted[after] == pytest.approx(expected(t[after], base[after]), abs=1.26 * LSB[names.SIG_YAW_RATE])
     assert np.abs(faulted[after] - base[after]).max() > 1e-3  # the fault is visible
+
+
+def test_the_yaw_rate_frame_carries_both_elements_and_a_fault_on_one_leaves_the_other(channel: str, clean) -> None:
+    _, first = series(clean, names.SIG_YAW_RATE)
+    _, second = series(clean, names.SIG_YAW_RATE_2)
+    assert np.array_equal(first, second) and np.ptp(first) > 1e-2  # ideal sensors: the same car, moving
+    run = bus_run(channel, (SensorFault("yaw_rate_redundant", "stuck", ONSET, 0.0),))
+    t, faulted = series(run, names.SIG_YAW_RATE_2)
+    _, untouched = series(run, names.SIG_YAW_RATE)
+    after = t >= ONSET - 1e-9
+    assert np.array_equal(untouched, first)  # no controller: the car is the clean run's
+    assert np.array_equal(faulted[~after], second[~after]) and np.all(faulted[after] == 0.0)
 
 
 def test_stuck_without_a_value_holds_the_value_at_onset(channel: str, clean) -> None:
@@ -233,7 +246,7 @@ def test_the_bridge_falsifies_the_value_in_well_formed_frames(bridge_of, kind: s
         (_, out), = b.transform(_yaw_frame((10 + k) % 15, value), 101.0 + 0.002 * k)
         got = rx.accept(out)
         assert got.status in (E2EStatus.OK,)  # CRC valid, the counter advancing
-        assert got.signals[names.SIG_YAW_RATE] == pytest.approx(expected(k, value), abs=1.01e-6)
+        assert got.signals[names.SIG_YAW_RATE] == pytest.approx(expected(k, value), abs=0.51 * LSB[names.SIG_YAW_RATE])
 
 
 def test_the_bridge_noise_and_the_redundant_frames_second_signal(bridge_of) -> None:

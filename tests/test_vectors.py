@@ -181,12 +181,12 @@ def _sensor_rows() -> list[dict[str, str]]:
 def test_secoc_sensor_vectors_hold_against_an_independent_cmac() -> None:
     """Each sensor MAC recomputed from the row's fields with the `cryptography` CMAC directly,
     with the byte positions docs/faults.md gives (CRC byte 0; MAC: driver angle byte 4, yaw rate
-    bytes 5-6, speed byte 4), not through mrsteer_dbc.secoc."""
+    bytes 6-7, speed byte 4), not through mrsteer_dbc.secoc."""
     from cryptography.hazmat.primitives.ciphers import algorithms
     from cryptography.hazmat.primitives.cmac import CMAC
 
     key = bytes.fromhex(_read_cfg(VECTOR_DIR / "secoc_setup.txt")["key"])
-    layout = {"MRS_DriverSteer": (0x100, (4,), 8), "MRS_YawRate": (0x101, (5, 6), 16),
+    layout = {"MRS_DriverSteer": (0x100, (4,), 8), "MRS_YawRate": (0x101, (6, 7), 16),
               "MRS_VehicleSpeed": (0x102, (4,), 8)}
     rows = _sensor_rows()
     assert [r["kind"] for r in rows].count("sync") == 2

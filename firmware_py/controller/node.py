@@ -71,7 +71,7 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_CMD_MEAS, SIG_CMD_STATE, SIG_LAT_ACCEL, SIG_SPEED, SIG_STATUS_CAUSE,
                                SIG_STATUS_FLAGS, SIG_STATUS_LATENESS, SIG_STATUS_OVERRUNS, SIG_STATUS_PLAUS,
                                SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2,
-                               SIG_YAW_RATE)
+                               SIG_YAW_RATE, SIG_YAW_RATE_2)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
@@ -129,7 +129,7 @@ class ControllerNode:
 
         self.inputs = {  # by frame ID
             c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, limit(MSG_STEER)),
-            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW)),
+            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW), SIG_YAW_RATE_2),
             c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
             # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
             c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT), SIG_STEER_ANGLE_2),
@@ -266,10 +266,11 @@ class ControllerNode:
             self._sync_age += 1
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
+        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.second_value  # NaN: SNA, no element
         bits = self.plausibility  # held between yaw-rate samples
         for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
-                                   values[2], self.command)
+                                   values[2], self.command, yaw_2)
         # the yaw-rate pair's fault is found while its command builds: removed at once, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
                               self.monitor.flags & pl.CHECK_YAW_PAIR)

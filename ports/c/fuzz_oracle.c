@@ -62,7 +62,11 @@ uint8_t ref_crc(uint16_t data_id, const uint8_t *d, size_t len, size_t crc_byte)
     }
 
 REF_SENSOR(ref_steer, mrs_driver_steer, driver_steer, IR(mrs_driver_steer, driver_steer, angle))
-REF_SENSOR(ref_yaw, mrs_yaw_rate, yaw_rate, IR(mrs_yaw_rate, yaw_rate, yaw_rate))
+/* The second element's SNA (the DBC's value table) is no range error: it says "not available". */
+REF_SENSOR(ref_yaw, mrs_yaw_rate, yaw_rate,
+           IR(mrs_yaw_rate, yaw_rate, yaw_rate) &&
+               (IR(mrs_yaw_rate, yaw_rate, yaw_rate2) ||
+                m.yaw_rate_yaw_rate2 == MRSTEER_MRS_YAW_RATE_YAW_RATE_YAW_RATE2_SNA_CHOICE))
 REF_SENSOR(ref_speed, mrs_vehicle_speed, vehicle_speed, IR(mrs_vehicle_speed, vehicle_speed, speed))
 REF_SENSOR(ref_red, mrs_redundant_sensors, redundant_sensors,
            IR(mrs_redundant_sensors, redundant_sensors, lat_accel) &&

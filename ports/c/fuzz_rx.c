@@ -19,6 +19,7 @@
  * counter 1..3 past the last one the receiver took. Authentic frames in step must be accepted,
  * forged MACs refused without advancing anything, repeats and replayed syncs refused (so the
  * harness can fail). Mutations a check cannot see (the 8-bit CRC, an 8-bit MAC) are counted. */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -72,7 +73,8 @@ static size_t build(const mrs_node_t *n, int k, unsigned alive, int sign, uint64
     phys[m->counter] = (double)alive;
     phys[in->sig] = draw(m, in->sig);
     if (in->sig2 >= 0) {
-        phys[in->sig2] = draw(m, in->sig2);
+        /* a signal with an SNA value: sometimes that (NaN packs as it) */
+        phys[in->sig2] = (m->sna[in->sig2] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, in->sig2);
     }
     if (sign) {
         phys[m->fv_epoch] = (double)(epoch & 1u);

@@ -13,7 +13,8 @@ functions truncate instead, which would make a C frame differ from the Python on
 For the SecOC messages the indices of the freshness and MAC fields and the AND mask that clears
 the CRC byte and the MAC bits (``mrsteer_dbc.secoc.AuthFields``).  The names the code means
 (messages, signals, ``CtrlStatus_Cause`` and ``CtrlStatus_Plausibility`` bits, ``MeasCounter``'s NONE) come from
-``mrsteer_dbc.names``.  Nothing here writes a bit position by hand: cantools owns the layouts.
+``mrsteer_dbc.names``.  A signal with an ``SNA`` raw value (the DBC's value table) unpacks to NaN
+at it, which the range check lets through for that signal only, and packs NaN as it.  Nothing here writes a bit position by hand: cantools owns the layouts.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import cantools
 from cantools.database.can.c_source import camel_to_snake_case
 
 from mrsteer_dbc import names
-from mrsteer_dbc.contract import Contract
+from mrsteer_dbc.contract import SNA, Contract
 
 DB = "mrsteer"
 MESSAGES = {  # names.py constant -> message
@@ -63,22 +64,34 @@ def _mask(contract: Contract, msg) -> list[int]:
     return mask
 
 
+def _sna_raw(s) -> int | None:
+    """The signal's raw 'not available' value (its value table's ``SNA``), if it has one."""
+    return next((int(raw) for raw, label in (s.choices or {}).items() if str(label) == SNA), None)
+
+
 def _functions(msg) -> str:
     m = f"{DB}_{camel_to_snake_case(msg.name)}"
     lo = [_c(s.minimum) for s in msg.signals]
     hi = [_c(s.maximum) for s in msg.signals]
-    unpack = "\n".join(f"    phys[{i}] = {m}_{camel_to_snake_case(s.name)}_decode(msg.{camel_to_snake_case(s.name)});"
-                       for i, s in enumerate(msg.signals))
+    sna = [_sna_raw(s) for s in msg.signals]
+    unpack = []
     pack = []
     for i, s in enumerate(msg.signals):
         field = camel_to_snake_case(s.name)
+        decode = f"{m}_{field}_decode(msg.{field})"
+        unpack.append(f"    phys[{i}] = {decode};" if sna[i] is None else
+                      f"    phys[{i}] = (msg.{field} == {sna[i]}) ? (double)NAN : {decode};")
         scale, offset = float(s.scale), float(s.offset)
         expr = f"phys[{i}]" if (scale, offset) == (1.0, 0.0) else f"(phys[{i}] - {_c(offset)}) / {_c(scale)}"
-        pack.append(f"    msg.{field} = ({'int64_t' if s.is_signed else 'uint64_t'})nearbyint({expr});")
+        raw = f"({'int64_t' if s.is_signed else 'uint64_t'})nearbyint({expr})"
+        pack.append(f"    msg.{field} = {raw};" if sna[i] is None else
+                    f"    msg.{field} = (phys[{i}] != phys[{i}]) ? {sna[i]} : {raw};")
+    unpack = "\n".join(unpack)
     sn = camel_to_snake_case(msg.name)
     return f"""
 static const double {sn}_min[{len(lo)}] = {{{", ".join(lo)}}};
 static const double {sn}_max[{len(hi)}] = {{{", ".join(hi)}}};
+static const uint8_t {sn}_sna[{len(lo)}] = {{{", ".join("0u" if x is None else "1u" for x in sna)}}};
 
 static int {sn}_unpack(double *phys, const uint8_t *data, size_t len)
 {{
@@ -120,7 +133,7 @@ def _desc(contract: Contract, msg) -> str:
             f"{at('Counter')}, {_c(cycle)}, {1 if contract.is_control_loop(msg.name) else 0}u,\n"
             f"     {at('FvEpoch')}, {at('FvCounter')}, {bits('FvCounter')}u, {at('MAC')}, {bits('MAC')}u, {at('Epoch')},\n"
             f"     {{{mask}}},\n"
-            f"     {sn}_min, {sn}_max, {sn}_unpack, {sn}_pack}}")
+            f"     {sn}_min, {sn}_max, {sn}_sna, {sn}_unpack, {sn}_pack}}")
 
 
 def header(contract: Contract) -> str:
@@ -175,6 +188,7 @@ typedef struct {{
     int epoch; /* MRS_SecOCSync's *_Epoch signal index, -1 elsewhere */
     uint8_t zero_mask[8]; /* AND mask clearing the CRC byte and the MAC bits */
     const double *min, *max; /* every signal's DBC range, in signal order */
+    const uint8_t *sna; /* 1: the signal has an SNA raw value, unpacked as NaN */
     /* Through the generated codec: physical values in signal order. */
     int (*unpack)(double *phys, const uint8_t *data, size_t len);
     int (*pack)(uint8_t *out, size_t size, const double *phys); /* bytes written, or < 0 */
@@ -182,7 +196,8 @@ typedef struct {{
 
 extern const mrs_msg_t mrs_messages[MRS_N_MESSAGES];
 
-/* Every signal within its DBC [min, max] and finite (mrsteer_dbc.Contract.decode). */
+/* Every signal within its DBC [min, max] and finite, or NaN where it has an SNA value
+ * (mrsteer_dbc.Contract.decode). */
 int mrs_in_range(const mrs_msg_t *m, const double *phys);
 
 #endif
@@ -207,8 +222,8 @@ int mrs_in_range(const mrs_msg_t *m, const double *phys)
 {{
     unsigned i;
     for (i = 0u; i < m->n_signals; ++i) {{
-        /* Written so that a NaN fails. */
-        if (!(phys[i] >= m->min[i] && phys[i] <= m->max[i])) {{
+        /* Written so that a NaN fails, unless it is the signal's SNA. */
+        if (!(phys[i] >= m->min[i] && phys[i] <= m->max[i]) && !(m->sna[i] != 0u && isnan(phys[i]))) {{
             return 0;
         }}
     }}

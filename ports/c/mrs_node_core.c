@@ -20,7 +20,7 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
 {
     static const int msgs[MRS_N_INPUTS] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED, MRS_MSG_REDUNDANT};
     static const int sigs[MRS_N_INPUTS] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED, MRS_SIG_LAT_ACCEL};
-    static const int sigs2[MRS_N_INPUTS] = {-1, -1, -1, MRS_SIG_STEER_ANGLE_2};
+    static const int sigs2[MRS_N_INPUTS] = {-1, MRS_SIG_YAW_RATE_2, -1, MRS_SIG_STEER_ANGLE_2};
     /* A missing redundant input is no cause: the monitor reports it (PLAUS_DEGRADED). */
     static const unsigned causes[MRS_N_INPUTS] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING,
                                                   MRS_CAUSE_SPEED_MISSING, 0u};
@@ -224,7 +224,7 @@ int mrs_node_control(mrs_node_t *n)
 {
     unsigned cause = 0u, state;
     mrs_real_t values[3];
-    double lat = NAN, steer2 = NAN, u_req;
+    double lat = NAN, steer2 = NAN, yaw2, u_req;
     int i, fault;
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
     /* node.py's monitor_steps and redundant_inputs, before the ages move on: the yaw-rate
@@ -266,9 +266,12 @@ int mrs_node_control(mrs_node_t *n)
     /* The monitor steps on the yaw-rate sensor's samples (a lost one at the newest values) and
      * holds its verdict between them; it sees the command sent last period (n->command: 0 before
      * the first); the limiter bounds this period's request with the monitor's verdict. */
+    /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
+     * pauses the pair check. */
+    yaw2 = isnan(values[1]) ? (double)NAN : yaw->value2;
     for (k = 0; k < steps; ++k) {
         n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
-                                    (double)values[2], n->command, NAN);
+                                    (double)values[2], n->command, yaw2);
     }
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
                                     (uint8_t)((n->mon_s.flags & MRS_CHECK_YAW_PAIR) != 0u));

@@ -18,6 +18,13 @@ Yaw rate, per plant step ts (fs = 1 / ts):
 * Q: quantisation to the DBC signal's resolution (YawRate_YawRate's scale), read from the
   contract, so offline simulations see what the bus carries.
 
+The yaw-rate sensor's second sensing element (``yaw_rate_redundant``, YawRate_YawRate2 in the same
+frame, for the plausibility monitor's yaw-rate pair check) is the same chain with its own
+parameters (a ``[yaw_rate_redundant]`` table; by default the first element's noise, filter and
+quantisation, and no bias), its own noise stream and its own faults.  ``present = false`` in
+that table models a sensor without it: it reads NaN, which the frame carries as SNA (what the
+campaign engine, which does not model the element, runs).
+
 Lateral acceleration (``MRS_RedundantSensors``, for the plausibility monitor): the true
 a_y = v (beta' + r) of the plant through the same chain as the yaw rate, with ``noise_density``
 in micro-g/sqrt(Hz) (default 180: Bosch BMI160's accelerometer, datasheet BST-BMI160-DS000-07,
@@ -37,7 +44,9 @@ sensors the time before a step's readings.
 
 Noise is seeded: one ``seed`` makes a numpy SeedSequence whose spawned children feed one
 Generator per sensor (yaw rate, steer, speed, lateral acceleration, second steering channel, then
-one per noise fault: the first three streams are those of the three-sensor model before), so runs are reproducible and the sensors' streams independent.
+one per noise fault, then the yaw rate's second element: the first three streams are those of the
+three-sensor model before, and each model since added its stream after the others), so runs are
+reproducible and the sensors' streams independent.
 ``SensorConfig.ideal()`` keeps today's exact sensors (output = input).
 """
 
@@ -60,7 +69,8 @@ G = 9.80665  # m/s^2 per g
 DBC_SIGNALS = {"yaw_rate": (names.MSG_YAW, names.SIG_YAW_RATE), "steer": (names.MSG_STEER, names.SIG_STEER_ANGLE),
                "speed": (names.MSG_SPEED, names.SIG_SPEED),
                "lat_accel": (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
-               "steer_redundant": (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2)}
+               "steer_redundant": (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2),
+               "yaw_rate_redundant": (names.MSG_YAW, names.SIG_YAW_RATE_2)}
 MAX_SEED = 2**63 - 1
 
 
@@ -130,6 +140,8 @@ class SensorConfig:
     lat_accel: LatAccelSensorConfig = field(default_factory=LatAccelSensorConfig)
     steer_redundant: ChannelConfig = field(default_factory=lambda: ChannelConfig(noise=0.01))
     faults: tuple[SensorFault, ...] = ()
+    yaw_rate_redundant: YawRateSensorConfig = field(default_factory=YawRateSensorConfig)
+    yaw_rate_redundant_present: bool = True  # False: the sensor has no second element (NaN, SNA)
 
     @classmethod
     def ideal(cls) -> "SensorConfig":
@@ -142,16 +154,25 @@ class SensorConfig:
     @classmethod
     def from_mapping(cls, data: dict[str, Any], where: str) -> "SensorConfig":
         """From a TOML table: ``seed`` and the tables [yaw_rate], [steer], [speed], [lat_accel],
-        [steer_redundant]."""
-        reject_unknown(data, {"seed", "yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"}, where)
-        yaw_cfg = _checked(YawRateSensorConfig, table(data, "yaw_rate", where), YAW_RANGES, f"{where} [yaw_rate]")
+        [steer_redundant], [yaw_rate_redundant] (the yaw-rate sensor's second element: the keys
+        it leaves out are [yaw_rate]'s but its bias, and ``present = false`` leaves it out)."""
+        reject_unknown(data, {"seed", "yaw_rate", "steer", "speed", "lat_accel", "steer_redundant",
+                              "yaw_rate_redundant"}, where)
+        first = table(data, "yaw_rate", where)
+        yaw_cfg = _checked(YawRateSensorConfig, first, YAW_RANGES, f"{where} [yaw_rate]")
+        second_yaw = dict(table(data, "yaw_rate_redundant", where))
+        present = boolean(second_yaw, "present", True, f"{where} [yaw_rate_redundant]")
+        second_yaw.pop("present", None)
+        inherited = {k: v for k, v in first.items() if k != "bias_deg_s"}  # an offset is the element's own
+        yaw2_cfg = _checked(YawRateSensorConfig, {**inherited, **second_yaw}, YAW_RANGES,
+                            f"{where} [yaw_rate_redundant]")
         lat_cfg = _checked(LatAccelSensorConfig, table(data, "lat_accel", where), LAT_RANGES, f"{where} [lat_accel]")
         steer, speed = (_checked(ChannelConfig, table(data, name, where), CHANNEL_RANGES, f"{where} [{name}]")
                         for name in ("steer", "speed"))
         second = table(data, "steer_redundant", where)
         steer2 = _checked(ChannelConfig, {"noise": 0.01, **second}, CHANNEL_RANGES, f"{where} [steer_redundant]")
         return cls(yaw_cfg, steer, speed, integer(data, "seed", 0, 0, MAX_SEED, where), lat_accel=lat_cfg,
-                   steer_redundant=steer2)
+                   steer_redundant=steer2, yaw_rate_redundant=yaw2_cfg, yaw_rate_redundant_present=present)
 
     @classmethod
     def load(cls, spec: str) -> "SensorConfig":
@@ -193,12 +214,16 @@ class _Lowpass:
         return float(y)
 
 
-#: The channels in the order of their noise streams.
+#: The channels in the order of their noise streams (the faults' streams follow them).
 CHANNELS = ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant")
+#: The yaw-rate sensor's second element: its stream comes after the faults' streams, so every
+#: seed gives the other channels the noise it gave them before the element existed.
+YAW_RATE_REDUNDANT = "yaw_rate_redundant"
+ALL_CHANNELS = (*CHANNELS, YAW_RATE_REDUNDANT)
 
 
 class Sensors:
-    """The five sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s,
+    """The six sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s,
     m/s, m/s^2).  ``at(t)`` before a step's readings sets the time the faults see."""
 
     def __init__(self, config: SensorConfig, ts: float) -> None:
@@ -206,8 +231,9 @@ class Sensors:
             raise ModelFileError(f"sensor step ts must be positive, got {ts!r}")
         self.config, self.ts = config, ts
         fs = 1.0 / ts
-        yaw, lat = config.yaw_rate, config.lat_accel
-        for name, hz in (("yaw_rate", yaw.lowpass_hz), ("lat_accel", lat.lowpass_hz)):
+        yaw, lat, yaw2 = config.yaw_rate, config.lat_accel, config.yaw_rate_redundant
+        for name, hz in (("yaw_rate", yaw.lowpass_hz), ("lat_accel", lat.lowpass_hz),
+                         (YAW_RATE_REDUNDANT, yaw2.lowpass_hz)):
             if hz >= fs / 2:
                 raise ModelFileError(f"{name} lowpass_hz {hz:g} must be below the Nyquist "
                                      f"frequency {fs / 2:g} Hz of the plant step")
@@ -217,29 +243,33 @@ class Sensors:
         self.lat_bias = lat.bias_m_s2
         self.sigma = {"yaw_rate": self.yaw_sigma, "steer": math.radians(config.steer.noise),
                       "speed": config.speed.noise, "lat_accel": self.lat_sigma,
-                      "steer_redundant": math.radians(config.steer_redundant.noise)}
-        self.bias = {"yaw_rate": self.yaw_bias, "lat_accel": self.lat_bias}
-        self._hz = {"yaw_rate": yaw.lowpass_hz, "lat_accel": lat.lowpass_hz}
+                      "steer_redundant": math.radians(config.steer_redundant.noise),
+                      YAW_RATE_REDUNDANT: math.radians(yaw2.noise_density) * math.sqrt(fs / 2.0)}
+        self.bias = {"yaw_rate": self.yaw_bias, "lat_accel": self.lat_bias,
+                     YAW_RATE_REDUNDANT: math.radians(yaw2.bias_deg_s)}
+        self._hz = {"yaw_rate": yaw.lowpass_hz, "lat_accel": lat.lowpass_hz, YAW_RATE_REDUNDANT: yaw2.lowpass_hz}
         filtered = not config.exact  # exact sensors filter nothing
         self.lowpass = _Lowpass(yaw.lowpass_hz, fs).ba if filtered and yaw.lowpass_hz > 0.0 else None
-        self._q = {name: _quantiser(getattr(config, name).quantise, name) for name in CHANNELS}
+        self._q = {name: _quantiser(getattr(config, name).quantise, name) for name in ALL_CHANNELS}
         for f in config.faults:
-            if f.sensor not in CHANNELS:
-                raise ModelFileError(f"sensor fault: sensor must be one of {', '.join(CHANNELS)}, got {f.sensor!r}")
+            if f.sensor not in ALL_CHANNELS:
+                raise ModelFileError(f"sensor fault: sensor must be one of {', '.join(ALL_CHANNELS)}, "
+                                     f"got {f.sensor!r}")
         self.reset()
 
     def reset(self) -> None:
         """Back to the start: the same noise sequence again, the filters unstarted, the faults
         not yet begun."""
         n_fault = len(self.config.faults)
-        children = np.random.SeedSequence(self.config.seed).spawn(len(CHANNELS) + n_fault)
+        children = np.random.SeedSequence(self.config.seed).spawn(len(CHANNELS) + n_fault + 1)
         self._rng = {name: np.random.default_rng(c) for name, c in zip(CHANNELS, children)}
+        self._rng[YAW_RATE_REDUNDANT] = np.random.default_rng(children[-1])
         fs = 1.0 / self.ts
         self._lpf = {name: _Lowpass(hz, fs) for name, hz in self._hz.items() if hz > 0.0 and not self.config.exact}
         self._faults = {name: FaultedChannel(tuple(f for f in self.config.faults if f.sensor == name),
                                              [np.random.default_rng(children[len(CHANNELS) + i])
                                               for i, f in enumerate(self.config.faults) if f.sensor == name])
-                        for name in CHANNELS}
+                        for name in ALL_CHANNELS}
         self.t = 0.0
 
     def at(self, t: float) -> None:
@@ -270,3 +300,7 @@ class Sensors:
 
     def steer_redundant(self, delta: float) -> float:
         return self._measure("steer_redundant", delta)
+
+    def yaw_rate_redundant(self, r: float) -> float:
+        """The second element's reading; NaN for a sensor without one."""
+        return self._measure(YAW_RATE_REDUNDANT, r) if self.config.yaw_rate_redundant_present else math.nan

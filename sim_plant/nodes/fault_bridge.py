@@ -114,6 +114,26 @@ class BridgeStats:
     rx_queue_bytes: int | None = None  # each side's kernel receive queue (None: no kernel socket)
 
 
+def first_physical_signal(contract: mrsteer_dbc.Contract, name: str) -> Any:
+    """The signal ``out_of_range`` sets: the message's first that is no protection field."""
+    return next(s for s in contract.message(name).signals if not s.name.endswith(PROTECTION_SUFFIXES))
+
+
+def out_of_range_problem(contract: mrsteer_dbc.Contract, fault: Fault) -> str | None:
+    """Why ``out_of_range``'s value cannot be put in a target's frame (its raw field too
+    narrow), or None."""
+    if fault.kind != "out_of_range":
+        return None
+    for name in fault.targets():
+        sig = first_physical_signal(contract, name)
+        raw = round((fault.param - sig.offset) / sig.scale)
+        lo, hi = (-(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1) if sig.is_signed else (0, (1 << sig.length) - 1)
+        if not lo <= raw <= hi:
+            return (f"{fault.param:g} does not fit {sig.name}'s {sig.length}-bit field "
+                    f"({lo * sig.scale + sig.offset:g} to {hi * sig.scale + sig.offset:g})")
+    return None
+
+
 class Bridge:
     def __init__(self, vehicle: can.BusABC, controller: can.BusABC, fault: Fault, seed: int = 1) -> None:
         self.vehicle, self.controller, self.fault = vehicle, controller, fault
@@ -204,8 +224,7 @@ class Bridge:
         elif kind == "spoof_command":
             return [(now, msg), (now, _copy(msg, self._forge(msg)))]
         elif kind == "out_of_range":
-            m = self.contract.message(self.contract.name_of(msg.arbitration_id))
-            first = next(s for s in m.signals if not s.name.endswith(PROTECTION_SUFFIXES))
+            first = first_physical_signal(self.contract, self.contract.name_of(msg.arbitration_id))
             data = bytearray(self._reencode(msg, {first.name: f.param}))
         elif kind in SENSOR_KINDS:
             data = bytearray(self._falsify(msg, now))
@@ -365,6 +384,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
             if fault.signal is not None and fault.signal not in {
                     sig.name for sig in mrsteer_dbc.load().message(name).signals}:
                 raise ValueError(f"{name} has no signal {fault.signal!r}")
+        if (problem := out_of_range_problem(mrsteer_dbc.load(), fault)) is not None:
+            raise ValueError(problem)
     except (ValueError, TypeError) as exc:
         p.error(f"--fault: {exc}")
     if args.vehicle == args.controller:

@@ -97,11 +97,12 @@ class MonitorRun:
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
     """The plausibility bound a sensor's error is judged against, per period: the yaw rate's
     ``yaw_bound + yaw_rel |r|``, the lateral acceleration's the same times v (the same
-    residual), a steering channel's ``steer_bound``."""
+    residual), a steering channel's ``steer_bound``, the yaw rate's second element's
+    ``yaw_pair_bound``."""
     r = np.abs(run.r_true)
     yaw = cfg.yaw_bound + cfg.yaw_rel * r
     return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"], "steer": cfg.steer_bound,
-            "steer_redundant": cfg.steer_bound}[sensor]
+            "steer_redundant": cfg.steer_bound, "yaw_rate_redundant": cfg.yaw_pair_bound}[sensor]
 
 
 # One loop that is the plant node's step and the controller's cycle side by side; long because

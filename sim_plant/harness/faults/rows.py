@@ -64,7 +64,7 @@ ROWS = (
         detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_E2E, reject_all=True),
     Row("yaw-rate frames replayed", _f("replay", param=1.0), "every replayed frame rejected, no fault",
         no_fault=True, reject_all=True),
-    Row("yaw rate out of range (5 rad/s)", _f("out_of_range", param=5.0), "rejected (range), FAULT, recover",
+    Row("yaw rate out of range (3.2 rad/s)", _f("out_of_range", param=3.2), "rejected (range), FAULT, recover",
         detect_within=E2E_FAIL_MAX + 2, cause=names.CAUSE_RANGE, reject_all=True),
     Row("sensor frames duplicated", _f("duplicate", "sensors"), "copies rejected as repeated, no fault",
         no_fault=True, reject_all=True),
@@ -136,6 +136,9 @@ SENSOR_ROWS = (
             f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
     _sensor("curve: yaw-rate gain 0.5", "sensor_scale", names.MSG_YAW, 0.5, _YAW,
             f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+    # The element the law does not use: only the pair check can see it.
+    _sensor("curve: yaw-rate element 2 stuck at 0", "sensor_stuck", names.MSG_YAW, 0.0, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_YAW_RATE_2, scenario=CURVE),
 )
 
 ROWS = ROWS + SENSOR_ROWS
@@ -148,7 +151,8 @@ _PLANT_SENSOR = {(names.MSG_YAW, None): "yaw_rate", (names.MSG_YAW, names.SIG_YA
                  (names.MSG_STEER, None): "steer", (names.MSG_STEER, names.SIG_STEER_ANGLE): "steer",
                  (names.MSG_SPEED, None): "speed", (names.MSG_SPEED, names.SIG_SPEED): "speed",
                  (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL): "lat_accel",
-                 (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2): "steer_redundant"}
+                 (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2): "steer_redundant",
+                 (names.MSG_YAW, names.SIG_YAW_RATE_2): "yaw_rate_redundant"}
 
 
 def plant_fault(row: Row) -> SensorFault | None:

@@ -24,8 +24,8 @@ from sim_plant.harness.faults.evidence import STATISTICS, Evidence, gather, stal
 from sim_plant.harness.faults.rows import Row
 from sim_plant.harness.faults.verdicts_plausibility import check_plausibility, check_quiet_monitor
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
-                                               FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE, RATE_LIMIT,
-                                               TRACE_RESOLUTION, Setup)
+                                               CUT_RATE, FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE,
+                                               RATE_LIMIT, TRACE_RESOLUTION, Setup)
 from sim_plant.nodes.candump_log import Frame
 
 
@@ -135,12 +135,18 @@ def check_command_rate(e: Evidence, v: Verdict) -> None:
     # does not accept (around a SecOC epoch change) leaves two cycles between its neighbours.
     # Fifteen or more missing in a row alias to fewer (the counter runs 0..14), which only makes
     # the check stricter there.
+    # One exception, by design: a command in FAULT moving toward zero may move at the authority
+    # limiter's rate bound, which is how the limiter removes a command the yaw-rate pair check
+    # found wrong while it was still building (authority_step's cut); the actuator's own slew
+    # limit still bounds the wheels (the applied-angle checks).
     killed_at, restarted = e.killed_at, e.restarted
-    steps = zip(e.angles, e.angles[1:], e.cmd_counters, e.cmd_counters[1:])
-    for (ta, a), (tb, b), ca, cb in steps:
+    steps = zip(e.angles, e.angles[1:], e.cmd_counters, e.cmd_counters[1:], e.cmds[1:])
+    for (ta, a), (tb, b), ca, cb, (_, state) in steps:
         crash = killed_at is not None and ta <= killed_at and (restarted is None or tb >= restarted)
         cycles = max(1, (cb - ca) % COUNTER_MODULO)
-        if not crash and abs(b - a) > cycles * RATE_LIMIT * e.setup.ts + 2e-6:
+        cut = state == mr.STATUS_FAULT and a * b >= 0.0 and abs(b) <= abs(a)
+        rate = CUT_RATE if cut else RATE_LIMIT
+        if not crash and abs(b - a) > cycles * rate * e.setup.ts + 2e-6:
             v.fails.append(f"command stepped {math.degrees(abs(b - a)):.4f} deg in one cycle")
             break
 
