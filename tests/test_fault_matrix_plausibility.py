@@ -335,6 +335,13 @@ def test_a_sensor_row_judges_the_caused_yaw_detected_or_not() -> None:
     check_plausibility(replace(evidence(_row(), detect=0.2), trace=small), fails, observed)
     assert any(o.startswith("the command caused at most 0.0") for o in observed), observed
     assert not any("caused" in f for f in fails), fails
+    # A steering row reports it without judging it (its pair runs on the 50 ms frame).
+    steer = _row("curve: driver angle stuck at 0")
+    fails, observed = [], []
+    check_plausibility(replace(evidence(steer, detect=0.2), trace=trace), fails, observed)
+    assert any(o.startswith("the command caused at most 0.1") and o.endswith("NOT met, not judged on a steering row)")
+               for o in observed), observed
+    assert not any("caused" in f for f in fails), fails
 
 
 def test_a_row_whose_processes_left_no_statistics_fails_with_the_reason(tmp_path: Path) -> None:
