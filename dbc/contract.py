@@ -24,6 +24,12 @@ DBC_PATH = Path(__file__).with_name("mrsteer.dbc")
 SNA = "SNA"  # a value table's label for 'signal not available'
 
 
+def sna_raw(signal: Any) -> int | None:
+    """A cantools signal's raw 'not available' value (its value table's ``SNA``), if it has one:
+    the one place that reads the label, for the Python contract and the C glue alike."""
+    return next((int(raw) for raw, label in (signal.choices or {}).items() if str(label) == SNA), None)
+
+
 class ContractError(ValueError):
     """The DBC does not satisfy what the code requires of it."""
 
@@ -56,7 +62,7 @@ class Contract:
                           for m in self.db.messages}
         # The physical value cantools decodes an SNA raw value to, per signal that has one.
         self._sna = {m.name: {s.name: s.conversion.raw_to_scaled(raw, decode_choices=False)
-                              for s in m.signals for raw, label in (s.choices or {}).items() if str(label) == SNA}
+                              for s in m.signals if (raw := sna_raw(s)) is not None}
                      for m in self.db.messages}
 
     @staticmethod

@@ -26,7 +26,7 @@ import cantools
 from cantools.database.can.c_source import camel_to_snake_case
 
 from mrsteer_dbc import names
-from mrsteer_dbc.contract import SNA, Contract
+from mrsteer_dbc.contract import Contract, sna_raw
 
 DB = "mrsteer"
 MESSAGES = {  # names.py constant -> message
@@ -64,16 +64,11 @@ def _mask(contract: Contract, msg) -> list[int]:
     return mask
 
 
-def _sna_raw(s) -> int | None:
-    """The signal's raw 'not available' value (its value table's ``SNA``), if it has one."""
-    return next((int(raw) for raw, label in (s.choices or {}).items() if str(label) == SNA), None)
-
-
 def _functions(msg) -> str:
     m = f"{DB}_{camel_to_snake_case(msg.name)}"
     lo = [_c(s.minimum) for s in msg.signals]
     hi = [_c(s.maximum) for s in msg.signals]
-    sna = [_sna_raw(s) for s in msg.signals]
+    sna = [sna_raw(s) for s in msg.signals]
     unpack = []
     pack = []
     for i, s in enumerate(msg.signals):
