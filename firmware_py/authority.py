@@ -75,9 +75,9 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
     +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
     fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
     ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).
-    ``cut`` nonzero with a fault (the node passes the monitor's ``CHECK_YAW_PAIR``): the fault
-    was found while its command is still building, so the command is removed at ``rate_max``,
-    not faded.  ``s.flags`` says which bound acted."""
+    ``cut`` nonzero with a fault (the node passes the monitor's ``flags & CUT_CHECKS``: a pair
+    check): the fault was found while its command is still building, so the command is removed
+    at ``rate_max``, not faded.  ``s.flags`` says which bound acted."""
     flags = 0
     du = c.du_max
     if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):

@@ -78,6 +78,9 @@ FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
 YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
+#: The pair checks, which find a fault while the command it drove is still building: the node
+#: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
+CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
@@ -98,7 +101,7 @@ class PlausibilityConfig:
     yaw_count: int = 1  # samples of the redundant frame (50 ms each) over the bound, net (docs/controller.md)
     yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
     steer_bound: float = 0.004  # |delta - delta_2|, rad (0.23 deg of wheel angle)
-    steer_count: int = 3
+    steer_count: int = 1  # samples (50 ms each) over the bound, net (docs/controller.md)
     model_margin: float = 0.15  # |r - r_model| <= margin + model_rel |r_model|
     model_rel: float = 1.0
     model_tau: float = 0.15  # lag of the nominal car's yaw response, s

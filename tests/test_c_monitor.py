@@ -46,7 +46,7 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
     out = []
     for dd, dd2, r, ay, v, aux, u, r2 in rows:
         bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
-        u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CHECK_YAW_PAIR)
+        u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err))
     return out
 

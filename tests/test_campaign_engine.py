@@ -193,18 +193,21 @@ def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
     bits = choices[rng.integers(0, choices.size, (steps, rows))]
     calm = np.arange(steps) % 4 == 0  # periods with no bit set and every request finite (the clean path)
     bits[calm], requests[calm] = 0, walk[calm]
+    cuts = (rng.random((steps, rows)) < 0.5).astype(np.int64) * pl.CHECK_STEER_PAIR  # the node's flags & CUT_CHECKS
     batch = BatchAuthority(cfg, rows)
     c = au.configure_authority(cfg)
     states = [au.AuthorityState() for _ in range(rows)]
-    seen = 0
+    seen, cut_rows = 0, np.zeros(rows, dtype=bool)
     for k in range(steps):
-        u = batch.step(requests[k], bits[k])
+        u = batch.step(requests[k], bits[k], cuts[k])
         for i, s in enumerate(states):
-            expected = au.authority_step(c, s, float(requests[k, i]), int(bits[k, i]))
+            expected = au.authority_step(c, s, float(requests[k, i]), int(bits[k, i]), int(cuts[k, i]))
             assert u[i] == expected and batch.flags[i] == s.flags, (k, i)
             assert batch.engaged[i] == s.engaged and batch.quiet[i] == s.quiet, (k, i)
             seen |= s.flags
+        cut_rows |= batch.flags == (au.AUTH_FAULT | au.AUTH_RATE)  # a cut, bound by the rate
     assert seen == au.AUTH_MAGNITUDE | au.AUTH_RATE | au.AUTH_TIME | au.AUTH_FAULT  # every branch ran
+    assert cut_rows.any()
 
 
 def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:

@@ -335,12 +335,18 @@ def test_a_sensor_row_judges_the_caused_yaw_detected_or_not() -> None:
     check_plausibility(replace(evidence(_row(), detect=0.2), trace=small), fails, observed)
     assert any(o.startswith("the command caused at most 0.0") for o in observed), observed
     assert not any("caused" in f for f in fails), fails
-    # A steering row reports it without judging it (its pair runs on the 50 ms frame).
+    # A steering row: judged at the shipped rate, reported at the VM's 100 Hz (its pair runs on
+    # the 50 ms frame, which the 100 Hz plain law's command outlasts).
     steer = _row("curve: driver angle stuck at 0")
     fails, observed = [], []
     check_plausibility(replace(evidence(steer, detect=0.2), trace=trace), fails, observed)
-    assert any(o.startswith("the command caused at most 0.1") and o.endswith("NOT met, not judged on a steering row)")
-               for o in observed), observed
+    assert any(f.startswith("the command caused 0.1") for f in fails), fails
+    slow = evidence(steer, detect=0.2)
+    slow = replace(slow, trace=trace, setup=replace(slow.setup, rate_hz=100.0))
+    fails, observed = [], []
+    check_plausibility(slow, fails, observed)
+    assert any(o.startswith("the command caused at most 0.1")
+               and o.endswith("NOT met, not judged on a steering row at 100 Hz)") for o in observed), observed
     assert not any("caused" in f for f in fails), fails
 
 

@@ -86,11 +86,16 @@ def test_one_missing_redundant_sample_keeps_the_kinematic_window_and_a_long_gap_
 
 def test_the_two_steering_channels_disagreeing_trips_the_pair_check() -> None:
     mon = pl.PlausibilityMonitor()
-    bits = _straight(mon, 400, steer=lambda k: 0.01, steer2=lambda k: 0.01 - 0.006 * (k >= 100),
+    bits = _straight(mon, 400, steer=lambda k: 0.01, steer2=lambda k: 0.01 - 0.006 * (k >= 110),
                      yaw=lambda k: 0.06, lat=lambda k: 1.2)
-    first = bits.index(pl.PLAUS_STEER)
-    assert 100 < first and (first - 100) * TS <= 0.3 and mon.state.flags & pl.CHECK_STEER_PAIR
+    # one redundant sample over the bound trips (steer_count 1): the first after the onset
+    assert bits.index(pl.PLAUS_STEER) == 125 and mon.state.flags & pl.CHECK_STEER_PAIR
     assert mon.state.flags & pl.YAW_CHECKS == 0
+    assert mon.state.flags & pl.CUT_CHECKS == pl.CHECK_STEER_PAIR  # the node cuts the command on it
+    within = pl.PlausibilityMonitor()  # 0.0035 rad apart, under the 0.004 bound: never the pair
+    _straight(within, 400, steer=lambda k: 0.01, steer2=lambda k: 0.01 - 0.0035 * (k >= 110),
+              yaw=lambda k: 0.06, lat=lambda k: 1.2)
+    assert within.state.pair_count == 0 and not within.state.flags & pl.CHECK_STEER_PAIR
 
 
 def test_a_frozen_value_trips_once_its_partner_moves() -> None:

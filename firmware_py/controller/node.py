@@ -273,7 +273,7 @@ class ControllerNode:
                                    values[2], self.command, yaw_2)
         # the yaw-rate pair's fault is found while its command builds: removed at once, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
-                              self.monitor.flags & pl.CHECK_YAW_PAIR)
+                              self.monitor.flags & pl.CUT_CHECKS)
         state = self.state.status
         if bits & pl.PLAUS_FAULT:
             state = mr.STATUS_FAULT

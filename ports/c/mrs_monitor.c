@@ -14,7 +14,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->yaw_count = 1;
     cfg->yaw_raw_fraction = 0.5;
     cfg->steer_bound = 0.004;
-    cfg->steer_count = 3;
+    cfg->steer_count = 1;
     cfg->model_margin = 0.15;
     cfg->model_rel = 1.0;
     cfg->model_tau = 0.15;

@@ -29,6 +29,8 @@
 #define MRS_FROZEN_STEER_2 0x40u
 #define MRS_MISSING 0x80u
 #define MRS_CHECK_YAW_PAIR 0x100u
+/* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
+#define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
 
@@ -110,7 +112,7 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg);
 int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);
 void mrs_authority_reset(mrs_authority_state_t *s);
 /* The command allowed this period for u_request (rad), given the monitor's bits; cut nonzero
- * with a fault (the monitor's MRS_CHECK_YAW_PAIR) removes the command at rate_max, not faded. */
+ * with a fault (the monitor's MRS_CUT_CHECKS: a pair check) removes the command at rate_max, not faded. */
 double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
                           uint8_t plaus_bits, uint8_t cut);
 

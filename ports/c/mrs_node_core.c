@@ -274,7 +274,7 @@ int mrs_node_control(mrs_node_t *n)
                                     (double)values[2], n->command, yaw2);
     }
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
-                                    (uint8_t)((n->mon_s.flags & MRS_CHECK_YAW_PAIR) != 0u));
+                                    (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u));
     state = n->state.status;
     if (n->plaus & MRS_PLAUS_FAULT) {
         state = MRS_STATUS_FAULT;

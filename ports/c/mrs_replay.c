@@ -108,7 +108,7 @@ int main(int argc, char **argv)
             plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6]);
         }
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
-                                    (uint8_t)((mon_s.flags & MRS_CHECK_YAW_PAIR) != 0u));
+                                    (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u));
         state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
         printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
     }

@@ -38,14 +38,15 @@ class BatchAuthority:
         self.quiet = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros(n, dtype=np.int64)
 
-    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
-        """The command allowed this period per row (rad) for the law's ``u_request`` and the
-        monitor's ``plaus_bits``."""
+    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None = None) -> np.ndarray:
+        """The command allowed this period per row (rad) for the law's ``u_request``, the
+        monitor's ``plaus_bits`` and ``cut`` (nonzero: ``authority_step``'s cut; None: none)."""
         if _within(u_request) and not (plaus_bits & PLAUS_DEGRADED).any():
-            return self._checked(u_request, plaus_bits)
+            return self._checked(u_request, plaus_bits, cut)
         c = self.c
         finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
-        fault = ((plaus_bits & PLAUS_FAULT) != 0) | ~finite
+        plaus_fault = (plaus_bits & PLAUS_FAULT) != 0
+        fault = plaus_fault | ~finite
         timed_out = ~fault & (self.engaged >= c.window_steps) & ((plaus_bits & PLAUS_DEGRADED) != 0)
         fading = fault | timed_out
         flags = np.where(fault, au.AUTH_FAULT, 0) | np.where(timed_out, au.AUTH_TIME, 0)
@@ -54,7 +55,9 @@ class BatchAuthority:
         over, under = request > c.u_max, request < -c.u_max
         target = np.where(over, c.u_max, np.where(under, -c.u_max, request))
         flags |= np.where(~fading & (over | under), au.AUTH_MAGNITUDE, 0)
-        du = np.where(fault, c.fault_fade_step, np.where(timed_out, c.fade_step, c.du_max))
+        fault_step = c.fault_fade_step if cut is None else np.where(plaus_fault & (cut != 0), c.du_max,
+                                                                      c.fault_fade_step)
+        du = np.where(fault, fault_step, np.where(timed_out, c.fade_step, c.du_max))
         d = target - self.u
         up, down = d > du, d < -du
         d = np.where(up, du, np.where(down, -du, d))
@@ -62,15 +65,18 @@ class BatchAuthority:
         self.flags = flags
         return self._move(d)
 
-    def _checked(self, u_request: np.ndarray, plaus_bits: np.ndarray) -> np.ndarray:
+    def _checked(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None) -> np.ndarray:
         """``step`` with every request finite and no row DEGRADED (so none timed out): a
-        faulted row fades to 0, the others bounded in magnitude and rate (min and max are the
-        scalar's comparisons for finite numbers)."""
+        faulted row fades to 0 (a cut one moves at the rate bound), the others bounded in
+        magnitude and rate (min and max are the scalar's comparisons for finite numbers)."""
         c = self.c
         fault = (plaus_bits & PLAUS_FAULT) != 0
+        cutting = None
         if fault.any():
             request = np.where(fault, 0.0, u_request)
-            du = np.where(fault, c.fault_fade_step, c.du_max)
+            if cut is not None:
+                cutting = fault & (cut != 0)
+            du = np.where(fault & ~cutting if cutting is not None else fault, c.fault_fade_step, c.du_max)
             low = -du
         else:
             request, du, low = u_request, c.du_max, -c.du_max
@@ -78,7 +84,11 @@ class BatchAuthority:
         d = target - self.u
         bounded = np.minimum(np.maximum(d, low), du)
         flags = np.where(target != request, au.AUTH_MAGNITUDE, 0) | np.where(bounded != d, au.AUTH_RATE, 0)
-        self.flags = np.where(fault, au.AUTH_FAULT, flags) if request is not u_request else flags
+        if request is not u_request:
+            # a faulted row's flags: FAULT, and RATE where a cut (at du_max) bound it
+            faulted = au.AUTH_FAULT | (np.where(cutting & (bounded != d), au.AUTH_RATE, 0) if cutting is not None else 0)
+            flags = np.where(fault, faulted, flags)
+        self.flags = flags
         return self._move(bounded)
 
     def _move(self, d: np.ndarray) -> np.ndarray:

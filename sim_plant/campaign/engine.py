@@ -229,7 +229,7 @@ class _Group:
                     u = self.law.step(steer, yaw, held["speed"])
                     # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
                     bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending)
-                    u = self.limiter.step(u, bits)
+                    u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS)
                     tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits

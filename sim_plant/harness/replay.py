@@ -230,7 +230,7 @@ class _Replayer:
         for _ in range(monitor_steps):
             bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
-                                 monitor.flags & pl.CHECK_YAW_PAIR)
+                                 monitor.flags & pl.CUT_CHECKS)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node

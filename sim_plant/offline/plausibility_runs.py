@@ -13,7 +13,11 @@ step() gave it).
 ``second_yaw`` adds the yaw-rate sensor's second element (issue 18's decision,
 docs/controller.md "A second yaw-rate channel"): a sensor of its own configuration (noise stream,
 offset), never faulted, sampled with the first as one ``MRS_YawRate`` frame would carry both,
-for the monitor's pair check.  The bus does not carry it yet; without it the loop is as before.
+for the monitor's pair check, as ``MRS_YawRate`` carries it; without it the car has none (NaN:
+the check paused).
+
+``cut`` is the monitor's flags the node passes as ``authority_step``'s cut (the node's
+``CUT_CHECKS``: the pair checks; 0 fades every fault instead).
 
 The error of a faulted sensor is measured against a second, fault-free copy of the same sensor
 models (same seed, same streams), so it is the fault's own contribution, noise excluded.
@@ -38,6 +42,7 @@ from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SensorConfig, Sensors
+from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 #: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
 _MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.MSG_SPEED,
@@ -62,6 +67,19 @@ class MonitorRun:
     margins: dict[str, float]  # each check's largest residual over the run / its bound
     held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel (and yaw_rate_redundant)
     beta: np.ndarray
+
+    def caused_yaw(self, start: float, car: VehicleParams) -> float:
+        """The peak |r| that the command's excursion from ``start`` on gives the linear ``car``
+        (eqs. 14/16): as the fault matrix's ``caused_yaw``, only what lies outside the range
+        from the command at the onset (the healthy controller's, in a steady state) to zero."""
+        dt = float(self.t[1] - self.t[0])
+        i0 = max(0, int(round(start / dt)) - 1)
+        low, high = min(0.0, float(self.aux[i0])), max(0.0, float(self.aux[i0]))
+        plant, peak = DiscretePlant(car, dt), 0.0
+        for a in self.aux[i0:]:
+            plant.advance(a - min(max(a, low), high), 0.0)
+            peak = max(peak, abs(float(plant.x[1])))
+        return peak
 
     def first(self, mask: np.ndarray) -> float | None:
         idx = np.flatnonzero(mask)
@@ -109,7 +127,7 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 # each of its stages is a few lines that read best in order.
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
-        guard: bool = True, second_yaw: SensorConfig | None = None) -> MonitorRun:
+        guard: bool = True, second_yaw: SensorConfig | None = None, cut: int = pl.CUT_CHECKS) -> MonitorRun:
     every = cycles(ts)
     scene = ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
@@ -157,7 +175,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
                         pipeline[0], held["yaw_rate_redundant"])
         if guard:
-            u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CHECK_YAW_PAIR)
+            u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut)
         pipeline.append(u)
         applied = actuator.step(pipeline.popleft())
         out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
@@ -182,7 +200,7 @@ def steady_curve(v: float, mu: float, a_y: float = 2.0, duration: float = 2.5, p
     ``steer`` steps: a driver steering normally, not a step; 0 = a step), then held."""
     from sim_plant.car.actuator_dynamics import ActuatorModelConfig
     from sim_plant.car.sensors import SensorConfig
-    from sim_plant.car.vehicle import VehicleParams, steering_tf
+    from sim_plant.car.vehicle import steering_tf
 
     a = min(a_y, 0.6 * 9.81 * mu)
     gain = steering_tf(VehicleParams(v=v, mu=1.0)).dc_gain()  # r / delta on a dry road

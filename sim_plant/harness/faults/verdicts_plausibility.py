@@ -40,7 +40,7 @@ from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, PLAUS_YAW, Pla
 from mrsteer_dbc import names
 from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET, caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
-from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
+from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, RATE_HZ, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
 
 #: A sample of the falsified signal as the controller got it: (t, error, bound).
@@ -225,18 +225,21 @@ def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observ
 
 def judge_caused_yaw(e: Evidence, start: float, fails: list[str], observed: list[str]) -> None:
     """The yaw rate the row's command caused (``caused_yaw``) against issue 18's target, judged
-    on the yaw-rate rows (the yaw-rate pair check finds those within a few cycles) and reported
-    on the steering rows: their pair check runs on the 50 ms redundant frame and, depending on
-    the frame's phase to the onset, misses the target (0.15 rad/s at 100 Hz).  A row whose
-    figure cannot be estimated says why."""
+    on the yaw-rate rows at every rate (the yaw-rate pair finds those within a few cycles) and on
+    the steering rows at the shipped rate (``RATE_HZ``, the shipped law): their pair check waits
+    for the 50 ms redundant frame, which the shipped law's command outlasts within the target
+    (offline, every onset phase: at most 0.028 rad/s), but the paper's plain law tuned for
+    100 Hz, which the VM runs, does not (0.074 at the worst phase): there it is reported.  A row
+    whose figure cannot be estimated says why."""
     caused = caused_yaw(e, start)
     if caused.value is None:
         observed.append(f"caused yaw not estimated: {caused.reason}")
         return
-    judged = e.row.plausibility == PLAUS_YAW
+    judged = e.row.plausibility == PLAUS_YAW or e.setup.rate_hz == RATE_HZ
     met = "met" if caused.value <= CAUSED_YAW_TARGET else "NOT met"
+    why_not = f", not judged on a steering row at {e.setup.rate_hz:g} Hz"
     observed.append(f"the command caused at most {caused.value:.4f} rad/s of yaw (target {CAUSED_YAW_TARGET:g}: "
-                    f"{met}{'' if judged else ', not judged on a steering row'})")
+                    f"{met}{'' if judged else why_not})")
     if judged and caused.value > CAUSED_YAW_TARGET:
         fails.append(f"the command caused {caused.value:.4f} rad/s of yaw, over issue 18's {CAUSED_YAW_TARGET:g}")
 
