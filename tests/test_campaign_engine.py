@@ -179,7 +179,7 @@ def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
     under random monitor bits; a short panic window so that the time-out fades some rows."""
     from firmware_py import authority as au
     from firmware_py import plausibility as pl
-    from sim_plant.campaign.batch_monitor import BatchAuthority
+    from sim_plant.campaign.batch_authority import BatchAuthority
 
     cfg = au.AuthorityConfig(ts=0.002, panic_window=0.03, rearm_time=0.01)
     rows, steps = 40, 400
@@ -212,15 +212,19 @@ def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
 
 def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     """Inputs of the shape the node gives the monitor: the redundant pair held for 25 periods,
-    a nominal-car-like yaw rate, and per row one of: healthy, a yaw-rate offset, a stuck yaw
-    rate, a steering-pair offset, a stuck second channel, the redundant frame missing for a
-    while, a speed below the monitor's minimum for a while, a stuck a_y, a stuck driver's angle,
-    a large yaw-rate offset."""
+    a nominal-car-like yaw rate read by two elements (each its own noise), and per row one of:
+    healthy, a yaw-rate offset, a stuck yaw rate, a steering-pair offset, a stuck second
+    channel, the redundant frame and the second yaw-rate element missing for a while, a speed
+    below the monitor's minimum for a while, a stuck a_y, a stuck driver's angle, a large
+    yaw-rate offset; the second yaw-rate element also missing in every period divisible by 7 of
+    the even rows, its window restarting there."""
     rng = np.random.default_rng(seed)
     k = np.arange(steps)[:, None]
     v = np.repeat(rng.uniform(8.0, 40.0, rows)[None], steps, axis=0)
     d = 0.02 * np.sin(2 * np.pi * k * 0.002 * rng.uniform(0.2, 1.5, rows)) + rng.normal(0, 1e-4, (steps, rows))
-    r = d * v / (2.5 + 0.0025 * v * v) + rng.normal(0, 2e-3, (steps, rows))
+    r_true = d * v / (2.5 + 0.0025 * v * v)
+    r = r_true + rng.normal(0, 2e-3, (steps, rows))
+    r2 = r_true + rng.normal(0, 2e-3, (steps, rows))
     lat = r * v + rng.normal(0, 0.05, (steps, rows))
     d2 = d + rng.normal(0, 2e-4, (steps, rows))
     aux = rng.normal(0, 1e-3, (steps, rows))
@@ -237,10 +241,11 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     gap = after & (k < onset + 100)
     lat = np.where((kind == 5) & gap, np.nan, lat)
     d2 = np.where((kind == 5) & gap, np.nan, d2)
+    r2 = np.where((kind == 5) & gap | (k % 7 == 0) & (np.arange(rows) % 2 == 0), np.nan, r2)
     v = np.where((kind == 6) & gap, 3.0, v)
     held = (k // 25) * 25  # the 50 ms frame, sampled at the period it is sent in
     lat, d2 = lat[held[:, 0]], d2[held[:, 0]]
-    return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux}
+    return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux, "r2": r2}
 
 
 @pytest.mark.parametrize("held", [False, True], ids=["every-period", "held-pair"])
@@ -267,26 +272,27 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
     for k in range(steps):
         if not held or k % 25 == 0:
             pair = (x["lat"][k], x["d2"][k])
-        bits = batch.step(x["d"][k], pair[1], x["r"][k], pair[0], x["v"][k], x["aux"][k])
+        bits = batch.step(x["d"][k], pair[1], x["r"][k], pair[0], x["v"][k], x["aux"][k], x["r2"][k])
         if held:
             if k % 25 == 0:
                 quiet_pair = (pair[0][healthy], pair[1][healthy])
             q = quiet.step(x["d"][k][healthy], quiet_pair[1], x["r"][k][healthy], quiet_pair[0],
-                           x["v"][k][healthy], x["aux"][k][healthy])
+                           x["v"][k][healthy], x["aux"][k][healthy], x["r2"][k][healthy])
             assert np.array_equal(q, bits[healthy]), k
-            for name in ("yaw_same", "lat_same", "st_same", "st2_same", "model_count", "since"):
+            for name in ("yaw_same", "lat_same", "st_same", "st2_same", "model_count", "since", "yaw_pair_n"):
                 assert np.array_equal(getattr(quiet, name), getattr(batch, name)[healthy]), (k, name)
         for i, s in enumerate(states):
-            expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux")))
+            expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux", "r2")))
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
-                         "kin_n", "since"):
+                         "kin_n", "since", "yaw_pair_n", "yaw_pair_idx"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
-            for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err"):
+            for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    assert seen == 0xFF, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
+    assert seen == 2 * pl.CHECK_YAW_PAIR - 1, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
+    assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
         assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,
                                                                                  batch.steady_periods)
@@ -294,7 +300,7 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
 
 def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_models() -> None:
     """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
-    ``BatchSensors``' lateral acceleration, second steering channel and yaw rate against
+    ``BatchSensors``' lateral acceleration, second steering channel and yaw rate (both elements) against
     ``sensors.Sensors`` of the same seed, step by step while the cars move."""
     from sim_plant.campaign.batch_car import BatchCar
     from sim_plant.campaign.batch_sensors import BatchSensors
@@ -302,6 +308,7 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     from sim_plant.car.plants import Car
     from sim_plant.car.sensors import SensorConfig, Sensors, YawRateSensorConfig
     from sim_plant.car.vehicle import VehicleParams
+    from dataclasses import replace
 
     rng = np.random.default_rng(5)
     rows, steps, ts = 6, 400, 0.002
@@ -312,8 +319,9 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     delta = 0.03 * np.sin(2 * np.pi * rng.uniform(0.5, 3.0, rows) * t)
     car, sensors = BatchCar(v, mu, mass, ts), BatchSensors(noise, bias, seeds, ts)
     cars = [Car("nonlinear", VehicleParams(v=v[i], mu=mu[i], mass=mass[i]), ts) for i in range(rows)]
-    scalar = [Sensors(SensorConfig(YawRateSensorConfig(noise_density=noise[i], bias_deg_s=bias[i]),
-                                   seed=int(seeds[i])), ts) for i in range(rows)]
+    yaw = [YawRateSensorConfig(noise_density=noise[i], bias_deg_s=bias[i]) for i in range(rows)]
+    scalar = [Sensors(SensorConfig(yaw[i], seed=int(seeds[i]), yaw_rate_redundant=replace(yaw[i], bias_deg_s=0.0)),
+                      ts) for i in range(rows)]
     for c, f in zip(cars, f_y):
         c.set_loads(Loads(f_y=float(f)))
     moved = 0.0
@@ -321,20 +329,49 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
         a_y = car.lat_accel(delta[k], f_y, None)
         sensors.at(k)
         got = {"yaw_rate": sensors.yaw_rate(car.r), "lat_accel": sensors.quantised_lat(sensors.lat_filtered(a_y)),
-               "steer_redundant": sensors.steer_redundant(delta[k])}
+               "steer_redundant": sensors.steer_redundant(delta[k]), "yaw_rate_redundant": sensors.yaw_rate_redundant(car.r)}
         for i in range(rows):
             y = cars[i].outputs(float(delta[k, i]), 0.0)
             assert abs(y[2] - a_y[i]) <= 1e-12 * max(1.0, abs(y[2])), (k, i)
             s = scalar[i]
             s.at(k * ts)
             want = {"yaw_rate": s.yaw_rate(float(y[0])), "lat_accel": s.lat_accel(float(y[2])),
-                    "steer_redundant": s.steer_redundant(float(delta[k, i]))}
+                    "steer_redundant": s.steer_redundant(float(delta[k, i])),
+                    "yaw_rate_redundant": s.yaw_rate_redundant(float(y[0]))}
             for ch, value in want.items():
                 assert abs(got[ch][i] - value) <= TOL, (k, i, ch, got[ch][i], value)
             cars[i].advance(float(delta[k, i]), 0.0)
         moved = max(moved, float(np.max(np.abs(a_y))))
         car.advance(delta[k], np.zeros(rows), f_y, None, None, mu)
     assert moved > 1.0  # the cars did turn
+
+
+def test_the_second_yaw_rate_element_reads_as_the_samples_scalar_sensor_with_and_without_a_fault() -> None:
+    """``BatchSensors.yaw_rate_redundant`` against the ``sensors.Sensors`` of each sample's
+    scenario (``scenario_for``): its stream is the seed's child after the faults', so a row
+    with a fault draws another one than a row without; the first element's fault leaves it."""
+    from sim_plant.campaign.batch_faults import BatchFaults
+    from sim_plant.campaign.batch_sensors import BatchSensors
+    from sim_plant.campaign.params import FAULT_CHANNELS, NOISE_SEED
+    from sim_plant.car.sensors import Sensors
+
+    c = spec.parse(FAULTS.format(seed=8), "faults.toml")
+    s = sampling.samples(c, np.arange(16))
+    s["fault_onset"][:] = 0.0
+    faulted = s["fault_sensor"] != FAULT_CHANNELS.index("none")
+    assert faulted.any() and (~faulted).any()
+    ts, steps = 0.002, 300
+    batch = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=BatchFaults(s), steps=steps)
+    scalar = [Sensors(scenario_for(s.row(i), 1.0).sensor_config, ts) for i in range(len(s))]
+    r = 0.2 * np.sin(np.linspace(0.0, 3.0, steps))
+    for k in range(steps):
+        batch.at(k)
+        first, got = batch.yaw_rate(np.full(len(s), r[k])), batch.yaw_rate_redundant(np.full(len(s), r[k]))
+        for i, sensor in enumerate(scalar):
+            sensor.at(k * ts)
+            assert sensor.yaw_rate(float(r[k])) == pytest.approx(first[i], abs=TOL)
+            assert sensor.yaw_rate_redundant(float(r[k])) == pytest.approx(got[i], abs=TOL), (k, i)
+    assert np.any(got != first)  # its own noise
 
 
 def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light_grippy_cars() -> None:

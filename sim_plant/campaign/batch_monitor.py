@@ -1,109 +1,24 @@
-"""Issue 18's safety layer vectorised over a batch, for the batch engine: the authority limiter
-(``firmware_py.authority.authority_step``) and the plausibility monitor
-(``firmware_py.plausibility.monitor_step``) for N rows at once.
+"""Issue 18's plausibility monitor vectorised over a batch, for the batch engine:
+``firmware_py.plausibility.monitor_step`` for N rows at once (its authority limiter is
+``batch_authority``).
 
-``BatchAuthority.step`` and ``BatchMonitor.step`` are the scalar functions statement for
-statement on arrays: each branch of the scalar code a mask in its order, the counters and the
-latched bits int arrays, the state one array per slot of the scalar state (``AuthorityState``,
-``MonitorState``).  The coefficients are the firmware's own (``configure_authority``,
-``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds both equal to the scalar
+``BatchMonitor.step`` is the scalar function statement for statement on arrays: each branch of
+the scalar code a mask in its order, the counters and the latched bits int arrays, the state one
+array per slot of ``MonitorState``.  The coefficients are the firmware's own
+(``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds it equal to the scalar
 code row by row and period by period: the bits, the flags, the counters, the residuals.
 
-``engine`` runs both after the law, as the controller node does, and the authority limiter
-again as the actuator's own limit.  ``BatchMonitor.step`` has a shortcut for the periods
-between redundant samples, ``BatchAuthority.step`` one for periods without DEGRADED (each the
-scalar's branches for such a period, checked by the same tests).
-
-Not here yet: the yaw-rate pair (``monitor_step``'s ``yaw_rate_redundant``, ``authority_step``'s
-``cut``).  The engine's sensors have no second yaw-rate element, so the scalar code, given NaN
-for it, does what these do (docs/controller.md, "A second yaw-rate channel", step 4).
+``engine`` runs it after the law, as the controller node does, with the yaw-rate sensor's
+second element (``yaw_rate_redundant``) every period.  ``step`` has a shortcut for the periods
+between redundant samples (the scalar's branches for such a period, checked by the same tests).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from firmware_py import authority as au
 from firmware_py import plausibility as pl
-from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT
-
-
-class BatchAuthority:
-    """N instances of the authority limiter configured with one ``AuthorityConfig``."""
-
-    def __init__(self, config: au.AuthorityConfig, n: int) -> None:
-        self.c = au.configure_authority(config)
-        self.u = np.zeros(n)
-        self.engaged = np.zeros(n, dtype=np.int64)
-        self.quiet = np.zeros(n, dtype=np.int64)
-        self.flags = np.zeros(n, dtype=np.int64)
-
-    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None = None) -> np.ndarray:
-        """The command allowed this period per row (rad) for the law's ``u_request``, the
-        monitor's ``plaus_bits`` and ``cut`` (nonzero: ``authority_step``'s cut; None: none)."""
-        if _within(u_request) and not (plaus_bits & PLAUS_DEGRADED).any():
-            return self._checked(u_request, plaus_bits, cut)
-        c = self.c
-        finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
-        plaus_fault = (plaus_bits & PLAUS_FAULT) != 0
-        fault = plaus_fault | ~finite
-        timed_out = ~fault & (self.engaged >= c.window_steps) & ((plaus_bits & PLAUS_DEGRADED) != 0)
-        fading = fault | timed_out
-        flags = np.where(fault, au.AUTH_FAULT, 0) | np.where(timed_out, au.AUTH_TIME, 0)
-        # the request clamped to +-u_max (a fading row's target is 0; its request may be NaN)
-        request = np.where(fading, 0.0, u_request)
-        over, under = request > c.u_max, request < -c.u_max
-        target = np.where(over, c.u_max, np.where(under, -c.u_max, request))
-        flags |= np.where(~fading & (over | under), au.AUTH_MAGNITUDE, 0)
-        fault_step = c.fault_fade_step if cut is None else np.where(plaus_fault & (cut != 0), c.du_max,
-                                                                      c.fault_fade_step)
-        du = np.where(fault, fault_step, np.where(timed_out, c.fade_step, c.du_max))
-        d = target - self.u
-        up, down = d > du, d < -du
-        d = np.where(up, du, np.where(down, -du, d))
-        flags |= np.where((up | down) & (du == c.du_max), au.AUTH_RATE, 0)
-        self.flags = flags
-        return self._move(d)
-
-    def _checked(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None) -> np.ndarray:
-        """``step`` with every request finite and no row DEGRADED (so none timed out): a
-        faulted row fades to 0 (a cut one moves at the rate bound), the others bounded in
-        magnitude and rate (min and max are the scalar's comparisons for finite numbers)."""
-        c = self.c
-        fault = (plaus_bits & PLAUS_FAULT) != 0
-        cutting = None
-        if fault.any():
-            request = np.where(fault, 0.0, u_request)
-            if cut is not None:
-                cutting = fault & (cut != 0)
-            du = np.where(fault & ~cutting if cutting is not None else fault, c.fault_fade_step, c.du_max)
-            low = -du
-        else:
-            request, du, low = u_request, c.du_max, -c.du_max
-        target = np.minimum(np.maximum(request, -c.u_max), c.u_max)
-        d = target - self.u
-        bounded = np.minimum(np.maximum(d, low), du)
-        flags = np.where(target != request, au.AUTH_MAGNITUDE, 0) | np.where(bounded != d, au.AUTH_RATE, 0)
-        if request is not u_request:
-            # a faulted row's flags: FAULT, and RATE where a cut (at du_max) bound it
-            faulted = au.AUTH_FAULT | (np.where(cutting & (bounded != d), au.AUTH_RATE, 0) if cutting is not None else 0)
-            flags = np.where(fault, faulted, flags)
-        self.flags = flags
-        return self._move(bounded)
-
-    def _move(self, d: np.ndarray) -> np.ndarray:
-        """The command moved by ``d``, and the intervention's window counted (``authority_step``'s
-        counters: |u| > engage is its two comparisons, False for NaN alike)."""
-        c = self.c
-        u = self.u + d
-        acting = np.abs(u) > c.engage
-        self.engaged += acting & (self.engaged < c.window_steps)
-        quiet = np.where(acting, 0, self.quiet + (self.quiet < c.rearm_steps))
-        # (an acting row's quiet is 0, below rearm_steps >= 1)
-        self.engaged = np.where(quiet >= c.rearm_steps, 0, self.engaged)
-        self.quiet = quiet
-        self.u = u
-        return u
+from sim_plant.campaign.batch_authority import within
 
 
 def _count(count: np.ndarray, over: np.ndarray, runs: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -124,10 +39,12 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
-           "lat_beta_prev", "aux_lag")
+           "lat_beta_prev", "aux_lag", "yaw_pair_err")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
-         "flags", "bits", "kin_idx", "kin_n", "since")
+         "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n")
 _BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok")
+#: every value the detailed flags can take (the highest bit is CHECK_YAW_PAIR)
+_FLAG_VALUES = 2 * pl.CHECK_YAW_PAIR
 
 
 class BatchMonitor:
@@ -146,6 +63,7 @@ class BatchMonitor:
         self.kin_raw = np.zeros((pl.KIN_WINDOW, n))
         self.kin_comp = np.zeros((pl.KIN_WINDOW, n))
         self.kin_lat = np.zeros((pl.KIN_WINDOW, n))
+        self.yaw_pair = np.zeros((pl.YAW_PAIR_WINDOW, n))
         self._cols = np.arange(n)
         self._pair: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the last period's lat, d2
         self._pair_ok = False  # the pair present in every row at the last full period
@@ -157,15 +75,18 @@ class BatchMonitor:
         #: the CtrlStatus_Plausibility bits of each value of the detailed flags
         self._bits_of = np.array([(pl.PLAUS_YAW if f & pl.YAW_CHECKS else 0) | (pl.PLAUS_STEER if f & pl.STEER_CHECKS
                                                                                else 0)
-                                  | (pl.PLAUS_DEGRADED if f & pl.MISSING else 0) for f in range(256)], dtype=np.int64)
+                                  | (pl.PLAUS_DEGRADED if f & pl.MISSING else 0) for f in range(_FLAG_VALUES)],
+                                 dtype=np.int64)
 
     def _set(self, name: str, rows: np.ndarray, value) -> None:
         setattr(self, name, np.where(rows, value, getattr(self, name)))
 
     def step(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
-             aux: np.ndarray) -> np.ndarray:
+             aux: np.ndarray, r2: np.ndarray | None = None) -> np.ndarray:
         """``monitor_step(c, s, delta_driver=d, delta_driver_redundant=d2, yaw_rate=r,
-        lat_accel=lat, speed=v, aux_cmd_applied=aux)`` per row; the CtrlStatus_Plausibility bits.
+        lat_accel=lat, speed=v, aux_cmd_applied=aux, yaw_rate_redundant=r2)`` per row (``r2``
+        None: NaN in every row, the car without the second element); the
+        CtrlStatus_Plausibility bits.
 
         A caller that holds the redundant pair between its samples (the node's 50 ms frame)
         passes the very same two arrays, unmodified, until the next sample.  A period in which
@@ -173,16 +94,16 @@ class BatchMonitor:
         inputs are in range and no row starts its checks afresh takes ``_steady``: the scalar's
         branches for a period without a new sample, and nothing else (``_steady_pausing`` when
         some rows are below ``speed_min``)."""
-        if (lat is self._pair[0] and d2 is self._pair[1] and self._pair_ok and _within(d) and _within(r)
-                and _within(aux) and _within(v, -1e3)):
+        if (lat is self._pair[0] and d2 is self._pair[1] and self._pair_ok and within(d) and within(r)
+                and within(aux) and within(v, -1e3)):
             # every primary input in range but perhaps the speed: the rows below speed_min pause
             act = None if v.min() >= self.c.speed_min else v >= self.c.speed_min
             if act is None and self._all_started or act is not None and not (act & ~self.started).any():
                 self.steady_periods += 1
                 if act is None:
-                    return self._steady(d, d2, r, lat, v, aux)
-                return self._steady_pausing(d, d2, r, lat, v, aux, act)
-        bits = self._full(d, d2, r, lat, v, aux)
+                    return self._steady(d, d2, r, lat, v, aux, r2)
+                return self._steady_pausing(d, d2, r, lat, v, aux, r2, act)
+        bits = self._full(d, d2, r, lat, v, aux, r2)
         self._pair = (lat, d2)
         self._pair_ok = not (self.flags & pl.MISSING).any()
         self._all_started = bool(self.started.all())
@@ -190,7 +111,7 @@ class BatchMonitor:
         return bits
 
     def _full(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
-              aux: np.ndarray) -> np.ndarray:
+              aux: np.ndarray, r2: np.ndarray | None) -> np.ndarray:
         """Every branch of ``monitor_step`` as a mask, in its order."""
         c = self.c
         with np.errstate(all="ignore"):  # a paused row's arithmetic (NaN, 1/0) is computed and dropped
@@ -210,6 +131,7 @@ class BatchMonitor:
                 self._set(name, paused, 0)
             self._set("started", paused, False)
             self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
+            self._yaw_pair(act, r, r2)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
@@ -321,18 +243,38 @@ class BatchMonitor:
         self.st2_same, trip = _frozen(self.st2_same, moved, steps)
         self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
 
+    def _yaw_pair(self, act: np.ndarray | None, r: np.ndarray, r2: np.ndarray | None) -> None:
+        """Check 4, the yaw-rate pair, in the rows that ``act`` (None: every row): the mean of
+        r - r2 over the last ``YAW_PAIR_WINDOW`` samples; a row without the second element
+        (NaN, or ``r2`` None) or paused restarts its window."""
+        if r2 is None:
+            self.yaw_pair_n.fill(0)
+            return
+        c, w = self.c, self.yaw_pair
+        ok = (-1e3 < r2) & (r2 < 1e3)
+        if act is not None:
+            ok &= act
+        i, cols = self.yaw_pair_idx, self._cols
+        w[i, cols] = np.where(ok, r - r2, w[i, cols])
+        self.yaw_pair_idx = np.where(ok, np.where(i + 1 >= pl.YAW_PAIR_WINDOW, 0, i + 1), i)
+        self.yaw_pair_n = np.where(ok, np.minimum(self.yaw_pair_n + 1, pl.YAW_PAIR_WINDOW), 0)
+        full = ok & (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW)
+        e = np.abs((w[0] + w[1] + w[2] + w[3] + w[4]) * (1.0 / pl.YAW_PAIR_WINDOW))
+        self.yaw_pair_err = np.where(full, e * c.inv_yaw_pair_bound, self.yaw_pair_err)
+        np.bitwise_or(self.latched, pl.CHECK_YAW_PAIR, out=self.latched, where=full & (e > c.yaw_pair_bound))
+
     # monitor_step's path for a period without a new redundant sample, every row checking: the
     # model check, the count since the last sample and the four frozen checks with new_sample
     # False (``kin_*``, ``pair_*``, ``lat_prev``, ``steer2_prev`` keep their values: the scalar
     # writes the value they hold).  Long because it is those checks inline.
-    def _steady_pausing(self, d, d2, r, lat, v, aux, act: np.ndarray) -> np.ndarray:
+    def _steady_pausing(self, d, d2, r, lat, v, aux, r2, act: np.ndarray) -> np.ndarray:
         """``_steady`` for the rows that ``act``; the others paused as ``monitor_step`` pauses a
         row below ``speed_min``: its counters and windows at 0, not started, the rest untouched."""
         kept = {k: getattr(self, k) for k in ("r_model", "model_err", "since", "yaw_last", "yaw_ref_ok", "st_last",
                                               "st_ref_ok", "aux_lag")}
         latched = self.latched.copy()
         with np.errstate(all="ignore"):  # a paused row's arithmetic (a speed of 0) is dropped
-            self._steady(d, d2, r, lat, v, aux)
+            self._steady(d, d2, r, lat, v, aux, r2, act)
         for k, old in kept.items():
             setattr(self, k, np.where(act, getattr(self, k), old))
         for k in ("model_count", "yaw_same", "lat_same", "st_same", "st2_same", "kin_count", "pair_count", "kin_n"):
@@ -343,7 +285,7 @@ class BatchMonitor:
         self.bits = self._bits_of[self.flags]
         return self.bits
 
-    def _steady(self, d, d2, r, lat, v, aux) -> np.ndarray:
+    def _steady(self, d, d2, r, lat, v, aux, r2, act: np.ndarray | None = None) -> np.ndarray:
         c, latched = self.c, self.latched
         if v is not self._v_seen:  # the speed is held for several periods: the model's denominator once
             self._v_seen, self._den = v, c.wheelbase + c.k_us * v * v
@@ -394,16 +336,10 @@ class BatchMonitor:
             self.st2_same += moved
         else:
             _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
+        self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
         self.flags = latched.copy()
         self.bits = self._bits_of[self.flags]
         return self.bits
-
-
-def _within(x: np.ndarray, lo: float = -1e3, closed: bool = False) -> bool:
-    """Every entry of ``x`` in (lo, 1e3), or in [lo, 1e3) when ``closed``: the scalar's range
-    checks for all rows at once.  False for any NaN (min and max propagate it)."""
-    x_lo, x_hi = x.min(), x.max()
-    return bool((x_lo >= lo if closed else x_lo > lo) and x_hi < 1e3)
 
 
 def _frozen_held(same: np.ndarray, moved: np.ndarray, steps: int, latched: np.ndarray, bit: int) -> np.ndarray:

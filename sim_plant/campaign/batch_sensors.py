@@ -4,9 +4,10 @@ holds the car and the actuator).
 ``BatchSensors`` is ``sim_plant.car.sensors.Sensors`` for a batch of samples, repeating its
 arithmetic statement for statement: the yaw rate's and the lateral acceleration's noise (each
 sample's own seeded streams, drawn as the scalar draws them: ``noise``), bias, 2nd-order
-Butterworth and DBC quantisation; the second steering channel's noise and quantisation; the
-steering angle and the speed quantised (their noise is 0 in a campaign); the sampled sensor
-faults on their inputs (``batch_faults``) and the error each makes.
+Butterworth and DBC quantisation; the yaw-rate sensor's second element (the first's noise
+density and filter, no bias, its own stream); the second steering channel's noise and
+quantisation; the steering angle and the speed quantised (their noise is 0 in a campaign);
+the sampled sensor faults on their inputs (``batch_faults``) and the error each makes.
 """
 
 from __future__ import annotations
@@ -17,12 +18,13 @@ import numpy as np
 
 from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.campaign.noise import NoiseStream
-from sim_plant.car.sensors import CHANNELS, SensorConfig, dbc_resolution
+from sim_plant.car.sensors import CHANNELS, YAW_RATE_REDUNDANT, SensorConfig, dbc_resolution
 from sim_plant.car.sensors import G as G_SENSOR
 
 
 class _Butterworth:
-    """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first input."""
+    """``sensors._Lowpass`` per row: scipy's direct form II transposed, at rest on its first
+    input's noise-free value."""
 
     def __init__(self, hz: float, fs: float) -> None:
         from scipy.signal import butter, lfilter_zi
@@ -34,10 +36,10 @@ class _Butterworth:
         self._z: tuple[np.ndarray, np.ndarray] | None = None
         self._tmp: np.ndarray | None = None
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
+    def __call__(self, x: np.ndarray, rest: np.ndarray) -> np.ndarray:
         b, a = self.b, self.a
-        if self._z is None:  # at rest on the first value (lfilter_zi)
-            self._z = (self.zi[0] * x, self.zi[1] * x)
+        if self._z is None:  # at rest on the first noise-free value (lfilter_zi)
+            self._z = (self.zi[0] * rest, self.zi[1] * rest)
         z0, z1 = self._z  # (updated in place: b1 x - a1 y + z1 and b2 x - a2 y)
         y = b[0] * x + z0
         tmp = self._tmp if self._tmp is not None else np.empty_like(y)
@@ -51,10 +53,11 @@ class _Butterworth:
 
 
 class BatchSensors:
-    """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row),
-    the lateral acceleration and the steering angle's second channel (``config``'s noise, bias,
-    filter, each row on its own streams), the steering angle and the speed (quantised; their
-    noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
+    """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row)
+    and its second element (the same noise density and filter, no bias: ``params.scenario_for``'s
+    ``[yaw_rate_redundant]``), the lateral acceleration and the steering angle's second channel
+    (``config``'s noise, bias, filter, each row on its own streams), the steering angle and the
+    speed (quantised; their noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
 
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
                  config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None,
@@ -73,18 +76,23 @@ class BatchSensors:
         self.lat_bias = lat.bias_m_s2
         self.steer2_sigma = math.radians(steer2.noise)
         self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
+        self._yaw2_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
         self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
         # the same filters on the fault-free input, for the error of a faulted channel
         self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
         self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
-        self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2 = (
-            dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant"))
+        self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2, self.q_yaw2 = (
+            dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant",
+                                        YAW_RATE_REDUNDANT))
         # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
         # the second steering channel is read every 25 steps, unless a row faults it
         self._yaw_noise, self._lat_noise, self._steer2_noise = (
             NoiseStream(seeds, CHANNELS.index(ch), scale, steps, dense) for ch, scale, dense in (
                 ("yaw_rate", self.sigma, True), ("lat_accel", self.lat_sigma, True),
                 ("steer_redundant", self.steer2_sigma, "steer_redundant" in tracked)))
+        # the second yaw-rate element's child follows the faults' (one in a row with a fault)
+        faulted = faults.sensor != 0 if faults is not None else np.zeros(seeds.size, dtype=bool)
+        self._yaw2_noise = NoiseStream(seeds, len(CHANNELS) + faulted.astype(np.int64), self.sigma, steps)
         self._k = 0
 
     def at(self, k: int) -> None:
@@ -102,18 +110,29 @@ class BatchSensors:
     def yaw_rate(self, r: np.ndarray) -> np.ndarray:
         noise = self._yaw_noise.at(self._k)  # sigma times the draw
         q = self.q_yaw
-        y = np.round(self._yaw_lpf(self._input("yaw_rate", r) + self.bias + noise) / q) * q
+        rest = self._input("yaw_rate", r) + self.bias
+        y = np.round(self._yaw_lpf(rest + noise, rest) / q) * q
         if self._yaw_clean is not None:
-            self._error("yaw_rate", y, np.round(self._yaw_clean(r + self.bias + noise) / q) * q)
+            rest = r + self.bias
+            self._error("yaw_rate", y, np.round(self._yaw_clean(rest + noise, rest) / q) * q)
         return y
+
+    def yaw_rate_redundant(self, r: np.ndarray) -> np.ndarray:
+        """The yaw-rate sensor's second element (a campaign faults only the first)."""
+        noise = self._yaw2_noise.at(self._k)
+        q = self.q_yaw2
+        rest = r + 0.0
+        return np.round(self._yaw2_lpf(rest + noise, rest) / q) * q
 
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
         """The lateral acceleration's filter output, unquantised: the filter runs every step,
         and ``quantised_lat`` makes the value of a step whose reading is sent."""
         noise = self._lat_noise.at(self._k)
-        y = self._lat_lpf(self._input("lat_accel", a_y) + self.lat_bias + noise)
+        rest = self._input("lat_accel", a_y) + self.lat_bias
+        y = self._lat_lpf(rest + noise, rest)
         if self._lat_clean is not None:
-            clean = self._lat_clean(a_y + self.lat_bias + noise)
+            rest = a_y + self.lat_bias
+            clean = self._lat_clean(rest + noise, rest)
             self._error("lat_accel", self.quantised_lat(y), self.quantised_lat(clean))
         return y
 

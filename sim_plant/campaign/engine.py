@@ -14,11 +14,13 @@ scalar oracle ``reference.run`` has them:
    before through its own authority limit, on the plausibility bits of the last status frame
    (sent every 50 periods, read by the plant two steps after they were computed; DEGRADED
    before the first);
-4. the sensors read every channel (``BatchSensors``): the driver's angle and the yaw rate sent
-   every period, the speed every 5, the lateral acceleration (the car's a_y at the actuator's
-   position as the step begins) and the second steering channel every 25, each held between;
+4. the sensors read every channel (``BatchSensors``): the driver's angle and the yaw rate (both
+   its elements) sent every period, the speed every 5, the lateral acceleration (the car's a_y
+   at the actuator's position as the step begins) and the second steering channel every 25,
+   each held between;
 5. the controller: the law (``BatchLaw``), the plausibility monitor given the command sent the
-   period before (``BatchMonitor``), the authority limiter on its bits (``BatchAuthority``);
+   period before (``BatchMonitor``), the authority limiter on its bits and on the pair checks'
+   cut (``BatchAuthority``);
    the state reported FAULT on ``PLAUS_FAULT``;
 6. the actuator's position follows the handled command, and the car advances with the
    driver's angle plus the position's mean over the step.
@@ -46,7 +48,8 @@ from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
 from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.batch_law import BatchLaw
-from sim_plant.campaign.batch_monitor import BatchAuthority, BatchMonitor
+from sim_plant.campaign.batch_authority import BatchAuthority
+from sim_plant.campaign.batch_monitor import BatchMonitor
 from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
@@ -228,7 +231,8 @@ class _Group:
                 if controlled:
                     u = self.law.step(steer, yaw, held["speed"])
                     # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
-                    bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending)
+                    bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending,
+                                             sensors.yaw_rate_redundant(r))
                     u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS)
                     tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:

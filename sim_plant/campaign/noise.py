@@ -39,8 +39,9 @@ def _mix(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return r ^ (r >> np.uint32(_XSHIFT))
 
 
-def pcg64_states(seeds: np.ndarray, child: int) -> list[tuple[int, int]]:
-    """(state, inc) of ``PCG64(SeedSequence(seed, spawn_key=(child,)))`` per seed (int64, >= 0):
+def pcg64_states(seeds: np.ndarray, child: int | np.ndarray) -> list[tuple[int, int]]:
+    """(state, inc) of ``PCG64(SeedSequence(seed, spawn_key=(child,)))`` per seed (int64, >= 0;
+    ``child`` one for all, or one per seed):
     numpy's ``SeedSequence`` (pool of 4 words, the seed's words padded to it, the spawn key
     after) and ``pcg64_set_seed``, for all seeds at once."""
     seeds = np.asarray(seeds)
@@ -91,7 +92,7 @@ class NoiseStream:
     stay in step).  ``dense``: the channel is read at most steps (the transposed copy pays);
     else a step's draws are read as a strided column."""
 
-    def __init__(self, seeds: np.ndarray, child: int, scale: np.ndarray | float, steps: int | None = None,
+    def __init__(self, seeds: np.ndarray, child: int | np.ndarray, scale: np.ndarray | float, steps: int | None = None,
                  dense: bool = True) -> None:
         self._bits = np.random.PCG64(0)  # its state is each row's in turn
         self._gen = np.random.Generator(self._bits)  # default_rng's stream without its dispatch

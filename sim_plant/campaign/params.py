@@ -45,7 +45,7 @@ KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
 #: fault_sensor codes: none, then the sensors of sensor_faults.FAULT_SENSORS that the monitor
 #: checks (each has a plausibility bound: ``plausibility_runs.error_bound``; the speed has none),
-#: but the yaw-rate sensor's second element, which the batch engine does not model yet
+#: but the yaw-rate sensor's second element (the engine models it, fault-free)
 FAULT_CHANNELS = ("none", *(ch for ch in FAULT_SENSORS if ch not in ("speed", "yaw_rate_redundant")))
 #: fault_kind codes and the sensor_faults kind each one is
 FAULT_KINDS = ("stuck", "offset", "gain", "drift")
@@ -141,12 +141,10 @@ def scenario_for(row: dict[str, float], duration: float) -> Scenario:
         event = Event(onset, kind, 0.0, load=disturbance_for(row, kind))
     actuator = ActuatorModelConfig(order=1, time_constant_s=float(row["actuator_tau"]),
                                    rate_limit_deg_s=float(row["actuator_rate"]))
-    # The engine does not model the yaw-rate sensor's second element: its car has none (SNA).
-    # (Its configuration is what a scenario file's [yaw_rate_redundant] defaults to, so that an
-    # exported sample reads back equal.)
+    # The yaw-rate sensor's second element: what a scenario file's [yaw_rate_redundant] defaults
+    # to (the first's noise and filter, no bias), so that an exported sample reads back equal.
     yaw = YawRateSensorConfig(noise_density=float(row["noise_density"]), bias_deg_s=float(row["bias"]))
-    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0),
-                           yaw_rate_redundant_present=False)
+    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0))
     return Scenario(name=f"campaign-sample-{int(row[INDEX])}", duration=duration, v=float(row["v"]),
                     mu=float(row["mu"]), mass=mass, events=(event,),
                     driver=DriverModel("model", float(row["reaction_time"]), float(row["driver_time_constant"])),

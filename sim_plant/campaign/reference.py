@@ -9,14 +9,14 @@ with the bus taken out:
   nonlinear car; its a_y from ``Car.outputs`` at the actuator's position as the step begins),
   ``actuator.Actuator`` (the command handling and its authority limit) and
   ``actuator_dynamics.PositionActuator``, ``sensors.Sensors`` (every channel read every step,
-  each on its own stream);
+  each on its own stream, and the yaw-rate sensor's second element);
 * the bus: each channel held at its DBC cycle (``plausibility_runs.cycles``: driver angle and
   yaw rate every period, the speed every 5, ``MRS_RedundantSensors`` every 25), the command one
   period late, ``MRS_CtrlStatus`` every 50 periods, its plausibility bits reaching the actuator
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
 * the controller: ``u = step(d, r, v)``, ``bits = monitor_step(mc, ms, d, d2, r, lat, v,
-  previous_command)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
+  previous_command, r_2)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
   ``bits & PLAUS_FAULT``.
 
 The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
@@ -114,6 +114,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                  "steer_redundant": driver}
         sensors.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        yaw_rate_2 = sensors.yaw_rate_redundant(truth["yaw_rate"])  # in the yaw-rate frame: every period
         if fault is not None and clean is not None:
             clean.at(t)
             error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
@@ -125,7 +126,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         if ctrl is not None and ac is not None:
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"])
             bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
-                            held["speed"], command)
+                            held["speed"], command, yaw_rate_2)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS)
             state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
             if (k + 1) % status_every == 0:

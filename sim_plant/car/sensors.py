@@ -14,7 +14,8 @@ Yaw rate, per plant step ts (fs = 1 / ts):
 * LPF: a 2nd-order Butterworth low-pass of ``lowpass_hz`` (default 30 Hz, as production
   sensors' output filters are; issue 15), designed with scipy.signal.butter at fs (bilinear
   with pre-warping, so the -3 dB point is exactly there) and started at rest on the first
-  value (scipy.signal.lfilter_zi) so it adds no start-up transient.  0 = no filter.
+  value without its noise (scipy.signal.lfilter_zi) so it adds no start-up transient.  0 = no
+  filter.
 * Q: quantisation to the DBC signal's resolution (YawRate_YawRate's scale), read from the
   contract, so offline simulations see what the bus carries.
 
@@ -22,8 +23,7 @@ The yaw-rate sensor's second sensing element (``yaw_rate_redundant``, YawRate_Ya
 frame, for the plausibility monitor's yaw-rate pair check) is the same chain with its own
 parameters (a ``[yaw_rate_redundant]`` table; by default the first element's noise, filter and
 quantisation, and no bias), its own noise stream and its own faults.  ``present = false`` in
-that table models a sensor without it: it reads NaN, which the frame carries as SNA (what the
-campaign engine, which does not model the element, runs).
+that table models a sensor without it: it reads NaN, which the frame carries as SNA.
 
 Lateral acceleration (``MRS_RedundantSensors``, for the plausibility monitor): the true
 a_y = v (beta' + r) of the plant through the same chain as the yaw rate, with ``noise_density``
@@ -190,7 +190,10 @@ def _quantiser(on: bool, quantity: str):
 
 class _Lowpass:
     """scipy.signal.lfilter's direct form II transposed, one sample at a time, started at rest
-    on its first input (lfilter_zi) so it adds no start-up transient."""
+    (lfilter_zi) on its first input's noise-free value ``rest`` (default: the input itself), so
+    that it adds no start-up transient: a filter at rest on a noisy first sample carries that
+    sample's whole unfiltered noise for its first ~10 ms (at 30 Hz), about 3x the filtered
+    noise's sigma, which the yaw-rate pair check of two such elements read as a fault."""
 
     def __init__(self, hz: float, fs: float) -> None:
         # Imported here: scipy.signal costs the plant process half a second of start-up,
@@ -201,12 +204,12 @@ class _Lowpass:
         self.ba: tuple[np.ndarray, np.ndarray] = (b / a[0], a / a[0])
         self.z: list[float] | None = None
 
-    def __call__(self, x: float) -> float:
+    def __call__(self, x: float, rest: float | None = None) -> float:
         b, a = self.ba
         if self.z is None:
             from scipy.signal import lfilter_zi
 
-            self.z = (lfilter_zi(b, a) * x).tolist()
+            self.z = (lfilter_zi(b, a) * (x if rest is None else rest)).tolist()
         z = self.z
         y = b[0] * x + z[0]
         z[0] = b[1] * x - a[1] * y + z[1]
@@ -281,9 +284,10 @@ class Sensors:
         x = fault.input(self.t, x)
         if not self.config.exact:
             sigma = self.sigma[name]
-            x = x + self.bias.get(name, 0.0) + (sigma * self._rng[name].standard_normal() if sigma else 0.0)
+            clean = x + self.bias.get(name, 0.0)
+            x = clean + (sigma * self._rng[name].standard_normal() if sigma else 0.0)
             lpf = self._lpf.get(name)
-            x = self._q[name](lpf(x) if lpf is not None else x)
+            x = self._q[name](lpf(x, clean) if lpf is not None else x)
         return fault.output(self.t, x)
 
     def yaw_rate(self, r: float) -> float:
