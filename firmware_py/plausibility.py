@@ -31,7 +31,8 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
 3. **Steering pair**: the driver's angle against the steering sensor's second channel, at each
    new redundant sample.
 4. **Yaw-rate pair**: the yaw rate against the yaw-rate sensor's second element, sampled with it
-   (``MRS_YawRate`` carries both once the bus has the channel; until then NaN pauses it): the
+   (``MRS_YawRate`` carries both; a sender without the element sends SNA, NaN here, which
+   pauses the check, and the element lost after it was received is DEGRADED): the
    mean of their difference over ``YAW_PAIR_WINDOW`` samples (10 ms).  No motion of the car
    moves that residual, so its bound sits just above the two elements' noise and offsets, and a
    stuck or scaled element is found while the command it drove is still small; the limiter then
@@ -167,7 +168,8 @@ class MonitorState:
                  "st_last", "st_same", "st_ref", "st2_last", "st2_same", "st2_ref", "latched", "flags", "bits",
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
-                 "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err")
+                 "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
+                 "yaw2_seen")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -206,6 +208,7 @@ def reset_monitor(s: MonitorState) -> None:
     s.yaw_pair_idx = 0
     s.yaw_pair_n = 0  # samples in the window so far
     s.yaw_pair_err = 0.0
+    s.yaw2_seen = False  # the yaw-rate sensor's second element has been received this cycle
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
@@ -260,14 +263,22 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
     a missing input: a missing primary input pauses every check (step() faults on it), a
     missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
-    yaw-rate sensor's second element, pauses its pair check when NaN without DEGRADED: the bus
-    does not carry it yet, and with the default every result is as without the check."""
+    yaw-rate sensor's second element, pauses its pair check when NaN; DEGRADED too once the
+    element has been received since ``reset_monitor`` while the first element is valid (a lost
+    element).  A sender without it (SNA from the start, or the default NaN) never sets it:
+    every result is then as without the check."""
     flags = s.latched
     # A NaN fails every comparison: these are False for NaN and +-inf.
     primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
         -1e3 < aux_cmd_applied < 1e3)
     lat_ok = -1e3 < lat_accel < 1e3
     st2_ok = -1e3 < delta_driver_redundant < 1e3
+    if -1e3 < yaw_rate_redundant < 1e3:
+        s.yaw2_seen = True
+    elif s.yaw2_seen and -1e3 < yaw_rate < 1e3:
+        # The car has the element and it is gone while the first is there: the pair check
+        # pauses, which leaves a stuck first element to the slower checks.
+        flags |= MISSING
     if not (lat_ok and st2_ok):
         flags |= MISSING
         if s.since >= c.kin_gap_steps:

@@ -94,6 +94,13 @@ def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
     return rows
 
 
+def _lost_second_element(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+    """The rows with the yaw-rate sensor's second element missing (NaN, SNA on the bus) from
+    the middle on, as a car whose element fails."""
+    half = len(rows) // 2
+    return rows[:half] + [(*row[:7], math.nan) for row in rows[half:]]
+
+
 CASES = {
     "split-mu, fault-free": lambda: _run_rows(pr.scn.load("split-mu")),
     "yaw bias in a curve": lambda: _run_rows(pr.steady_curve(20.0, 1.0).with_sensor_faults(
@@ -101,6 +108,8 @@ CASES = {
     "frozen second steering channel": lambda: _run_rows(pr.steady_curve(30.0, 0.5).with_sensor_faults(
         (SensorFault("steer_redundant", "frozen", 0.1),))),
     "random inputs with NaN and inf": lambda: _random_rows(7),
+    "second yaw-rate element lost half way (DEGRADED)": lambda: _lost_second_element(
+        _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
@@ -115,6 +124,14 @@ def test_the_c_monitor_and_limiter_are_bit_identical_to_python(runner: Path, cas
     assert len(c) == len(py) == len(rows)
     for k, (x, y) in enumerate(zip(py, c)):
         assert x == y, f"period {k}: python {x} != C {y}"
+
+
+def test_a_lost_second_element_is_degraded_from_its_first_missing_sample() -> None:
+    rows = CASES["second yaw-rate element lost half way (DEGRADED)"]()
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+    half = len(rows) // 2
+    assert not any(bits & pl.PLAUS_DEGRADED for bits, *_ in out[:half])
+    assert all(bits & pl.PLAUS_DEGRADED for bits, *_ in out[half:])
 
 
 def test_the_random_case_exercises_every_branch(runner: Path) -> None:

@@ -76,6 +76,7 @@ class Drive:
     slow: int = 1  # the sender steps once every `slow` control periods (a plant behind real time)
     burst: int = 0  # every 2nd redundant frame comes in one drain with the frames of the `burst` periods before it
     second_yaw: bool = False  # the yaw-rate frames carry the sensor's second element (the car's r); else SNA
+    second_yaw_lost: float = math.inf  # s from which the second element is SNA (the element failed)
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -93,7 +94,8 @@ class Drive:
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
                       names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta},
                       names.MSG_YAW: {names.SIG_YAW_RATE: r_meas,
-                                      names.SIG_YAW_RATE_2: r if self.second_yaw else math.nan}}
+                                      names.SIG_YAW_RATE_2: r if self.second_yaw and t < self.second_yaw_lost
+                                      else math.nan}}
             period = []
             for msg, n in every.items():
                 if k % n or (msg == names.MSG_REDUNDANT and not self.redundant):
@@ -213,6 +215,19 @@ def test_the_yaw_rate_pair_finds_a_stuck_element_at_once_and_cuts_the_command_as
     assert k_zero == k_fault or abs(cmds[k_zero - 1][names.SIG_CMD_ANGLE]) > 0.0  # not sooner
     late = [s for s in statuses if int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT]
     assert late and all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
+
+
+def test_a_second_yaw_rate_element_lost_on_the_bus_is_degraded_as_in_python(secoc_check: Path) -> None:
+    # The element sent, then SNA from 0.8 s (a failed element): the pair check pauses, and the
+    # node reports DEGRADED from the loss on, no fault; a sender that never sends it stays clean
+    # (test_fault_free_drive_equals_python_and_raises_nothing).
+    lost = 0.8
+    cmds, statuses = _run(secoc_check, Drive(seconds=1.4, second_yaw=True, second_yaw_lost=lost))
+    per_status = round(len(cmds) / len(statuses))
+    k_lost = int(lost * RATE_HZ) // per_status  # the status frames sent before the loss
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    assert set(plaus[:k_lost]) == {0} and set(plaus[k_lost + 1:]) == {pl.PLAUS_DEGRADED}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
 
 
 def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in_python(secoc_check: Path) -> None:

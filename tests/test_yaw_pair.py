@@ -46,10 +46,18 @@ def test_a_difference_within_the_bound_never_trips() -> None:
     assert not any(_flags([0.029, -0.029] * 500 + [0.0299] * 500))
 
 
-def test_a_missing_second_element_restarts_the_window_without_degraded() -> None:
+def test_a_second_element_lost_after_it_was_received_is_degraded_and_restarts_the_window() -> None:
     mon = pl.PlausibilityMonitor()
-    bits = [mon.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, x) for x in [0.01] * 10 + [math.nan]]
-    assert bits[-1] & pl.PLAUS_DEGRADED == 0 and not mon.state.flags & pl.CHECK_YAW_PAIR
+    bits = [mon.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, x) for x in [0.01] * 10 + [math.nan] * 3 + [0.01]]
+    assert [b & pl.PLAUS_DEGRADED for b in bits] == [0] * 10 + [pl.PLAUS_DEGRADED] * 3 + [0]
+    assert not mon.state.flags & pl.CHECK_YAW_PAIR  # DEGRADED, no fault: the command may stay
+    # with the first element invalid too (a stale frame: step() faults on it) the loss is not DEGRADED
+    assert not mon.step(0.0, 0.0, math.nan, 0.2, 20.0, 0.0, math.nan) & pl.PLAUS_DEGRADED
+    # a sender without the element (SNA from the start) is never DEGRADED for it, and the next
+    # ignition cycle forgets that the element was there
+    for m in (pl.PlausibilityMonitor(), mon):
+        pl.reset_monitor(m.state)
+        assert not any(m.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, math.nan) & pl.PLAUS_DEGRADED for _ in range(50))
     # four samples far apart after the gap: the window is not full again yet
     flags = _flags([0.0] * 10 + [math.nan] + [1.0] * 5)
     assert flags[-2] == 0 and flags[-1] == pl.CHECK_YAW_PAIR

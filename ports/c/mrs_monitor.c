@@ -130,6 +130,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw_pair_idx = 0;
     s->yaw_pair_n = 0;
     s->yaw_pair_err = 0.0;
+    s->yaw2_seen = 0u;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -188,6 +189,12 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
     int new_sample;
 
+    if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
+        s->yaw2_seen = 1u;
+    } else if (s->yaw2_seen && yaw_rate > -1e3 && yaw_rate < 1e3) {
+        /* the car has the element and it is gone while the first is there: the pair pauses */
+        flags |= MRS_MISSING;
+    }
     if (!(lat_ok && st2_ok)) {
         flags |= MRS_MISSING;
         if (s->since >= c->kin_gap_steps) {

@@ -71,6 +71,7 @@ typedef struct {
 
 typedef struct {
     uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, bits;
+    uint8_t yaw2_seen; /* the yaw-rate sensor's second element received since the reset */
     uint16_t latched, flags;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
@@ -103,7 +104,8 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg);
 int mrs_monitor_configure(const mrs_monitor_config_t *cfg, mrs_monitor_coeffs_t *c);
 void mrs_monitor_reset(mrs_monitor_state_t *s);
 /* One control period; returns the CtrlStatus_Plausibility bits. NaN marks a missing input;
- * a NaN yaw_rate_redundant pauses the yaw-rate pair check without DEGRADED (not on the bus yet). */
+ * a NaN yaw_rate_redundant pauses the yaw-rate pair check, and is DEGRADED once the element has
+ * been received since the reset while yaw_rate is valid (a sender without it never sets it). */
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
                          double aux_cmd_applied, double yaw_rate_redundant);

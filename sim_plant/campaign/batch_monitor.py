@@ -42,7 +42,7 @@ _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_las
            "lat_beta_prev", "aux_lag", "yaw_pair_err")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n")
-_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok")
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen")
 #: every value the detailed flags can take (the highest bit is CHECK_YAW_PAIR)
 _FLAG_VALUES = 2 * pl.CHECK_YAW_PAIR
 
@@ -121,7 +121,7 @@ class BatchMonitor:
             lat_ok = (-1e3 < lat) & (lat < 1e3)
             st2_ok = (-1e3 < d2) & (d2 < 1e3)
             missing = ~(lat_ok & st2_ok)
-            flags |= np.where(missing, pl.MISSING, 0)
+            flags |= np.where(missing | self._lost(r, r2), pl.MISSING, 0)
             gap = missing & (self.since >= c.kin_gap_steps)  # a shorter gap is bridged (the scalar's comment)
             self._set("have_sample", gap, False)
             self._set("kin_n", gap, 0)
@@ -243,6 +243,17 @@ class BatchMonitor:
         self.st2_same, trip = _frozen(self.st2_same, moved, steps)
         self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
 
+    def _lost(self, r: np.ndarray, r2: np.ndarray | None) -> np.ndarray | bool:
+        """The rows whose second yaw-rate element is missing after it was received, the first
+        valid (``monitor_step``'s lost element: DEGRADED); marks the rows that have it now
+        (so a second call in the same period gives the same rows)."""
+        if r2 is None:
+            return False if not self.yaw2_seen.any() else self.yaw2_seen & (-1e3 < r) & (r < 1e3)
+        ok = (-1e3 < r2) & (r2 < 1e3)
+        lost = ~ok & self.yaw2_seen & (-1e3 < r) & (r < 1e3)
+        self.yaw2_seen |= ok
+        return lost
+
     def _yaw_pair(self, act: np.ndarray | None, r: np.ndarray, r2: np.ndarray | None) -> None:
         """Check 4, the yaw-rate pair, in the rows that ``act`` (None: every row): the mean of
         r - r2 over the last ``YAW_PAIR_WINDOW`` samples; a row without the second element
@@ -281,7 +292,7 @@ class BatchMonitor:
             setattr(self, k, np.where(act, getattr(self, k), 0))
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
-        self.flags = self.latched.copy()
+        self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0)
         self.bits = self._bits_of[self.flags]
         return self.bits
 
@@ -337,7 +348,7 @@ class BatchMonitor:
         else:
             _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
         self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
-        self.flags = latched.copy()
+        self.flags = latched | np.where(self._lost(r, r2), pl.MISSING, 0)
         self.bits = self._bits_of[self.flags]
         return self.bits
 
