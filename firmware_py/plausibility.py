@@ -21,7 +21,9 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    (the plant sends both frames in the same step, so the comparison has no hold error).  Less
    the beta' of a family of nominal cars: every friction in [``mu_min``, 1], so that a car on
    low mu or under a yaw moment, whose physical channels move together, is not taken for a
-   sensor that disagrees with them.
+   sensor that disagrees with them; and every sensor lag in [0, ``sensor_tau``] on the wheel
+   angle, so that a brisk turn of the wheel, which reaches the nominal car's beta before the
+   filtered a_y, is not either, whatever the sensors' filters.
 2. **Model** (yaw rate against the steering): the nominal (mu = 1) car's steady-state yaw
    rate K_n(v) (delta_driver + aux) of eq. (15), lagged by a first-order filter, against the
    yaw rate.  ``aux`` in both checks is the command sent the period before through the
@@ -127,6 +129,11 @@ class PlausibilityConfig:
     # |mean of r - r_2 over YAW_PAIR_WINDOW samples| <= this, rad/s: above two elements' noise
     # (0.028 deg/s/sqrt(Hz)) and offsets (0.3 deg/s each, opposite) by 5.4 SDs (docs/controller.md)
     yaw_pair_bound: float = 0.03
+    # The largest lag the sensors' filters may put on the car's a_y and yaw rate (the 30 Hz
+    # second-order Butterworth's delay, sqrt(2) / (2 pi 30 Hz) = 7.5 ms): the kinematic check's
+    # family of nominal cars sees the wheel angle through every lag in [0, sensor_tau], so that a
+    # steering step is not taken for a yaw-rate error whatever the sensors' filters (docs/controller.md)
+    sensor_tau: float = 0.0075
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,6 +165,7 @@ class MonitorCoefficients:
     aux_alpha: float  # the actuator's lag per period: 1 - exp(-ts / actuator_tau)
     yaw_pair_bound: float
     inv_yaw_pair_bound: float
+    delta_alpha: float  # the sensors' lag per period: 1 - exp(-ts / sensor_tau)
 
 
 class MonitorState:
@@ -169,7 +177,7 @@ class MonitorState:
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
                  "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
-                 "yaw2_seen")
+                 "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -209,13 +217,16 @@ def reset_monitor(s: MonitorState) -> None:
     s.yaw_pair_n = 0  # samples in the window so far
     s.yaw_pair_err = 0.0
     s.yaw2_seen = False  # the yaw-rate sensor's second element has been received this cycle
+    s.delta_lag = 0.0  # the wheel angle through the sensors' lag (sensor_tau)
+    s.kin_sensor = [0.0] * KIN_WINDOW  # how much that lag moves the nominal car's beta' (C: double[4])
+    s.lag_beta_prev = 0.0
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
-                          "yaw_pair_bound"))
+                          "yaw_pair_bound", "sensor_tau"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel"):
@@ -242,7 +253,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
-        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound)
+        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau))
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -327,7 +338,10 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.yaw_last, s.lat_last, s.st_last, s.st2_last = yaw_rate, lat_accel, delta_driver, delta_driver_redundant
         s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
         s.yaw_ref_ok = s.st_ref_ok = False
+        s.delta_lag = delta
         s.started = True
+    # The wheel angle as filtered a_y and yaw rate show its effect (the kinematic check's family).
+    s.delta_lag += c.delta_alpha * (delta - s.delta_lag)
     s.r_model += c.model_alpha * (r_ss - s.r_model)
     e = yaw_rate - s.r_model
     e = -e if e < 0.0 else e
@@ -382,12 +396,18 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         # (moment_m / v is the small understeer term), so a yaw-rate error hardly moves it.
         beta = (c.moment_m * inv_v * inv_v * yaw_rate + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * speed
         lat_beta = lat_accel * c.inv_cs_m  # the a_y term of beta (with the minus sign: beta = ... - lat_beta)
+        # The nominal car's beta with the wheel angle through the sensors' lag, less beta: a
+        # steering step reaches beta at once but the filtered a_y only after the lag, so on
+        # filtered sensors beta' jumped a sample early (a false alarm on a brisk turn of the
+        # wheel at 10 m/s), and on unfiltered ones the lagged beta' would.
+        lag_beta = c.cf_m * inv_v * (s.delta_lag - delta) * c.inv_cs_m * speed
         if s.have_sample:
             mid = 0.5 * (raw + s.raw_prev)
             i = s.kin_idx
             s.kin_raw[i] = mid
             s.kin_comp[i] = mid - (beta - s.beta_prev) / (s.since * c.ts)
             s.kin_lat[i] = (lat_beta - s.lat_beta_prev) / (s.since * c.ts)
+            s.kin_sensor[i] = (s.lag_beta_prev - lag_beta) / (s.since * c.ts)
             i += 1
             if i >= KIN_WINDOW:
                 i = 0
@@ -398,21 +418,34 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.raw_prev = raw
         s.beta_prev = beta
         s.lat_beta_prev = lat_beta
+        s.lag_beta_prev = lag_beta
         s.since = 0
         raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
         comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
-        # The family of nominal cars on mu in [mu_min, 1]: the car on mu has the a_y term of beta
-        # 1 / mu times mu = 1's, so its residual is comp + (1 / mu - 1) lat, linear in 1 / mu; the
-        # smallest |residual| of the family is 0 if the two ends differ in sign, else the smaller end.
-        far = comp + c.lat_span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
+        # The family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]: the
+        # car on mu has the a_y term of beta 1 / mu times mu = 1's, so its residual is
+        # comp + (1 / mu - 1) lat, linear in 1 / mu, and the lagged car's is comp + sens (taken
+        # as linear between the two lags).  The smallest |residual| of the family is 0 if its
+        # four corners differ in sign, else the smallest corner's.
+        far = c.lat_span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
+        sens = (s.kin_sensor[0] + s.kin_sensor[1] + s.kin_sensor[2] + s.kin_sensor[3]) * (1.0 / KIN_WINDOW)
         raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
-        if comp * far <= 0.0:
+        lo = hi = comp
+        x = comp + sens
+        lo = x if x < lo else lo
+        hi = x if x > hi else hi
+        x = comp + far
+        lo = x if x < lo else lo
+        hi = x if x > hi else hi
+        x = comp + far + sens
+        lo = x if x < lo else lo
+        hi = x if x > hi else hi
+        if lo <= 0.0 <= hi:
             comp = 0.0
+        elif lo > 0.0:
+            comp = lo
         else:
-            comp = -comp if comp < 0.0 else comp
-            far = -far if far < 0.0 else far
-            if far < comp:
-                comp = far
+            comp = -hi
         e = comp if comp < raw else raw
         if s.kin_n < KIN_WINDOW:
             e = 0.0  # the window is not full yet

@@ -108,6 +108,8 @@ CASES = {
     "frozen second steering channel": lambda: _run_rows(pr.steady_curve(30.0, 0.5).with_sensor_faults(
         (SensorFault("steer_redundant", "frozen", 0.1),))),
     "random inputs with NaN and inf": lambda: _random_rows(7),
+    "a steering step at 10 m/s (the family of sensor lags)": lambda: _run_rows(
+        pr.steady_curve(10.0, 1.0, a_y=3.4, ramp=0.0, duration=2.0)),
     "second yaw-rate element lost half way (DEGRADED)": lambda: _lost_second_element(
         _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
@@ -158,7 +160,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
-                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound]
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

@@ -31,6 +31,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->mu_min = 0.5;
     cfg->actuator_tau = 0.025;
     cfg->yaw_pair_bound = 0.03;
+    cfg->sensor_tau = 0.0075;
 }
 
 static int positive(double x)
@@ -50,7 +51,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
-                        g->yaw_pair_bound};
+                        g->yaw_pair_bound, g->sensor_tau};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -90,6 +91,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->aux_alpha = 1.0 - exp(-g->ts / g->actuator_tau);
     c->yaw_pair_bound = g->yaw_pair_bound;
     c->inv_yaw_pair_bound = 1.0 / g->yaw_pair_bound;
+    c->delta_alpha = 1.0 - exp(-g->ts / g->sensor_tau);
     return 0;
 }
 
@@ -117,10 +119,13 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->beta_prev = 0.0;
     s->lat_beta_prev = 0.0;
     s->aux_lag = 0.0;
+    s->delta_lag = 0.0;
+    s->lag_beta_prev = 0.0;
     for (i = 0; i < MRS_KIN_WINDOW; ++i) {
         s->kin_raw[i] = 0.0;
         s->kin_comp[i] = 0.0;
         s->kin_lat[i] = 0.0;
+        s->kin_sensor[i] = 0.0;
     }
     s->kin_idx = 0;
     s->kin_n = 0;
@@ -240,8 +245,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->st_ref = delta_driver_redundant;
         s->st2_ref = delta_driver;
         s->yaw_ref_ok = s->st_ref_ok = 0u;
+        s->delta_lag = delta;
         s->started = 1u;
     }
+    /* the wheel angle as the filtered a_y and yaw rate show its effect (the kinematic check) */
+    s->delta_lag += c->delta_alpha * (delta - s->delta_lag);
     s->r_model += c->model_alpha * (r_ss - s->r_model);
     e = MRS_MAG(yaw_rate - s->r_model);
     rm = MRS_MAG(s->r_model);
@@ -279,15 +287,18 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     new_sample = lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev);
     if (new_sample) {
         double raw = r_kin - yaw_rate;
-        double comp, far, beta, lat_beta;
+        double comp, far, sens, lo, hi, x, beta, lat_beta, lag_beta;
         beta = (c->moment_m * inv_v * inv_v * yaw_rate + c->cf_m * inv_v * delta - r_kin) * c->inv_cs_m * speed;
         lat_beta = lat_accel * c->inv_cs_m;
+        /* the nominal car's beta with the wheel angle through the sensors' lag, less beta */
+        lag_beta = c->cf_m * inv_v * (s->delta_lag - delta) * c->inv_cs_m * speed;
         if (s->have_sample) {
             double mid = 0.5 * (raw + s->raw_prev);
             int32_t i = s->kin_idx;
             s->kin_raw[i] = mid;
             s->kin_comp[i] = mid - (beta - s->beta_prev) / ((double)s->since * c->ts);
             s->kin_lat[i] = (lat_beta - s->lat_beta_prev) / ((double)s->since * c->ts);
+            s->kin_sensor[i] = (s->lag_beta_prev - lag_beta) / ((double)s->since * c->ts);
             i += 1;
             if (i >= MRS_KIN_WINDOW) {
                 i = 0;
@@ -301,20 +312,44 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->raw_prev = raw;
         s->beta_prev = beta;
         s->lat_beta_prev = lat_beta;
+        s->lag_beta_prev = lag_beta;
         s->since = 0;
         raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW)) *
               c->inv_yaw_raw_fraction;
         comp = (s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW);
-        /* the family of nominal cars on mu in [mu_min, 1]: 0 if its two ends differ in sign */
-        far = comp + c->lat_span * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
-        if (comp * far <= 0.0) {
+        /* the family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]:
+         * 0 if its four corners differ in sign, else the smallest corner's magnitude */
+        far = c->lat_span * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
+        sens = (s->kin_sensor[0] + s->kin_sensor[1] + s->kin_sensor[2] + s->kin_sensor[3]) * (1.0 / MRS_KIN_WINDOW);
+        lo = comp;
+        hi = comp;
+        x = comp + sens;
+        if (x < lo) {
+            lo = x;
+        }
+        if (x > hi) {
+            hi = x;
+        }
+        x = comp + far;
+        if (x < lo) {
+            lo = x;
+        }
+        if (x > hi) {
+            hi = x;
+        }
+        x = comp + far + sens;
+        if (x < lo) {
+            lo = x;
+        }
+        if (x > hi) {
+            hi = x;
+        }
+        if (lo <= 0.0 && hi >= 0.0) {
             comp = 0.0;
+        } else if (lo > 0.0) {
+            comp = lo;
         } else {
-            comp = MRS_MAG(comp);
-            far = MRS_MAG(far);
-            if (far < comp) {
-                comp = far;
-            }
+            comp = -hi;
         }
         e = comp < raw ? comp : raw;
         if (s->kin_n < MRS_KIN_WINDOW) {

@@ -55,6 +55,7 @@ typedef struct {
     double mu_min;  /* the kinematic check's family of nominal cars: every friction in [mu_min, 1] */
     double actuator_tau; /* the actuator's nominal lag behind the command sent, s */
     double yaw_pair_bound; /* |mean of r - r_2 over MRS_YAW_PAIR_WINDOW samples|, rad/s */
+    double sensor_tau; /* the sensors' filters' lag on a_y and r, s: the kinematic check's wheel angle takes it */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -67,6 +68,7 @@ typedef struct {
     double frozen_move_yaw, frozen_move_steer, wheelbase, k_us, ts, inv_cs_m, moment_m, cf_m;
     double lat_span, aux_alpha; /* 1 / mu_min - 1; 1 - exp(-ts / actuator_tau) */
     double yaw_pair_bound, inv_yaw_pair_bound;
+    double delta_alpha; /* 1 - exp(-ts / sensor_tau) */
 } mrs_monitor_coeffs_t;
 
 typedef struct {
@@ -80,6 +82,8 @@ typedef struct {
     double kin_err, pair_err, model_err;
     double kin_raw[MRS_KIN_WINDOW], kin_comp[MRS_KIN_WINDOW], kin_lat[MRS_KIN_WINDOW];
     double yaw_pair[MRS_YAW_PAIR_WINDOW], yaw_pair_err;
+    double delta_lag; /* the wheel angle through the sensors' lag */
+    double lag_beta_prev, kin_sensor[MRS_KIN_WINDOW]; /* what that lag moves the nominal car's beta' */
 } mrs_monitor_state_t;
 
 typedef struct {

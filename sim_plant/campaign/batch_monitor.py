@@ -39,7 +39,7 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
-           "lat_beta_prev", "aux_lag", "yaw_pair_err")
+           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n")
 _BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen")
@@ -63,6 +63,7 @@ class BatchMonitor:
         self.kin_raw = np.zeros((pl.KIN_WINDOW, n))
         self.kin_comp = np.zeros((pl.KIN_WINDOW, n))
         self.kin_lat = np.zeros((pl.KIN_WINDOW, n))
+        self.kin_sensor = np.zeros((pl.KIN_WINDOW, n))
         self.yaw_pair = np.zeros((pl.YAW_PAIR_WINDOW, n))
         self._cols = np.arange(n)
         self._pair: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the last period's lat, d2
@@ -153,8 +154,10 @@ class BatchMonitor:
         for name, value in (("r_model", r_ss), ("kin_n", 0), ("kin_idx", 0), ("since", 0), ("have_sample", False),
                             ("lat_prev", lat), ("steer2_prev", d2), ("yaw_last", r), ("lat_last", lat),
                             ("st_last", d), ("st2_last", d2), ("yaw_ref", r_kin), ("lat_ref", r), ("st_ref", d2),
-                            ("st2_ref", d), ("yaw_ref_ok", False), ("st_ref_ok", False), ("started", True)):
+                            ("st2_ref", d), ("yaw_ref_ok", False), ("st_ref_ok", False), ("delta_lag", delta),
+                            ("started", True)):
             self._set(name, init, value)
+        self._set("delta_lag", act, self.delta_lag + c.delta_alpha * (delta - self.delta_lag))
         self._set("r_model", act, self.r_model + c.model_alpha * (r_ss - self.r_model))
         e = np.abs(r - self.r_model)
         bound = c.model_margin + c.model_rel * np.abs(self.r_model)
@@ -167,6 +170,7 @@ class BatchMonitor:
         raw = r_kin - r
         beta = (c.moment_m * inv_v * inv_v * r + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * v
         lat_beta = lat * c.inv_cs_m
+        lag_beta = c.cf_m * inv_v * (self.delta_lag - delta) * c.inv_cs_m * v
         into = new & self.have_sample
         mid = 0.5 * (raw + self.raw_prev)
         i, cols = self.kin_idx, self._cols
@@ -175,20 +179,27 @@ class BatchMonitor:
         self.kin_comp[i, cols] = np.where(into, comp_now, self.kin_comp[i, cols])
         lat_now = (lat_beta - self.lat_beta_prev) / (self.since * c.ts)
         self.kin_lat[i, cols] = np.where(into, lat_now, self.kin_lat[i, cols])
+        sens_now = (self.lag_beta_prev - lag_beta) / (self.since * c.ts)
+        self.kin_sensor[i, cols] = np.where(into, sens_now, self.kin_sensor[i, cols])
         self._set("kin_idx", into, np.where(i + 1 >= pl.KIN_WINDOW, 0, i + 1))
         self._set("kin_n", into & (self.kin_n < pl.KIN_WINDOW), self.kin_n + 1)
         self._set("have_sample", new, True)
         self._set("raw_prev", new, raw)
         self._set("beta_prev", new, beta)
         self._set("lat_beta_prev", new, lat_beta)
+        self._set("lag_beta_prev", new, lag_beta)
         self._set("since", new, 0)
         kr, kc = self.kin_raw, self.kin_comp
         raw_avg = np.abs((kr[0] + kr[1] + kr[2] + kr[3]) * (1.0 / pl.KIN_WINDOW)) * c.inv_yaw_raw_fraction
         comp = (kc[0] + kc[1] + kc[2] + kc[3]) * (1.0 / pl.KIN_WINDOW)
-        kl = self.kin_lat
-        far = comp + c.lat_span * ((kl[0] + kl[1] + kl[2] + kl[3]) * (1.0 / pl.KIN_WINDOW))
-        # the family of nominal cars on mu in [mu_min, 1]: 0 where its two ends differ in sign
-        comp = np.where(comp * far <= 0.0, 0.0, np.minimum(np.abs(comp), np.abs(far)))
+        kl, ks = self.kin_lat, self.kin_sensor
+        far = c.lat_span * ((kl[0] + kl[1] + kl[2] + kl[3]) * (1.0 / pl.KIN_WINDOW))
+        sens = (ks[0] + ks[1] + ks[2] + ks[3]) * (1.0 / pl.KIN_WINDOW)
+        # the family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]: 0
+        # where its four corners differ in sign, else the smallest corner's magnitude
+        corners = (comp, comp + sens, comp + far, comp + far + sens)
+        lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
+        comp = np.where((lo <= 0.0) & (0.0 <= hi), 0.0, np.where(lo > 0.0, lo, -hi))
         e = np.where(comp < raw_avg, comp, raw_avg)
         e = np.where(self.kin_n < pl.KIN_WINDOW, 0.0, e)
         bound = c.yaw_bound + c.yaw_rel * np.abs(r_kin)
@@ -282,7 +293,7 @@ class BatchMonitor:
         """``_steady`` for the rows that ``act``; the others paused as ``monitor_step`` pauses a
         row below ``speed_min``: its counters and windows at 0, not started, the rest untouched."""
         kept = {k: getattr(self, k) for k in ("r_model", "model_err", "since", "yaw_last", "yaw_ref_ok", "st_last",
-                                              "st_ref_ok", "aux_lag")}
+                                              "st_ref_ok", "aux_lag", "delta_lag")}
         latched = self.latched.copy()
         with np.errstate(all="ignore"):  # a paused row's arithmetic (a speed of 0) is dropped
             self._steady(d, d2, r, lat, v, aux, r2, act)
@@ -301,7 +312,9 @@ class BatchMonitor:
         if v is not self._v_seen:  # the speed is held for several periods: the model's denominator once
             self._v_seen, self._den = v, c.wheelbase + c.k_us * v * v
         self.aux_lag = self.aux_lag + c.aux_alpha * (aux - self.aux_lag)
-        r_ss = (d + self.aux_lag) * v / self._den
+        delta = d + self.aux_lag
+        self.delta_lag = self.delta_lag + c.delta_alpha * (delta - self.delta_lag)
+        r_ss = delta * v / self._den
         self.r_model = self.r_model + c.model_alpha * (r_ss - self.r_model)
         e = np.abs(r - self.r_model)
         bound = c.model_margin + c.model_rel * np.abs(self.r_model)
