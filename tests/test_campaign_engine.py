@@ -215,9 +215,11 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     a nominal-car-like yaw rate read by two elements (each its own noise), and per row one of:
     healthy, a yaw-rate offset, a stuck yaw rate, a steering-pair offset, a stuck second
     channel, the redundant frame and the second yaw-rate element missing for a while, a speed
-    below the monitor's minimum for a while, a stuck a_y, a stuck driver's angle, a large
-    yaw-rate offset; the second yaw-rate element also missing in every period divisible by 7 of
-    the even rows, its window restarting there."""
+    below the monitor's minimum for a while and then the first yaw-rate element missing in every
+    third period and the second in every other (both at once in every sixth), a stuck a_y, a
+    stuck driver's angle, a large yaw-rate offset; the second yaw-rate element also missing in
+    every period divisible by 7 of the even rows, its window restarting there (below the
+    minimum speed too: the lost element's rule there)."""
     rng = np.random.default_rng(seed)
     k = np.arange(steps)[:, None]
     v = np.repeat(rng.uniform(8.0, 40.0, rows)[None], steps, axis=0)
@@ -243,6 +245,9 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     d2 = np.where((kind == 5) & gap, np.nan, d2)
     r2 = np.where((kind == 5) & gap | (k % 7 == 0) & (np.arange(rows) % 2 == 0), np.nan, r2)
     v = np.where((kind == 6) & gap, 3.0, v)
+    then = (kind == 6) & (k >= onset + 100) & (k < onset + 160)
+    r = np.where(then & (k % 3 == 0), np.nan, r)
+    r2 = np.where(then & (k % 2 == 0), np.nan, r2)
     held = (k // 25) * 25  # the 50 ms frame, sampled at the period it is sent in
     lat, d2 = lat[held[:, 0]], d2[held[:, 0]]
     return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux, "r2": r2}
@@ -392,3 +397,19 @@ def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light
     assert not slow.one_substep(np.ones(2)) and slow.substeps(np.ones(2)).max() > 1
     fast = BatchCar(np.array([20.0, 30.0]), np.ones(2), np.array([1500.0, 1500.0]), 0.002)
     assert fast.one_substep(np.ones(2))
+
+
+def test_batch_sensors_refuse_a_second_yaw_element_they_do_not_model() -> None:
+    """The batch models the yaw-rate sensor's second element as ``params.scenario_for`` builds
+    it (present, the first element's filter, no bias); any other is refused, not ignored."""
+    from sim_plant.campaign.batch_sensors import BatchSensors
+    from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
+
+    args = (np.array([0.014]), np.array([0.1]), np.array([1]), 0.002)
+    BatchSensors(*args)
+    BatchSensors(*args, config=SensorConfig(yaw_rate_redundant=YawRateSensorConfig(noise_density=0.03)))
+    for other in (SensorConfig(yaw_rate_redundant_present=False),
+                  SensorConfig(yaw_rate_redundant=YawRateSensorConfig(bias_deg_s=0.2)),
+                  SensorConfig(yaw_rate_redundant=YawRateSensorConfig(lowpass_hz=20.0))):
+        with pytest.raises(ValueError, match="second element"):
+            BatchSensors(*args, config=other)

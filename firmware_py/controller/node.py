@@ -271,7 +271,8 @@ class ControllerNode:
         for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
                                    values[2], self.command, yaw_2)
-        # the yaw-rate pair's fault is found while its command builds: removed at once, not faded
+        # a pair check's fault (yaw rate or steering) is found while its command builds: removed at
+        # the limiter's rate bound, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
                               self.monitor.flags & pl.CUT_CHECKS)
         state = self.state.status

@@ -13,6 +13,7 @@ the sampled sensor faults on their inputs (``batch_faults``) and the error each 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -62,6 +63,12 @@ class BatchSensors:
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
                  config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None,
                  steps: int | None = None) -> None:
+        first, second = config.yaw_rate, config.yaw_rate_redundant
+        if not config.yaw_rate_redundant_present or replace(second, noise_density=first.noise_density) != replace(
+                first, bias_deg_s=0.0):
+            raise ValueError("BatchSensors models the yaw-rate sensor's second element as params.scenario_for "
+                             "builds it (present, the first element's filter, no bias); the config has "
+                             f"present={config.yaw_rate_redundant_present}, {second}")
         fs = 1.0 / ts
         self.ts, self.faults = ts, faults
         #: per row, its faulted channel's reading less the same sensor's without the fault (the

@@ -26,7 +26,7 @@ from sim_plant.car.sensors import SensorConfig
 
 RATE_HZ = DEFAULT_RATE_HZ
 RATE_LIMIT = math.radians(40.0)  # rad/s, the controller's command rate limit in these runs
-CUT_RATE = AuthorityConfig().rate_max  # rad/s: the limiter removing a command on a yaw-rate pair fault
+CUT_RATE = AuthorityConfig().rate_max  # rad/s: the limiter removing a command on a pair check's fault
 PLANT_FADE = FADE_RATE_RAD_S  # rad/s, the actuator's fade (the plant's default)
 CMD_TIMEOUT = CMD_TIMEOUT_S  # s, the actuator's command timeout (the plant's default)
 SCENARIO = "paper-fig9"  # the plant's scenario in every row but the curve rows (CURVE)

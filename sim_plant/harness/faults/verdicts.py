@@ -136,8 +136,8 @@ def check_command_rate(e: Evidence, v: Verdict) -> None:
     # Fifteen or more missing in a row alias to fewer (the counter runs 0..14), which only makes
     # the check stricter there.
     # One exception, by design: a command in FAULT moving toward zero may move at the authority
-    # limiter's rate bound, which is how the limiter removes a command the yaw-rate pair check
-    # found wrong while it was still building (authority_step's cut); the actuator's own slew
+    # limiter's rate bound, which is how the limiter removes a command a pair check (yaw rate or
+    # steering) found wrong while it was still building (authority_step's cut); the actuator's own slew
     # limit still bounds the wheels (the applied-angle checks).
     killed_at, restarted = e.killed_at, e.restarted
     steps = zip(e.angles, e.angles[1:], e.cmd_counters, e.cmd_counters[1:], e.cmds[1:])
