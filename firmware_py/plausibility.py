@@ -134,6 +134,11 @@ class PlausibilityConfig:
     # family of nominal cars sees the wheel angle through every lag in [0, sensor_tau], so that a
     # steering step is not taken for a yaw-rate error whatever the sensors' filters (docs/controller.md)
     sensor_tau: float = 0.0075
+    # The lateral acceleration a side force no nominal car has (a gust of wind) may put in a_y,
+    # m/s^2: the kinematic bound widens by side_accel / v while the yaw-rate pair is running,
+    # which then finds every yaw-rate error itself, so that the kinematic check is the lateral
+    # acceleration's and the gust is not taken for a sensor error (docs/controller.md)
+    side_accel: float = 0.6
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,6 +171,7 @@ class MonitorCoefficients:
     yaw_pair_bound: float
     inv_yaw_pair_bound: float
     delta_alpha: float  # the sensors' lag per period: 1 - exp(-ts / sensor_tau)
+    side_accel: float
 
 
 class MonitorState:
@@ -229,7 +235,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
                           "yaw_pair_bound", "sensor_tau"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
-    for name in ("model_rel", "yaw_rel"):
+    for name in ("model_rel", "yaw_rel", "side_accel"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
@@ -253,7 +259,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
-        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau))
+        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
+        side_accel=cfg.side_accel)
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -450,6 +457,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         if s.kin_n < KIN_WINDOW:
             e = 0.0  # the window is not full yet
         bound = c.yaw_bound + c.yaw_rel * (-r_kin if r_kin < 0.0 else r_kin)
+        if s.yaw_pair_n >= YAW_PAIR_WINDOW:
+            bound += c.side_accel * inv_v
         s.kin_err = e / bound
         if e > bound:
             s.kin_count += 1

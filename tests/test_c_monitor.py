@@ -101,6 +101,19 @@ def _lost_second_element(rows: list[tuple[float, ...]]) -> list[tuple[float, ...
     return rows[:half] + [(*row[:7], math.nan) for row in rows[half:]]
 
 
+def _lost_edges(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+    """The rows with the second yaw-rate element missing, from the middle on, in every other
+    period, the first element in every third (both in every sixth), and the speed below the
+    monitor's minimum in the last quarter: where the lost element's rule asks for the first
+    element valid, and where every check pauses."""
+    half, out = len(rows) // 2, list(rows[:len(rows) // 2])
+    for k, row in enumerate(rows[half:], start=half):
+        d, d2, r, lat, v, aux, u, r2 = row
+        out.append((d, d2, math.nan if k % 3 == 0 else r, lat, 3.0 if k >= 3 * len(rows) // 4 else v, aux, u,
+                    math.nan if k % 2 == 0 else r2))
+    return out
+
+
 CASES = {
     "split-mu, fault-free": lambda: _run_rows(pr.scn.load("split-mu")),
     "yaw bias in a curve": lambda: _run_rows(pr.steady_curve(20.0, 1.0).with_sensor_faults(
@@ -112,6 +125,10 @@ CASES = {
         pr.steady_curve(10.0, 1.0, a_y=3.4, ramp=0.0, duration=2.0)),
     "second yaw-rate element lost half way (DEGRADED)": lambda: _lost_second_element(
         _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
+    "second element lost with the first missing and below speed_min": lambda: _lost_edges(
+        _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
+    "a side-wind gust at 10 m/s, the pair in the loop (side_accel)": lambda: _run_rows(
+        dataclasses.replace(pr.scn.load("side-wind"), v=10.0, mu=0.3), SensorConfig(seed=101)),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
@@ -134,6 +151,17 @@ def test_a_lost_second_element_is_degraded_from_its_first_missing_sample() -> No
     half = len(rows) // 2
     assert not any(bits & pl.PLAUS_DEGRADED for bits, *_ in out[:half])
     assert all(bits & pl.PLAUS_DEGRADED for bits, *_ in out[half:])
+
+
+def test_a_lost_element_is_degraded_below_speed_min_too_but_not_while_the_first_is_missing() -> None:
+    rows = CASES["second element lost with the first missing and below speed_min"]()
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+    half, slow = len(rows) // 2, 3 * len(rows) // 4
+    for k in range(half, len(rows)):
+        r, v, r2, bits = rows[k][2], rows[k][4], rows[k][7], out[k][0]
+        assert (v < pl.PlausibilityConfig().speed_min) == (k >= slow)
+        degraded = math.isnan(r2) and not math.isnan(r)  # the first element there, the second lost
+        assert bool(bits & pl.PLAUS_DEGRADED) == degraded, (k, r, r2, bits)
 
 
 def test_the_random_case_exercises_every_branch(runner: Path) -> None:
@@ -160,7 +188,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
-                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha]
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

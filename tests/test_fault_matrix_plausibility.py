@@ -355,3 +355,23 @@ def test_a_row_whose_processes_left_no_statistics_fails_with_the_reason(tmp_path
     result = judge(_row(), tmp_path, 0, None, None)
     assert not result.passed
     assert "no bridge.json, logger-vehicle.json" in result.failures[0] and "stack" in result.failures[0]
+
+
+@pytest.mark.parametrize("second_element", [True, False], ids=["with-the-yaw-pair", "without"])
+def test_the_lateral_accelerations_bound_allows_a_side_force_while_the_car_has_the_yaw_pair(
+        second_element: bool) -> None:
+    """a_y's bound is the kinematic one times v, plus ``side_accel`` when the car sends the
+    yaw-rate sensor's second element (the monitor widens its bound while that pair runs)."""
+    row = {r.name: r for r in F.secured_rows()}["lateral acceleration offset +2 m/s^2"]
+    n = int(round(END / TS))
+    t = [k * TS for k in range(n)]
+    yaw_2 = [R if second_element else math.nan] * n
+    columns = {"t_s": t, "wall_s": t, "yaw_rate_rad_s": [R] * n, "v_m_s": [20.0] * n,
+               "lat_accel_m_s2": [0.4] * n, "lat_accel_measured_m_s2": [0.4 + 2.0 * (tk >= ONSET) for tk in t],
+               "yaw_rate_redundant_measured_rad_s": yaw_2}
+    e = replace(evidence(row), trace=Trace(t, [0.0] * n, [0.0] * n, t, columns))
+    cfg = PlausibilityConfig()
+    expected = (cfg.yaw_bound + cfg.yaw_rel * R) * 20.0 + (cfg.side_accel if second_element else 0.0)
+    series = error_series(e, cfg)
+    assert all(b == pytest.approx(expected) for *_, b in series)
+    assert max(err for _, err, _ in series) == pytest.approx(2.0)

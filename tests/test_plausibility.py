@@ -221,6 +221,39 @@ def test_the_family_of_sensor_lags_keeps_unfiltered_sensors_as_quiet() -> None:
         assert with_family <= without + 1e-12 and with_family < 0.5
 
 
+#: The yaw-rate sensor's second element, as the plant sends it (its own noise stream).
+SECOND = replace(scn.load("side-wind").sensors, seed=101)
+
+
+@pytest.mark.parametrize("v, mu", [(10.0, 0.3), (10.0, 0.7), (12.5, 0.5), (15.0, 0.3)])
+def test_a_side_wind_gust_at_low_speed_is_no_sensor_fault_while_the_yaw_pair_runs(v: float, mu: float) -> None:
+    """The built-in 1500 N gust at 10-15 m/s: its side force is an a_y no nominal car has, and
+    without the second yaw-rate element (the kinematic check alone watching the yaw rate) it
+    trips the check; with it the bound allows ``side_accel`` / v and the residual stays under
+    90 % of the bound."""
+    sc = replace(scn.load("side-wind"), v=v, mu=mu)
+    alone = pr.run(sc, controller=LAW)
+    assert alone.fault_time is not None and alone.margins["kinematic"] > 1.0
+    paired = pr.run(sc, controller=LAW, second_yaw=SECOND)
+    assert paired.fault_time is None and paired.bits.max() == 0 and paired.margins["kinematic"] < 0.9
+
+
+@pytest.mark.parametrize("v, mu, kind, value, a_y", [(10.0, 1.0, "bias", 1.5, 2.0), (40.0, 0.3, "bias", -2.5, 0.0),
+                                                     (20.0, 1.0, "scale", 0.5, 4.0), (10.0, 0.3, "stuck", 3.0, 0.0)])
+def test_an_a_y_fault_over_the_widened_bound_is_still_reported_within_300_ms(v: float, mu: float, kind: str,
+                                                                            value: float, a_y: float) -> None:
+    """With the yaw-rate pair running the kinematic check is the lateral acceleration's, and its
+    bound ``error_bound`` states (``side_accel`` more than without the pair): a fault whose
+    error passes it is reported within 300 ms of that."""
+    sc = pr.steady_curve(v, mu, a_y=a_y, duration=3.0).with_sensor_faults((SensorFault("lat_accel", kind, 1.4, value),))
+    cfg = pl.PlausibilityConfig()
+    r = pr.run(sc, controller=LAW, second_yaw=SECOND)
+    bound = pr.error_bound("lat_accel", cfg, r)
+    assert bound[-1] == pytest.approx((cfg.yaw_bound + cfg.yaw_rel * abs(r.r_true[-1])) * v + cfg.side_accel)
+    exceeded = r.exceeded_time(bound)
+    assert exceeded is not None and r.fault_time is not None and 0.0 <= r.fault_time - exceeded <= 0.3
+
+
 def _campaign_sample(duration: float = 3.0, **values: float) -> scn.Scenario:
     """The campaign's scenario of one sample: its parameters' defaults but ``values``."""
     row = {name: p.default for name, p in params.PARAMETERS.items()} | {params.INDEX: 0, params.NOISE_SEED: 1}

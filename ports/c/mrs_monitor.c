@@ -32,6 +32,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->actuator_tau = 0.025;
     cfg->yaw_pair_bound = 0.03;
     cfg->sensor_tau = 0.0075;
+    cfg->side_accel = 0.6;
 }
 
 static int positive(double x)
@@ -60,7 +61,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         }
     }
     if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
-        g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0)) {
+        g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
+        !(g->side_accel >= 0.0 && g->side_accel < 1e3)) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
@@ -92,6 +94,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->yaw_pair_bound = g->yaw_pair_bound;
     c->inv_yaw_pair_bound = 1.0 / g->yaw_pair_bound;
     c->delta_alpha = 1.0 - exp(-g->ts / g->sensor_tau);
+    c->side_accel = g->side_accel;
     return 0;
 }
 
@@ -356,6 +359,9 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             e = 0.0;
         }
         bound = c->yaw_bound + c->yaw_rel * MRS_MAG(r_kin);
+        if (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW) {
+            bound += c->side_accel * inv_v; /* the pair checks the yaw rate: allow a side force */
+        }
         s->kin_err = e / bound;
         MRS_COUNT(s->kin_count, e > bound, c->yaw_count, MRS_CHECK_KINEMATIC);
         e = MRS_MAG(delta_driver - delta_driver_redundant);

@@ -56,6 +56,7 @@ typedef struct {
     double actuator_tau; /* the actuator's nominal lag behind the command sent, s */
     double yaw_pair_bound; /* |mean of r - r_2 over MRS_YAW_PAIR_WINDOW samples|, rad/s */
     double sensor_tau; /* the sensors' filters' lag on a_y and r, s: the kinematic check's wheel angle takes it */
+    double side_accel; /* m/s^2 of a_y a side force may add: the kinematic bound widens by it / v while the yaw pair runs */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -69,6 +70,7 @@ typedef struct {
     double lat_span, aux_alpha; /* 1 / mu_min - 1; 1 - exp(-ts / actuator_tau) */
     double yaw_pair_bound, inv_yaw_pair_bound;
     double delta_alpha; /* 1 - exp(-ts / sensor_tau) */
+    double side_accel;
 } mrs_monitor_coeffs_t;
 
 typedef struct {

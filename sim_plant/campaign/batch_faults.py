@@ -105,9 +105,10 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        # plausibility_runs.error_bound: the yaw rate's, a_y's the same times v, a steering angle's
+        # plausibility_runs.error_bound: the yaw rate's, a_y's the same times v plus side_accel (a
+        # campaign's car has the yaw-rate sensor's second element), a steering angle's
         bound = self.cfg.yaw_bound + self.cfg.yaw_rel * np.abs(r_true)
-        bound = np.where(self.lat, bound * speed, np.where(self.steer, self.cfg.steer_bound, bound))
+        bound = np.where(self.lat, bound * speed + self.cfg.side_accel, np.where(self.steer, self.cfg.steer_bound, bound))
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

@@ -131,8 +131,8 @@ class BatchMonitor:
                          "kin_n"):
                 self._set(name, paused, 0)
             self._set("started", paused, False)
+            self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
             self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
-            self._yaw_pair(act, r, r2)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
@@ -203,6 +203,7 @@ class BatchMonitor:
         e = np.where(comp < raw_avg, comp, raw_avg)
         e = np.where(self.kin_n < pl.KIN_WINDOW, 0.0, e)
         bound = c.yaw_bound + c.yaw_rel * np.abs(r_kin)
+        bound = np.where(self.yaw_pair_n >= pl.YAW_PAIR_WINDOW, bound + c.side_accel * inv_v, bound)
         self._set("kin_err", new, e / bound)
         self.kin_count, trip = _count(self.kin_count, e > bound, new, c.yaw_count)
         self.latched |= np.where(trip, pl.CHECK_KINEMATIC, 0)

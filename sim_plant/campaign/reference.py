@@ -93,7 +93,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     n = int(round(sc.duration / ts)) + 1
     r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
     status, bits_hist, auth = (np.zeros(n, dtype=np.int64) for _ in range(3))
-    error, speed_seen = np.zeros(n), np.zeros(n)
+    error, speed_seen, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
     command = 0.0  # the command sent the period before: what acts on the car now
     in_flight: int | None = None  # a status frame's plausibility bits, not yet read by the plant
@@ -121,7 +121,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         for ch in CHANNELS:
             if k % every[ch] == 0:
                 held[ch] = read[ch]
-        speed_seen[k] = held["speed"]
+        speed_seen[k], yaw_2_seen[k] = held["speed"], yaw_rate_2
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
         if ctrl is not None and ac is not None:
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"])
@@ -145,20 +145,23 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     if fault is not None and ctrl is not None:
         r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
-                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen, r_clean))
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen, r_clean, yaw_2_seen))
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
-                  error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None) -> tuple[int, float, float]:
+                  error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None,
+                  yaw_rate_2: np.ndarray) -> tuple[int, float, float]:
     """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
-    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection."""
+    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection (``speed`` and
+    ``yaw_rate_2``: what the monitor saw)."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
     false_alarms = int(np.count_nonzero((bits != 0) & ~after))
     if fault is None:
         return false_alarms, 0.0, 0.0
     cfg = pl.PlausibilityConfig(ts=ts)
-    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed}, np.zeros(bits.size))
+    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed, "yaw_rate_redundant": yaw_rate_2},
+                     np.zeros(bits.size))
     exceeded, reported = run.exceeded_time(error_bound(fault.sensor, cfg, run)), run.fault_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
     caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))

@@ -115,11 +115,13 @@ class MonitorRun:
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
     """The plausibility bound a sensor's error is judged against, per period: the yaw rate's
     ``yaw_bound + yaw_rel |r|``, the lateral acceleration's the same times v (the same
-    residual), a steering channel's ``steer_bound``, the yaw rate's second element's
-    ``yaw_pair_bound``."""
+    residual) plus ``side_accel`` while the yaw-rate sensor's second element is there (the
+    kinematic check allows a side force then), a steering channel's ``steer_bound``, the yaw
+    rate's second element's ``yaw_pair_bound``."""
     r = np.abs(run.r_true)
     yaw = cfg.yaw_bound + cfg.yaw_rel * r
-    return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"], "steer": cfg.steer_bound,
+    side = np.where(np.isfinite(run.held["yaw_rate_redundant"]), cfg.side_accel, 0.0)
+    return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"] + side, "steer": cfg.steer_bound,
             "steer_redundant": cfg.steer_bound, "yaw_rate_redundant": cfg.yaw_pair_bound}[sensor]
 
 

@@ -23,7 +23,8 @@ The error is the falsified signal on the controller's bus less the same frame's 
 vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up; a fault
 the plant injects, under ``--secoc``, is measured less true in the plant's trace), against
 the bound ``offline.plausibility_runs.error_bound`` states: the yaw rate's ``yaw_bound +
-yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v, a
+yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
+plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
 (``PlausibilityConfig``'s defaults, as the controller runs).
 It counts as left the bound when it stays over it for 300 ms or until the fault is reported.
@@ -70,13 +71,16 @@ _TRACE_COLUMNS = {names.SIG_YAW_RATE: ("yaw_rate_measured_rad_s", "yaw_rate_rad_
                   names.SIG_YAW_RATE_2: ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s")}
 
 
-def _bound(signal: str, cfg: PlausibilityConfig, r: float, v: float) -> float:
+def _bound(signal: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool) -> float:
     if signal in (names.SIG_STEER_ANGLE, names.SIG_STEER_ANGLE_2):
         return cfg.steer_bound
     if signal == names.SIG_YAW_RATE_2:
         return cfg.yaw_pair_bound  # only the pair check sees the second element
     bound = cfg.yaw_bound + cfg.yaw_rel * abs(r)
-    return bound * v if signal == names.SIG_LAT_ACCEL else bound
+    if signal != names.SIG_LAT_ACCEL:
+        return bound
+    # with the yaw-rate pair running the kinematic check allows a side force's a_y
+    return bound * v + (cfg.side_accel if pair else 0.0)
 
 
 def onset(e: Evidence) -> float | None:
@@ -96,14 +100,18 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
     if e.row.at_plant:
         cols = e.trace.columns
         measured, true = (cols[c] for c in _TRACE_COLUMNS[signal])
-        return [(w, m - x, _bound(signal, cfg, r, v)) for w, m, x, r, v in
+        pair = signal == names.SIG_LAT_ACCEL and any(
+            math.isfinite(x) for x in cols.get(_TRACE_COLUMNS[names.SIG_YAW_RATE_2][0], ()))
+        return [(w, m - x, _bound(signal, cfg, r, v, pair)) for w, m, x, r, v in
                 zip(e.trace.wall, measured, true, cols["yaw_rate_rad_s"], cols["v_m_s"])]
     truth = _values(e.vehicle_frames, fault.target, signal)
     seen = _values(e.frames, fault.target, signal)
     yaw = _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE)
     speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
     yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
-    return [(tc, got - x, _bound(signal, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0)))
+    pair = signal == names.SIG_LAT_ACCEL and any(
+        math.isfinite(x) for _, x in _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE_2))
+    return [(tc, got - x, _bound(signal, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair))
             for (tv, x), (tc, got) in zip(truth, seen)]
 
 
