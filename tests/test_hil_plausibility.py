@@ -58,3 +58,59 @@ def test_a_clean_run_reports_nothing_and_degraded_is_its_own_figure() -> None:
     degraded = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), scn.load("side-wind"), RATE)
     assert degraded["fault_detected_s"] is None  # DEGRADED is no fault
     assert degraded["first_degraded_s"] == pytest.approx(149 / RATE)
+
+
+def _steps(n: int, **measured) -> list:
+    """n plant steps at 20 m/s, r 0.02 rad/s, a_y 0.4 m/s^2, the wheel at 0.01 rad; each
+    ``measured`` column a function of t (the truth where not given)."""
+    import math
+
+    from sim_plant.harness.hil_steps import Step
+
+    out = []
+    for k in range(n):
+        t = k / RATE
+        truth = dict(steer_measured_rad=0.01, lat_accel_measured_m_s2=0.4, steer_redundant_measured_rad=0.01,
+                     yaw_rate_redundant_measured_rad_s=0.02, yaw_rate_measured_rad_s=0.02)
+        cols = {name: f(t) for name, f in measured.items()}
+        out.append(Step(step=k, t_s=t, driver_angle_rad=0.01, yaw_rate_rad_s=0.02, v_m_s=20.0, aux_cmd_rad=0.0,
+                        aux_applied_rad=0.0, ctrl_state="", ctrl_cause=None, m_z_nm=0.0, mu=1.0, beta_rad=0.0,
+                        lat_accel_m_s2=0.4, wall_s=1000.0 + t, **(truth | cols)))
+    assert not math.isnan(out[0].lat_accel_measured_m_s2)
+    return out
+
+
+def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -> None:
+    from dataclasses import replace
+
+    from firmware_py.plausibility import PlausibilityConfig
+
+    cfg = PlausibilityConfig()
+    drift = 0.5 * 3.141592653589793 / 180.0  # rad/s: the steering channel drifts 0.5 deg/s from 0.2 s
+    sc = scn.load("side-wind").with_sensor_faults((SensorFault("steer", "drift", 0.2, drift),))
+    steps = _steps(800, steer_measured_rad=lambda t: 0.01 + max(0.0, t - 0.2) * drift)
+    fig = plausibility_figures(_traffic(fault_from=None, steps=800), sc, RATE, steps)
+    assert fig["error_over_bound_s"] == pytest.approx(0.2 + cfg.steer_bound / drift, abs=2.5 / RATE)
+    assert fig["yaw_error_over_bound_s"] is None  # not a yaw-rate fault
+    # a_y: the kinematic bound times v, plus side_accel while the car has the second yaw element
+    for offset, present, over in ((1.0, True, False), (1.0, False, True), (2.0, True, True)):
+        sensors = replace(scn.load("side-wind").sensors, yaw_rate_redundant_present=present)
+        sc = replace(scn.load("side-wind"), sensors=sensors).with_sensor_faults(
+            (SensorFault("lat_accel", "bias", 0.5, offset),))
+        steps = _steps(400, lat_accel_measured_m_s2=lambda t, o=offset: 0.4 + (o if t >= 0.5 else 0.0))
+        fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
+        assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
+    # the speed has no check that bounds its error
+    sc = scn.load("side-wind").with_sensor_faults((SensorFault("speed", "scale", 0.5, 1.5),))
+    assert plausibility_figures(_traffic(fault_from=None), sc, RATE, _steps(400))["error_over_bound_s"] is None
+
+
+def test_the_command_line_says_early_or_late_against_the_bound() -> None:
+    from mrsteer_cli.hil_cli import plausibility_line
+
+    base = {"bits_seen": 2, "fault_detected_s": 1.95, "detection_latency_s": 0.45}
+    assert plausibility_line(base | {"latency_from_bound_s": 0.12}).endswith(
+        "at 1.950 s, 450 ms after the sensor fault, 120 ms after its error passed the bound")
+    assert "10 ms before its error passed the bound" in plausibility_line(base | {"latency_from_bound_s": -0.01})
+    quiet = {"bits_seen": 0, "fault_detected_s": None, "detection_latency_s": None, "latency_from_bound_s": None}
+    assert plausibility_line(quiet) == "bits seen 0, fault reported none"

@@ -129,14 +129,20 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
             value = s[key]
             print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
         print(f"  {'frames':<26}{s['frames']}")
-        pl = s["plausibility"]
-        found = "none" if pl["fault_detected_s"] is None else f"at {pl['fault_detected_s']:.3f} s"
-        if pl["detection_latency_s"] is not None:
-            found += f", {1e3 * pl['detection_latency_s']:.0f} ms after the sensor fault"
-        if pl["latency_from_bound_s"] is not None:
-            found += f", {1e3 * pl['latency_from_bound_s']:.0f} ms after its error passed the bound"
-        print(f"  {'plausibility':<26}bits seen {pl['bits_seen']}, fault reported {found}")
+        print(f"  {'plausibility':<26}{plausibility_line(s['plausibility'])}")
     return 0
+
+
+def plausibility_line(pl: dict) -> str:
+    """The summary's ``plausibility`` entry in words (``hil run``'s last line)."""
+    found = "none" if pl["fault_detected_s"] is None else f"at {pl['fault_detected_s']:.3f} s"
+    if pl["detection_latency_s"] is not None:
+        found += f", {1e3 * pl['detection_latency_s']:.0f} ms after the sensor fault"
+    if pl["latency_from_bound_s"] is not None:
+        ms = 1e3 * pl["latency_from_bound_s"]
+        found += f", {ms:.0f} ms after its error passed the bound" if ms >= 0.0 else (
+            f", {-ms:.0f} ms before its error passed the bound (found by its noise or another check)")
+    return f"bits seen {pl['bits_seen']}, fault reported {found}"
 
 
 def _cmd_hil_evidence(args: argparse.Namespace) -> int:

@@ -54,6 +54,13 @@ class Step:
     beta_rad: float
     lat_accel_m_s2: float
     wall_s: float  # epoch s when the plant recorded the step, for aligning with traffic.log
+    # What the other sensors gave (NaN: a steps.csv written before they were kept; the second
+    # yaw-rate element NaN also when the sensor has none): their faults' errors are these less
+    # the truth above (the steering channels' truth is driver_angle_rad).
+    steer_measured_rad: float = math.nan
+    lat_accel_measured_m_s2: float = math.nan
+    steer_redundant_measured_rad: float = math.nan
+    yaw_rate_redundant_measured_rad_s: float = math.nan
 
 
 STEP_COLUMNS = tuple(f.name for f in fields(Step))
