@@ -44,6 +44,11 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    ``frozen_move_*``: a real sensor's noise toggles its LSB, so an unchanging value while the
    car's motion changes is a frozen output.
 
+6. **Speed**: a change from one speed value to the next larger than ``speed_step`` (no car
+   changes its speed that fast; a sensor stuck at another value, offset or scaled jumps at its
+   onset), checked before the pause below ``speed_min``, since K_n(v) follows the wrong speed
+   at once; a missing speed restarts it.
+
 Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
 within it, and trips at ``*_count``; 2 likewise per control period, tripping at
 ``model_time``; 4 trips on one window over its bound (at other rates than 500 Hz its
@@ -74,16 +79,19 @@ CHECK_KINEMATIC = 0x01  # yaw rate against a_y / v
 CHECK_MODEL = 0x02  # yaw rate against the nominal car's response to the steering
 CHECK_STEER_PAIR = 0x04  # the two steering channels
 CHECK_YAW_PAIR = 0x100  # the two yaw-rate elements (C: the flags are 16 bits)
+CHECK_SPEED = 0x200  # the speed jumped between two samples by more than a car can change it
 FROZEN_YAW = 0x08
 FROZEN_LAT = 0x10
 FROZEN_STEER = 0x20
 FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
-YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR
+#: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
+#: rate's (CtrlStatus_Plausibility 1).
+YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: The pair checks, which find a fault while the command it drove is still building: the node
 #: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
-CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR
+CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
@@ -139,6 +147,11 @@ class PlausibilityConfig:
     # which then finds every yaw-rate error itself, so that the kinematic check is the lateral
     # acceleration's and the gust is not taken for a sensor error (docs/controller.md)
     side_accel: float = 0.6
+    # m/s: the most the speed may change from one value to the next (a 20 ms frame; 1.5 m/s is
+    # 75 m/s^2 there, and 15 m/s^2 across the 100 ms a timed-out frame may leave): more is a
+    # sensor that jumped (stuck at another value, an offset or a gain from its onset), which
+    # reschedules K_n(v) at once (docs/controller.md)
+    speed_step: float = 1.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,6 +185,7 @@ class MonitorCoefficients:
     inv_yaw_pair_bound: float
     delta_alpha: float  # the sensors' lag per period: 1 - exp(-ts / sensor_tau)
     side_accel: float
+    speed_step: float
 
 
 class MonitorState:
@@ -183,7 +197,7 @@ class MonitorState:
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
                  "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
-                 "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev")
+                 "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -226,13 +240,15 @@ def reset_monitor(s: MonitorState) -> None:
     s.delta_lag = 0.0  # the wheel angle through the sensors' lag (sensor_tau)
     s.kin_sensor = [0.0] * KIN_WINDOW  # how much that lag moves the nominal car's beta' (C: double[4])
     s.lag_beta_prev = 0.0
+    s.speed_last = 0.0  # the last valid speed (speed_seen: since the speed was last invalid)
+    s.speed_seen = False
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
-                          "yaw_pair_bound", "sensor_tau"))
+                          "yaw_pair_bound", "sensor_tau", "speed_step"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel", "side_accel"):
@@ -260,7 +276,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
         inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
-        side_accel=cfg.side_accel)
+        side_accel=cfg.side_accel, speed_step=cfg.speed_step)
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -285,6 +301,18 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     element has been received since ``reset_monitor`` while the first element is valid (a lost
     element).  A sender without it (SNA from the start, or the default NaN) never sets it:
     every result is then as without the check."""
+    # --- 6. speed: a jump no car makes.  Before the pause below, which a speed stuck under
+    #     speed_min would otherwise bring on: K_n(v) follows the wrong speed whatever it is.
+    if 0.0 <= speed < 1e3:
+        if s.speed_seen and speed != s.speed_last:
+            e = speed - s.speed_last
+            e = -e if e < 0.0 else e
+            if e > c.speed_step:
+                s.latched |= CHECK_SPEED
+        s.speed_last = speed
+        s.speed_seen = True
+    else:
+        s.speed_seen = False  # missing (the node's freshness): the next valid value starts afresh
     flags = s.latched
     # A NaN fails every comparison: these are False for NaN and +-inf.
     primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (

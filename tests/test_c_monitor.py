@@ -129,6 +129,9 @@ CASES = {
         _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
     "a side-wind gust at 10 m/s, the pair in the loop (side_accel)": lambda: _run_rows(
         dataclasses.replace(pr.scn.load("side-wind"), v=10.0, mu=0.3), SensorConfig(seed=101)),
+    "the speed stuck at another value in a curve": lambda: _run_rows(
+        pr.steady_curve(12.5, 0.8, a_y=3.0).with_sensor_faults((SensorFault("speed", "stuck", 1.0, 33.0),)),
+        SensorConfig(seed=7)),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
@@ -188,7 +191,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
-                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel]
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

@@ -40,11 +40,11 @@ static void print_defaults(void)
     mrs_monitor_default_config(&m);
     mrs_authority_default_config(&a);
     printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
+           "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
            m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
            m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r, m.kin_gap, m.mu_min, m.actuator_tau,
-           m.yaw_pair_bound, m.sensor_tau, m.side_accel);
+           m.yaw_pair_bound, m.sensor_tau, m.side_accel, m.speed_step);
     printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
            a.fault_fade_rate, a.panic_window, a.engage, a.rearm_time);
 }
@@ -52,7 +52,7 @@ static void print_defaults(void)
 int main(void)
 {
     char line[LINE_MAX_LEN];
-    double v[26];
+    double v[27];
     mrs_monitor_config_t mg;
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
@@ -67,7 +67,7 @@ int main(void)
         print_defaults();
         return 0;
     }
-    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 26) != 0) {
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 27) != 0) {
         return 2;
     }
     mg.ts = v[0];
@@ -96,6 +96,7 @@ int main(void)
     mg.yaw_pair_bound = v[23];
     mg.sensor_tau = v[24];
     mg.side_accel = v[25];
+    mg.speed_step = v[26];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 8) != 0) {
         return 2;
@@ -111,10 +112,10 @@ int main(void)
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g\n",
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g\n",
            mc.model_alpha, mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m,
            mc.moment_m, mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps,
-           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel);
+           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);
     while (fgets(line, sizeof line, stdin) != NULL) {

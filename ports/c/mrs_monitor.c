@@ -33,6 +33,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->yaw_pair_bound = 0.03;
     cfg->sensor_tau = 0.0075;
     cfg->side_accel = 0.6;
+    cfg->speed_step = 1.5;
 }
 
 static int positive(double x)
@@ -52,7 +53,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
-                        g->yaw_pair_bound, g->sensor_tau};
+                        g->yaw_pair_bound, g->sensor_tau, g->speed_step};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -95,6 +96,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->inv_yaw_pair_bound = 1.0 / g->yaw_pair_bound;
     c->delta_alpha = 1.0 - exp(-g->ts / g->sensor_tau);
     c->side_accel = g->side_accel;
+    c->speed_step = g->speed_step;
     return 0;
 }
 
@@ -139,6 +141,8 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw_pair_n = 0;
     s->yaw_pair_err = 0.0;
     s->yaw2_seen = 0u;
+    s->speed_last = 0.0;
+    s->speed_seen = 0u;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -188,7 +192,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
                          double aux_cmd_applied, double yaw_rate_redundant)
 {
-    uint16_t flags = s->latched;
+    uint16_t flags;
     const int primary_ok = (delta_driver > -1e3 && delta_driver < 1e3) && (yaw_rate > -1e3 && yaw_rate < 1e3) &&
                            (speed >= c->speed_min && speed < 1e3) &&
                            (aux_cmd_applied > -1e3 && aux_cmd_applied < 1e3);
@@ -197,6 +201,20 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
     int new_sample;
 
+    /* 6. speed: a jump no car makes; before the pause below speed_min (K_n(v) follows it) */
+    if (speed >= 0.0 && speed < 1e3) {
+        if (s->speed_seen && speed != s->speed_last) {
+            e = MRS_MAG(speed - s->speed_last);
+            if (e > c->speed_step) {
+                s->latched |= MRS_CHECK_SPEED;
+            }
+        }
+        s->speed_last = speed;
+        s->speed_seen = 1u;
+    } else {
+        s->speed_seen = 0u;
+    }
+    flags = s->latched;
     if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
         s->yaw2_seen = 1u;
     } else if (s->yaw2_seen && yaw_rate > -1e3 && yaw_rate < 1e3) {

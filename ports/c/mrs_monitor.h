@@ -29,9 +29,11 @@
 #define MRS_FROZEN_STEER_2 0x40u
 #define MRS_MISSING 0x80u
 #define MRS_CHECK_YAW_PAIR 0x100u
+#define MRS_CHECK_SPEED 0x200u /* the speed jumped between two values by more than speed_step */
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
-#define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR)
-#define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR)
+#define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED)
+#define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
+                        MRS_CHECK_SPEED)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
 
 #define MRS_KIN_WINDOW 4
@@ -57,6 +59,7 @@ typedef struct {
     double yaw_pair_bound; /* |mean of r - r_2 over MRS_YAW_PAIR_WINDOW samples|, rad/s */
     double sensor_tau; /* the sensors' filters' lag on a_y and r, s: the kinematic check's wheel angle takes it */
     double side_accel; /* m/s^2 of a_y a side force may add: the kinematic bound widens by it / v while the yaw pair runs */
+    double speed_step; /* m/s: the most the speed may change from one value to the next */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -70,12 +73,13 @@ typedef struct {
     double lat_span, aux_alpha; /* 1 / mu_min - 1; 1 - exp(-ts / actuator_tau) */
     double yaw_pair_bound, inv_yaw_pair_bound;
     double delta_alpha; /* 1 - exp(-ts / sensor_tau) */
-    double side_accel;
+    double side_accel, speed_step;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
     uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, bits;
     uint8_t yaw2_seen; /* the yaw-rate sensor's second element received since the reset */
+    uint8_t speed_seen; /* speed_last holds a valid speed received since the speed was last invalid */
     uint16_t latched, flags;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
@@ -86,6 +90,7 @@ typedef struct {
     double yaw_pair[MRS_YAW_PAIR_WINDOW], yaw_pair_err;
     double delta_lag; /* the wheel angle through the sensors' lag */
     double lag_beta_prev, kin_sensor[MRS_KIN_WINDOW]; /* what that lag moves the nominal car's beta' */
+    double speed_last;
 } mrs_monitor_state_t;
 
 typedef struct {

@@ -39,12 +39,12 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
-           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev")
+           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "speed_last")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n")
-_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen")
-#: every value the detailed flags can take (the highest bit is CHECK_YAW_PAIR)
-_FLAG_VALUES = 2 * pl.CHECK_YAW_PAIR
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen")
+#: every value the detailed flags can take (the highest bit is CHECK_SPEED)
+_FLAG_VALUES = 2 * pl.CHECK_SPEED
 
 
 class BatchMonitor:
@@ -71,6 +71,7 @@ class BatchMonitor:
         self._all_started = False  # every row started after it
         self.steady_periods = 0  # periods that took the shortcut (``step``)
         self._v_seen: np.ndarray | None = None  # the speed array the shortcut's model denominator is of
+        self._v_checked: np.ndarray | None = None  # the speed array the speed check last saw
         self._den = np.zeros(n)
         self._lat_max = self._st2_max = self._run = 0  # the counters' largest values at the last full period
         #: the CtrlStatus_Plausibility bits of each value of the detailed flags
@@ -95,6 +96,7 @@ class BatchMonitor:
         inputs are in range and no row starts its checks afresh takes ``_steady``: the scalar's
         branches for a period without a new sample, and nothing else (``_steady_pausing`` when
         some rows are below ``speed_min``)."""
+        self._speed(v)
         if (lat is self._pair[0] and d2 is self._pair[1] and self._pair_ok and within(d) and within(r)
                 and within(aux) and within(v, -1e3)):
             # every primary input in range but perhaps the speed: the rows below speed_min pause
@@ -110,6 +112,19 @@ class BatchMonitor:
         self._all_started = bool(self.started.all())
         self._lat_max, self._st2_max, self._run = int(self.lat_same.max()), int(self.st2_same.max()), 0
         return bits
+
+    def _speed(self, v: np.ndarray) -> None:
+        """Check 6, the speed's jump, in every row and before the rest (``monitor_step`` runs it
+        before its pause); nothing to do for the very array it last saw (the speed held)."""
+        if v is self._v_checked:
+            return
+        self._v_checked = v
+        with np.errstate(invalid="ignore"):
+            ok = (0.0 <= v) & (v < 1e3)
+            jump = ok & self.speed_seen & (v != self.speed_last) & (np.abs(v - self.speed_last) > self.c.speed_step)
+        np.bitwise_or(self.latched, pl.CHECK_SPEED, out=self.latched, where=jump)
+        self.speed_last = np.where(ok, v, self.speed_last)
+        self.speed_seen = ok
 
     def _full(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
               aux: np.ndarray, r2: np.ndarray | None) -> np.ndarray:

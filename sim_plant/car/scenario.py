@@ -19,7 +19,8 @@ A scenario file::
     t = 0.5
     yaw_moment = 4000.0     # Nm step (or: steer = rad of front-wheel angle,
                             # steer_norm = units of the dry-road steady yaw rate (Figure 8),
-                            # mu = friction, speed = m/s)
+                            # mu = friction, speed = m/s: set at once, which the
+                            # plausibility monitor takes for a speed sensor that jumped)
 
 The realistic car (``docs/realistic-car.md``), every key optional; the defaults are the
 paper's ideal plant, so a file without them runs as before::

@@ -13,7 +13,7 @@ fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pa
 error passes 0.03 rad/s, and may never reach the kinematic 0.035); for the lateral acceleration
 the kinematic bound times v, plus ``side_accel`` when the car has the second element; for a
 steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; none for
-the speed.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
+the speed, whose check looks at its jumps (``speed_step``), not at an error.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
 lockstep the log's wall-clock stamps are not simulated time."""
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
 def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
     """When the scenario's first sensor fault's error (measured less true, from the plant's
     trace) first exceeded the bound the monitor checks it against (the module's docstring);
-    None if it never did, or for a fault of the speed (no check bounds its error)."""
+    None if it never did, or for a fault of the speed (its check bounds its jumps, not its error)."""
     cfg = pl.PlausibilityConfig()
     sensor = min(sc.sensor_faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
