@@ -281,6 +281,29 @@ def test_an_a_y_fault_over_the_widened_bound_is_still_reported_within_300_ms(v: 
     assert exceeded is not None and r.fault_time is not None and 0.0 <= r.fault_time - exceeded <= 0.3
 
 
+def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays() -> None:
+    """``sensor_bound`` is the bound the offline runs, the fault matrix, the HIL summary and the
+    campaign judge a sensor's error against: the kinematic residual (yaw rate; a_y the same in
+    m/s^2, plus the side force's allowance only while the pair runs), the steering channels' and
+    the second element's fixed bounds, none for the speed; an array per row gives each row's
+    float."""
+    import numpy as np
+
+    cfg = pl.PlausibilityConfig()
+    assert pr.sensor_bound("yaw_rate", cfg, -0.2, 20.0, True) == pytest.approx(0.035 + 0.1 * 0.2)
+    assert pr.sensor_bound("lat_accel", cfg, 0.2, 20.0, False) == pytest.approx((0.035 + 0.1 * 0.2) * 20.0)
+    assert pr.sensor_bound("lat_accel", cfg, 0.2, 20.0, True) == pytest.approx((0.035 + 0.02) * 20.0 + 0.6)
+    assert pr.sensor_bound("steer_redundant", cfg, 0.2, 20.0, True) == cfg.steer_bound == pr.sensor_bound(
+        "steer", cfg, 0.0, 5.0, False)
+    assert pr.sensor_bound("yaw_rate_redundant", cfg, 0.5, 40.0, False) == cfg.yaw_pair_bound
+    with pytest.raises(ValueError, match="speed"):
+        pr.sensor_bound("speed", cfg, 0.0, 20.0, True)
+    r, v, pair = np.array([-0.3, 0.0, 0.1]), np.array([10.0, 25.0, 40.0]), np.array([True, False, True])
+    for sensor in ("yaw_rate", "lat_accel"):
+        rows = pr.sensor_bound(sensor, cfg, r, v, pair)
+        assert rows.tolist() == [pr.sensor_bound(sensor, cfg, float(a), float(b), bool(c)) for a, b, c in zip(r, v, pair)]
+
+
 @pytest.mark.parametrize("kind, value", [("scale", 0.5), ("stuck", 5.5), ("bias", 3.0), ("stuck", 33.0)])
 def test_a_speed_fault_in_a_curve_is_found_before_its_command_turns_the_car(kind: str, value: float) -> None:
     """The speed schedules the yaw rate the law asks for (K_n(v)): in a curve at 10 m/s on a dry

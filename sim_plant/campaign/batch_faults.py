@@ -19,6 +19,7 @@ import numpy as np
 
 from firmware_py import plausibility as pl
 from sim_plant.campaign.params import FAULT_CHANNELS, FAULT_KINDS, SampleSet, fault_value
+from sim_plant.offline.plausibility_runs import sensor_bound
 
 
 class BatchFaults:
@@ -105,10 +106,10 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        # plausibility_runs.error_bound: the yaw rate's, a_y's the same times v plus side_accel (a
-        # campaign's car has the yaw-rate sensor's second element), a steering angle's
-        bound = self.cfg.yaw_bound + self.cfg.yaw_rel * np.abs(r_true)
-        bound = np.where(self.lat, bound * speed + self.cfg.side_accel, np.where(self.steer, self.cfg.steer_bound, bound))
+        # a campaign's car has the yaw-rate sensor's second element: the pair runs
+        cfg = self.cfg
+        bound = np.where(self.lat, sensor_bound("lat_accel", cfg, r_true, speed, True),
+                         np.where(self.steer, cfg.steer_bound, sensor_bound("yaw_rate", cfg, r_true, speed, True)))
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

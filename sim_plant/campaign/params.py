@@ -44,7 +44,7 @@ from sim_plant.car.vehicle import MAX_MU
 KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
 #: fault_sensor codes: none, then the sensors of sensor_faults.FAULT_SENSORS that the monitor
-#: checks (each has a plausibility bound: ``plausibility_runs.error_bound``; the speed has none),
+#: checks (each has a plausibility bound: ``plausibility_runs.sensor_bound``; the speed has none),
 #: but the yaw-rate sensor's second element (the engine models it, fault-free)
 FAULT_CHANNELS = ("none", *(ch for ch in FAULT_SENSORS if ch not in ("speed", "yaw_rate_redundant")))
 #: fault_kind codes and the sensor_faults kind each one is

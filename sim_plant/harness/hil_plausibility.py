@@ -25,6 +25,7 @@ from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.harness.hil_steps import Step
+from sim_plant.offline.plausibility_runs import sensor_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -81,11 +82,7 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
     def bound(s: Step) -> float:
         if sensor == "yaw_rate":
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
-        if sensor == "lat_accel":
-            return (cfg.yaw_bound + cfg.yaw_rel * abs(s.yaw_rate_rad_s)) * s.v_m_s + (cfg.side_accel if pair else 0.0)
-        if sensor == "yaw_rate_redundant":
-            return cfg.yaw_pair_bound
-        return cfg.steer_bound
+        return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair))
 
     error = {"yaw_rate": lambda s: s.yaw_rate_measured_rad_s - s.yaw_rate_rad_s,
              "lat_accel": lambda s: s.lat_accel_measured_m_s2 - s.lat_accel_m_s2,

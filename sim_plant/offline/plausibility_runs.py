@@ -112,17 +112,28 @@ class MonitorRun:
         return None
 
 
+def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray, v: float | np.ndarray,
+                 pair: bool | np.ndarray) -> float | np.ndarray:
+    """The plausibility bound a sensor's error is judged against (floats, or arrays per period
+    or per row): the yaw rate's ``yaw_bound + yaw_rel |r|`` (r the true yaw rate), the lateral
+    acceleration's the same times v (the kinematic check's residual) plus ``side_accel`` while
+    the yaw-rate pair runs (``pair``: the check allows a side force then), a steering channel's
+    ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound`` (only the pair
+    check sees it).  The speed has none (its check bounds its jumps, not its error): ValueError."""
+    if sensor in ("steer", "steer_redundant"):
+        return cfg.steer_bound
+    if sensor == "yaw_rate_redundant":
+        return cfg.yaw_pair_bound
+    if sensor not in ("yaw_rate", "lat_accel"):
+        raise ValueError(f"no plausibility bound for the sensor {sensor!r}")
+    yaw = cfg.yaw_bound + cfg.yaw_rel * abs(r)
+    return yaw if sensor == "yaw_rate" else yaw * v + cfg.side_accel * pair
+
+
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
-    """The plausibility bound a sensor's error is judged against, per period: the yaw rate's
-    ``yaw_bound + yaw_rel |r|``, the lateral acceleration's the same times v (the same
-    residual) plus ``side_accel`` while the yaw-rate sensor's second element is there (the
-    kinematic check allows a side force then), a steering channel's ``steer_bound``, the yaw
-    rate's second element's ``yaw_pair_bound``."""
-    r = np.abs(run.r_true)
-    yaw = cfg.yaw_bound + cfg.yaw_rel * r
-    side = np.where(np.isfinite(run.held["yaw_rate_redundant"]), cfg.side_accel, 0.0)
-    return {"yaw_rate": yaw, "lat_accel": yaw * run.held["speed"] + side, "steer": cfg.steer_bound,
-            "steer_redundant": cfg.steer_bound, "yaw_rate_redundant": cfg.yaw_pair_bound}[sensor]
+    """``sensor_bound`` per period of an offline run: the true yaw rate, the speed the
+    controller held, the pair running while the second element's value is there."""
+    return sensor_bound(sensor, cfg, run.r_true, run.held["speed"], np.isfinite(run.held["yaw_rate_redundant"]))
 
 
 # One loop that is the plant node's step and the controller's cycle side by side; long because

@@ -22,7 +22,7 @@ the monitor's bound (for a step fault: its onset, the first falsified frame):
 The error is the falsified signal on the controller's bus less the same frame's value on the
 vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up; a fault
 the plant injects, under ``--secoc``, is measured less true in the plant's trace), against
-the bound ``offline.plausibility_runs.error_bound`` states: the yaw rate's ``yaw_bound +
+the bound ``offline.plausibility_runs.sensor_bound`` states: the yaw rate's ``yaw_bound +
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
 plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
@@ -41,21 +41,29 @@ from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, PLAUS_YAW, Pla
 from mrsteer_dbc import names
 from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET, caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
+from sim_plant.car.sensors import DBC_SIGNALS
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, RATE_HZ, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
+from sim_plant.offline.plausibility_runs import sensor_bound
 
 #: A sample of the falsified signal as the controller got it: (t, error, bound).
 ErrorSample = tuple[float, float, float]
 
 
-def _values(frames: list[Frame], name: str, signal: str) -> list[tuple[float, float]]:
+def _series(frames: list[Frame], name: str, *signals: str) -> list[list[tuple[float, float]]]:
+    """Each of ``signals`` of the message ``name`` as (t, value), decoded once per frame."""
     c = mrsteer_dbc.load()
     fid = c.frame_id(name)
-    out = []
+    out: list[list[tuple[float, float]]] = [[] for _ in signals]
     for t, f, data in frames:
         if f == fid and (d := c.decode(f, data)) is not None:
-            out.append((t, float(d.signals[signal])))
+            for series, signal in zip(out, signals):
+                series.append((t, float(d.signals[signal])))
     return out
+
+
+def _values(frames: list[Frame], name: str, signal: str) -> list[tuple[float, float]]:
+    return _series(frames, name, signal)[0]
 
 
 def _latest(series: list[tuple[float, float]], times: list[float], t: float, default: float) -> float:
@@ -71,16 +79,8 @@ _TRACE_COLUMNS = {names.SIG_YAW_RATE: ("yaw_rate_measured_rad_s", "yaw_rate_rad_
                   names.SIG_YAW_RATE_2: ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s")}
 
 
-def _bound(signal: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool) -> float:
-    if signal in (names.SIG_STEER_ANGLE, names.SIG_STEER_ANGLE_2):
-        return cfg.steer_bound
-    if signal == names.SIG_YAW_RATE_2:
-        return cfg.yaw_pair_bound  # only the pair check sees the second element
-    bound = cfg.yaw_bound + cfg.yaw_rel * abs(r)
-    if signal != names.SIG_LAT_ACCEL:
-        return bound
-    # with the yaw-rate pair running the kinematic check allows a side force's a_y
-    return bound * v + (cfg.side_accel if pair else 0.0)
+#: The sensor (``sensor_bound``'s name) each falsified signal carries.
+_SENSOR = {signal: sensor for sensor, (_, signal) in DBC_SIGNALS.items()}
 
 
 def onset(e: Evidence) -> float | None:
@@ -97,21 +97,22 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
     fault the plant injects: at each plant step, measured less true, from its trace)."""
     fault = e.row.fault
     signal = fault.signal or names.SENSOR_SIGNAL[fault.target]
+    sensor = _SENSOR[signal]
     if e.row.at_plant:
         cols = e.trace.columns
         measured, true = (cols[c] for c in _TRACE_COLUMNS[signal])
         pair = signal == names.SIG_LAT_ACCEL and any(
             math.isfinite(x) for x in cols.get(_TRACE_COLUMNS[names.SIG_YAW_RATE_2][0], ()))
-        return [(w, m - x, _bound(signal, cfg, r, v, pair)) for w, m, x, r, v in
+        return [(w, m - x, sensor_bound(sensor, cfg, r, v, pair)) for w, m, x, r, v in
                 zip(e.trace.wall, measured, true, cols["yaw_rate_rad_s"], cols["v_m_s"])]
     truth = _values(e.vehicle_frames, fault.target, signal)
     seen = _values(e.frames, fault.target, signal)
-    yaw = _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE)
+    yaw, yaw2 = _series(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE, names.SIG_YAW_RATE_2)
     speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
     yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
-    pair = signal == names.SIG_LAT_ACCEL and any(
-        math.isfinite(x) for _, x in _values(e.vehicle_frames, names.MSG_YAW, names.SIG_YAW_RATE_2))
-    return [(tc, got - x, _bound(signal, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair))
+    pair = signal == names.SIG_LAT_ACCEL and any(math.isfinite(x) for _, x in yaw2)
+    return [(tc, got - x, sensor_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0),
+                                       pair))
             for (tv, x), (tc, got) in zip(truth, seen)]
 
 
