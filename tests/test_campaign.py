@@ -54,7 +54,7 @@ def _write(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     ("duration = 1.0\n[parameters]\nonset = { uniform = [0.5, 2.0] }", "'onset' reaches"),
     ("[criteria]\npeak_yaw_rate = -1", "'peak_yaw_rate' must be a number >= 0"),
     ("[criteria]\nlateral = 1", "unknown key 'lateral'"),
-    ('[parameters]\nfault_sensor = "speed"', "'fault_sensor' must be one of"),
+    ('[parameters]\nfault_sensor = "wheel_speed"', "'fault_sensor' must be one of"),
     ('[parameters]\nfault_kind = "frozen"', "'fault_kind' must be one of"),
     ("[parameters]\nfault_size = 2.0", "'fault_size' is given but 'fault_sensor' is none"),
     ('duration = 1.0\n[parameters]\nfault_sensor = "yaw_rate"\nfault_onset = 2.0', "'fault_onset' reaches"),

@@ -89,9 +89,13 @@ class FaultFigures:
         self.faults, self.ts = faults, ts
         self.cfg = pl.PlausibilityConfig(ts=ts)
         self.faulted = faults.sensor != 0
-        self.lat = faults.rows.get("lat_accel", np.zeros(rows, dtype=bool))
-        self.steer = faults.rows.get("steer", np.zeros(rows, dtype=bool)) | faults.rows.get(
-            "steer_redundant", np.zeros(rows, dtype=bool))
+        none = np.zeros(rows, dtype=bool)
+        self.lat, self.yaw = faults.rows.get("lat_accel", none), faults.rows.get("yaw_rate", none)
+        # the bounds that do not move: the steering channels', the second yaw-rate element's, and
+        # none for the speed (its check bounds its jumps: its detection_time is 0)
+        self.fixed = np.full(rows, np.inf)
+        for channel in ("steer", "steer_redundant", "yaw_rate_redundant"):
+            self.fixed[faults.rows.get(channel, none)] = sensor_bound(channel, self.cfg, 0.0, 0.0, True)
         self.tracker = ExceededTracker(rows, max(1, int(round(HOLD / ts))), n - 1)
         self.reported = np.zeros(rows, dtype=bool)
         self.report_step = np.full(rows, -1, dtype=np.int64)
@@ -109,7 +113,7 @@ class FaultFigures:
         # a campaign's car has the yaw-rate sensor's second element: the pair runs
         cfg = self.cfg
         bound = np.where(self.lat, sensor_bound("lat_accel", cfg, r_true, speed, True),
-                         np.where(self.steer, cfg.steer_bound, sensor_bound("yaw_rate", cfg, r_true, speed, True)))
+                         np.where(self.yaw, sensor_bound("yaw_rate", cfg, r_true, speed, True), self.fixed))
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

@@ -87,6 +87,7 @@ class BatchSensors:
         self._lat_lpf = _Butterworth(lat.lowpass_hz, fs)
         # the same filters on the fault-free input, for the error of a faulted channel
         self._yaw_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate" in tracked else None
+        self._yaw2_clean = _Butterworth(config.yaw_rate.lowpass_hz, fs) if "yaw_rate_redundant" in tracked else None
         self._lat_clean = _Butterworth(lat.lowpass_hz, fs) if "lat_accel" in tracked else None
         self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2, self.q_yaw2 = (
             dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant",
@@ -125,11 +126,15 @@ class BatchSensors:
         return y
 
     def yaw_rate_redundant(self, r: np.ndarray) -> np.ndarray:
-        """The yaw-rate sensor's second element (a campaign faults only the first)."""
+        """The yaw-rate sensor's second element (its bias 0: ``params.scenario_for``'s)."""
         noise = self._yaw2_noise.at(self._k)
         q = self.q_yaw2
-        rest = r + 0.0
-        return np.round(self._yaw2_lpf(rest + noise, rest) / q) * q
+        rest = self._input("yaw_rate_redundant", r) + 0.0
+        y = np.round(self._yaw2_lpf(rest + noise, rest) / q) * q
+        if self._yaw2_clean is not None:
+            rest = r + 0.0
+            self._error("yaw_rate_redundant", y, np.round(self._yaw2_clean(rest + noise, rest) / q) * q)
+        return y
 
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
         """The lateral acceleration's filter output, unquantised: the filter runs every step,
@@ -163,4 +168,5 @@ class BatchSensors:
         return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:
-        return np.round(v / self.q_speed) * self.q_speed
+        """The speed (no error kept for a faulted one: no bound judges it, ``batch_faults``)."""
+        return np.round(self._input("speed", v) / self.q_speed) * self.q_speed

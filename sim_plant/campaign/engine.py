@@ -186,6 +186,7 @@ class _Group:
         term = np.empty(rows)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
+        speed_faulted = self.faults is not None and self.faults.faulted("speed")
         figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
         fault_yaw = np.zeros(self.pairs.size)
         for k0 in range(0, n, BLOCK):
@@ -225,7 +226,8 @@ class _Group:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
                 elif figures is not None and "steer_redundant" in sensors.tracked:
                     sensors.steer_redundant(driver)  # its error, every step
-                if k % speed_every == 0 and (self.grip or k == 0):  # (the intact rows' speed is constant)
+                # (the intact rows' speed is constant, but for a faulted speed sensor's reading)
+                if k % speed_every == 0 and (self.grip or k == 0 or speed_faulted):
                     held["speed"] = sensors.speed(car.v)
                 steer = sensors.steer(driver)
                 if controlled:

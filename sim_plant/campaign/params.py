@@ -43,15 +43,14 @@ from sim_plant.car.vehicle import MAX_MU
 
 KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
-#: fault_sensor codes: none, then the sensors of sensor_faults.FAULT_SENSORS that the monitor
-#: checks (each has a plausibility bound: ``plausibility_runs.sensor_bound``; the speed has none),
-#: but the yaw-rate sensor's second element (the engine models it, fault-free)
-FAULT_CHANNELS = ("none", *(ch for ch in FAULT_SENSORS if ch not in ("speed", "yaw_rate_redundant")))
+#: fault_sensor codes: none, then every sensor of sensor_faults.FAULT_SENSORS (the speed and the
+#: yaw-rate sensor's second element last, as they were added: stored codes keep their meaning)
+FAULT_CHANNELS = ("none", *FAULT_SENSORS)
 #: fault_kind codes and the sensor_faults kind each one is
 FAULT_KINDS = ("stuck", "offset", "gain", "drift")
 SCALAR_FAULT_KINDS = ("stuck", "bias", "scale", "drift")
 #: the channels whose fault_size is in degrees (the fault's value in rad)
-_ANGLES = tuple(FAULT_CHANNELS.index(ch) for ch in ("yaw_rate", "steer", "steer_redundant"))
+_ANGLES = tuple(FAULT_CHANNELS.index(ch) for ch in ("yaw_rate", "steer", "steer_redundant", "yaw_rate_redundant"))
 
 
 @dataclass(frozen=True)
@@ -87,8 +86,8 @@ PARAMETERS: dict[str, Parameter] = {
                               FAULT_CHANNELS),
     "fault_kind": Parameter("", 0, len(FAULT_KINDS) - 1, 1, "the sensor fault's kind", FAULT_KINDS),
     "fault_onset": Parameter("s", 0.0, 60.0, 1.0, "when the sensor fault starts"),
-    "fault_size": Parameter("", -1000.0, 1000.0, 1.0, "stuck at, offset or drift per s in deg/s (yaw rate), "
-                            "m/s^2 (a_y) or deg (steering angles); gain: the factor"),
+    "fault_size": Parameter("", -1000.0, 1000.0, 1.0, "stuck at, offset or drift per s in deg/s (either yaw-rate "
+                            "element), m/s^2 (a_y), deg (steering angles) or m/s (speed); gain: the factor"),
 }
 #: Columns every SampleSet has besides PARAMETERS: the sample's index and its sensors' noise seed.
 INDEX, NOISE_SEED = "index", "noise_seed"

@@ -82,7 +82,10 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     position = PositionActuator(sc.actuator, ts)
     sensors = Sensors(sc.sensor_config, ts)
     fault = sc.sensor_config.faults[0] if sc.sensor_config.faults else None
-    clean = Sensors(replace(sc.sensors, faults=()), ts) if fault is not None else None  # the same, fault-free
+    # the same sensors without the fault: an identity fault in its place keeps every noise stream
+    # where the faulted copy has it (the second yaw-rate element's follows the faults')
+    clean = None if fault is None else Sensors(
+        replace(sc.sensors, faults=(SensorFault(fault.sensor, "scale", fault.start, 1.0),)), ts)
     handling = Actuator(ActuatorConfig(), ts)
     ctrl = mr.ModelRegulator(config) if config is not None else None
     mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
@@ -114,7 +117,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                  "steer_redundant": driver}
         sensors.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
-        yaw_rate_2 = sensors.yaw_rate_redundant(truth["yaw_rate"])  # in the yaw-rate frame: every period
+        yaw_rate_2 = read["yaw_rate_redundant"] = sensors.yaw_rate_redundant(truth["yaw_rate"])  # every period
+        truth["yaw_rate_redundant"] = truth["yaw_rate"]
         if fault is not None and clean is not None:
             clean.at(t)
             error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
@@ -152,8 +156,8 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
                   error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None,
                   yaw_rate_2: np.ndarray) -> tuple[int, float, float]:
     """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
-    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection (``speed`` and
-    ``yaw_rate_2``: what the monitor saw)."""
+    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection (none for a speed
+    fault; ``speed`` and ``yaw_rate_2``: what the monitor saw)."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
     false_alarms = int(np.count_nonzero((bits != 0) & ~after))
@@ -162,7 +166,9 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     cfg = pl.PlausibilityConfig(ts=ts)
     run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed, "yaw_rate_redundant": yaw_rate_2},
                      np.zeros(bits.size))
-    exceeded, reported = run.exceeded_time(error_bound(fault.sensor, cfg, run)), run.fault_time
+    # the speed's error has no bound (its check bounds its jumps): its detection_time is 0
+    bound = np.inf if fault.sensor == "speed" else error_bound(fault.sensor, cfg, run)
+    exceeded, reported = run.exceeded_time(bound), run.fault_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
     caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
     return false_alarms, detection, caused
