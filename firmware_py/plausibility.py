@@ -48,13 +48,21 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    changes its speed that fast; a sensor stuck at another value, offset or scaled jumps at its
    onset), checked before the pause below ``speed_min``, since K_n(v) follows the wrong speed
    at once; a missing speed restarts it.
+7. **Speed in a steady turn**: a_y = v (r + beta'), and once the turn has settled beta' is
+   gone, so the speed is a_y / r.  At each new redundant sample where |r| >= ``turn_yaw_min``,
+   ``TURN_BLOCK`` samples (500 ms) in which r and a_y stay near the block's first make a block;
+   a block that follows another such block (the side slip has settled) compares the speed with
+   a_y / r (their r-weighted mean) against ``turn_speed_rel`` v plus what the sensors' offsets
+   make of it, (``turn_yaw_bias`` v + ``turn_lat_bias``) / |r|.  A speed that drifts, which
+   never jumps, is found here; straight on, nothing depends on the speed the law is given.
 
 Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
 within it, and trips at ``*_count``; 2 likewise per control period, tripping at
 ``model_time``; 4 trips on one window over its bound (at other rates than 500 Hz its
-``YAW_PAIR_WINDOW`` samples span another time).  A trip latches (until ``reset_monitor``: the
-next ignition cycle).  A missing redundant input (NaN: the node's freshness check) pauses the checks that need it and sets
-DEGRADED; below ``speed_min`` every check pauses and its counters restart.
+``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block over its bound.
+A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing redundant input
+(NaN: the node's freshness check) pauses the checks that need it and sets DEGRADED; below
+``speed_min`` every check pauses and its counters restart.
 
 ``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
 is a fault (the command fades to zero), ``PLAUS_DEGRADED`` a degraded state (fewer checks; the
@@ -80,6 +88,7 @@ CHECK_MODEL = 0x02  # yaw rate against the nominal car's response to the steerin
 CHECK_STEER_PAIR = 0x04  # the two steering channels
 CHECK_YAW_PAIR = 0x100  # the two yaw-rate elements (C: the flags are 16 bits)
 CHECK_SPEED = 0x200  # the speed jumped between two samples by more than a car can change it
+CHECK_TURN = 0x400  # the speed disagrees with a_y / r in a steady turn
 FROZEN_YAW = 0x08
 FROZEN_LAT = 0x10
 FROZEN_STEER = 0x20
@@ -87,7 +96,7 @@ FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
 #: rate's (CtrlStatus_Plausibility 1).
-YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED
+YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: The pair checks, which find a fault while the command it drove is still building: the node
 #: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
@@ -97,6 +106,8 @@ CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED
 KIN_WINDOW = 4
 #: Yaw-rate samples the pair's difference is averaged over: 10 ms at 500 Hz.
 YAW_PAIR_WINDOW = 5
+#: Samples (of the 50 ms redundant frame) in one block of the steady-turn speed check: 500 ms.
+TURN_BLOCK = 10
 
 # The nominal car is the controller's own (section 3, mu = 1): one owner, firmware_py.calibration.
 
@@ -152,6 +163,18 @@ class PlausibilityConfig:
     # sensor that jumped (stuck at another value, an offset or a gain from its onset), which
     # reschedules K_n(v) at once (docs/controller.md)
     speed_step: float = 1.5
+    # The steady-turn speed check (7; docs/controller.md): it runs where |r| >= turn_yaw_min
+    # (rad/s), in blocks over which r stays within turn_yaw_tol (rad/s) and a_y within
+    # turn_lat_tol + turn_lat_rel |a_y| (m/s^2) of the block's first sample; it trips when
+    # |v - a_y / r| > turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r| (m/s), the two
+    # biases the offsets the yaw-rate and a_y sensors may have (rad/s, m/s^2)
+    turn_yaw_min: float = 0.1
+    turn_yaw_tol: float = 0.05
+    turn_lat_tol: float = 0.1
+    turn_lat_rel: float = 0.08
+    turn_speed_rel: float = 0.02
+    turn_yaw_bias: float = 0.006
+    turn_lat_bias: float = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,6 +209,13 @@ class MonitorCoefficients:
     delta_alpha: float  # the sensors' lag per period: 1 - exp(-ts / sensor_tau)
     side_accel: float
     speed_step: float
+    turn_yaw_min: float
+    turn_yaw_tol: float
+    turn_lat_tol: float
+    turn_lat_rel: float
+    turn_speed_rel: float
+    turn_yaw_bias: float
+    turn_lat_bias: float
 
 
 class MonitorState:
@@ -197,7 +227,8 @@ class MonitorState:
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
                  "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
-                 "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen")
+                 "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen",
+                 "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -242,16 +273,22 @@ def reset_monitor(s: MonitorState) -> None:
     s.lag_beta_prev = 0.0
     s.speed_last = 0.0  # the last valid speed (speed_seen: since the speed was last invalid)
     s.speed_seen = False
+    s.turn_n = 0  # samples in the steady-turn check's current block
+    s.turn_settled = False  # the block before the current one was steady: the side slip has settled
+    s.turn_r0 = s.turn_a0 = 0.0  # the block's first r and a_y
+    s.turn_res = s.turn_r = 0.0  # the block's sums of r v - a_y and of r
+    s.turn_err = 0.0
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
-                          "yaw_pair_bound", "sensor_tau", "speed_step"))
+                          "yaw_pair_bound", "sensor_tau", "speed_step", "turn_yaw_min", "turn_yaw_tol",
+                          "turn_lat_tol", "turn_speed_rel"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
-    for name in ("model_rel", "yaw_rel", "side_accel"):
+    for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
@@ -276,7 +313,9 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
         inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
-        side_accel=cfg.side_accel, speed_step=cfg.speed_step)
+        side_accel=cfg.side_accel, speed_step=cfg.speed_step, turn_yaw_min=cfg.turn_yaw_min,
+        turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
+        turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias)
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -287,7 +326,7 @@ def check_positive(cfg: object, names: tuple[str, ...]) -> None:
             raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# One control period; long because it is the five checks inline, in the order the C port has
+# One control period; long because it is the seven checks inline, in the order the C port has
 # them (no calls, by the porting rules), each a few lines.
 def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
                  yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float,
@@ -327,6 +366,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         flags |= MISSING
     if not (lat_ok and st2_ok):
         flags |= MISSING
+        s.turn_n = 0  # the steady-turn check starts afresh when the frame is back
+        s.turn_settled = False
         if s.since >= c.kin_gap_steps:
             # A long gap: no difference across it, and the kinematic window restarts when the
             # frame is back.  A shorter one (a sample withheld) is bridged as a lost frame is:
@@ -339,6 +380,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.yaw_pair_n = 0
         s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
         s.kin_n = 0
+        s.turn_n = 0
+        s.turn_settled = False
         s.started = False
         bits = 0
         if flags & YAW_CHECKS:
@@ -374,6 +417,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
         s.yaw_ref_ok = s.st_ref_ok = False
         s.delta_lag = delta
+        s.turn_n = 0
+        s.turn_settled = False
         s.started = True
     # The wheel angle as filtered a_y and yaw rate show its effect (the kinematic check's family).
     s.delta_lag += c.delta_alpha * (delta - s.delta_lag)
@@ -505,6 +550,44 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                 s.latched |= CHECK_STEER_PAIR
         elif s.pair_count > 0:
             s.pair_count -= 1
+        # --- 7. the speed against a_y / r in a steady turn (blocks of TURN_BLOCK samples)
+        e = -yaw_rate if yaw_rate < 0.0 else yaw_rate
+        if e < c.turn_yaw_min:
+            s.turn_n = 0
+            s.turn_settled = False
+        else:
+            if s.turn_n > 0:
+                # still the block's turn: r and a_y near its first sample's, r on the same side
+                e = yaw_rate - s.turn_r0
+                e = -e if e < 0.0 else e
+                x = lat_accel - s.turn_a0
+                x = -x if x < 0.0 else x
+                rm = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
+                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * rm or yaw_rate * s.turn_r0 <= 0.0:
+                    s.turn_n = 0
+                    s.turn_settled = False
+            if s.turn_n == 0:
+                s.turn_r0 = yaw_rate
+                s.turn_a0 = lat_accel
+                s.turn_res = 0.0
+                s.turn_r = 0.0
+            s.turn_res += yaw_rate * speed - lat_accel
+            s.turn_r += yaw_rate
+            s.turn_n += 1
+            if s.turn_n >= TURN_BLOCK:
+                # the speed less a_y / r over the block (r-weighted), against what the sensors'
+                # offsets and the rest of the side slip can make of it at the block's mean |r|
+                e = s.turn_res / s.turn_r
+                e = -e if e < 0.0 else e
+                rm = s.turn_r * (1.0 / TURN_BLOCK)
+                rm = -rm if rm < 0.0 else rm
+                bound = c.turn_speed_rel * speed + (c.turn_yaw_bias * speed + c.turn_lat_bias) / rm
+                if s.turn_settled:
+                    s.turn_err = e / bound
+                    if e > bound:
+                        s.latched |= CHECK_TURN
+                s.turn_settled = True
+                s.turn_n = 0
     if lat_ok:
         s.lat_prev = lat_accel
     if st2_ok:

@@ -47,7 +47,8 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
     for dd, dd2, r, ay, v, aux, u, r2 in rows:
         bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
-        out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err))
+        out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
+                    ms.turn_err))
     return out
 
 
@@ -60,7 +61,8 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     out = []
     for line in lines[1:]:
         f = line.split()
-        out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7])))
+        out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
+                    float(f[8])))
     return out
 
 
@@ -132,6 +134,9 @@ CASES = {
     "the speed stuck at another value in a curve": lambda: _run_rows(
         pr.steady_curve(12.5, 0.8, a_y=3.0).with_sensor_faults((SensorFault("speed", "stuck", 1.0, 33.0),)),
         SensorConfig(seed=7)),
+    "a speed drifting in a steady turn (the steady-turn check)": lambda: _run_rows(
+        pr.steady_curve(10.0, 1.0, a_y=0.45 * 9.81, duration=4.0).with_sensor_faults(
+            (SensorFault("speed", "drift", 1.4, -1.0),)), SensorConfig(seed=44)),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
@@ -167,12 +172,19 @@ def test_a_lost_element_is_degraded_below_speed_min_too_but_not_while_the_first_
         assert bool(bits & pl.PLAUS_DEGRADED) == degraded, (k, r, r2, bits)
 
 
+def test_the_speed_drift_case_trips_the_steady_turn_check() -> None:
+    rows = CASES["a speed drifting in a steady turn (the steady-turn check)"]()
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+    first = next(k for k, (bits, f, *_) in enumerate(out) if f & pl.CHECK_TURN)
+    assert 1.4 < first * 0.002 < 3.0 and not any(f & pl.CHECK_TURN for _, f, *_ in out[:first])
+
+
 def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     rows = _random_rows(7)
     out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
-    for bits, f, *_, af, _yaw_pair_err in out:
+    for bits, f, *_, af, _yaw_pair_err, _turn_err in out:
         flags |= f
         auth |= af
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
@@ -191,7 +203,9 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     mc, ac = pl.configure(m), au.configure_authority(a)
     expected = [mc.model_alpha, mc.k_us, mc.model_steps, mc.frozen_steps, mc.yaw_count, mc.inv_cs_m, mc.moment_m,
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
-                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step]
+                mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
+                mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
+                mc.turn_lat_bias]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 

@@ -241,7 +241,8 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     third period and the second in every other (both at once in every sixth), a stuck a_y, a
     stuck driver's angle, a large yaw-rate offset; the second yaw-rate element also missing in
     every period divisible by 7 of the even rows, its window restarting there (below the
-    minimum speed too: the lost element's rule there)."""
+    minimum speed too: the lost element's rule there).  Rows from the 50th on hold a steady
+    turn whose speed reads 25 % high from the onset (the steady-turn check)."""
     rng = np.random.default_rng(seed)
     k = np.arange(steps)[:, None]
     v = np.repeat(rng.uniform(8.0, 40.0, rows)[None], steps, axis=0)
@@ -255,6 +256,16 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     kind = np.arange(rows) % 10
     onset = rng.integers(50, steps // 2, rows)
     after = k >= onset
+    turning = np.arange(rows) >= 50
+    if turning.any():
+        d = np.where(turning, 0.03 + rng.normal(0, 1e-4, (steps, rows)), d)
+        r_true = d * v / (2.5 + 0.0025 * v * v)
+        r = np.where(turning, r_true + rng.normal(0, 2e-3, (steps, rows)), r)
+        r2 = np.where(turning, r_true + rng.normal(0, 2e-3, (steps, rows)), r2)
+        lat = np.where(turning, r_true * v + rng.normal(0, 0.02, (steps, rows)), lat)
+        d2 = np.where(turning, d + rng.normal(0, 2e-4, (steps, rows)), d2)
+        v = np.where(turning & after, 1.25 * v, v)
+        kind = np.where(turning, -1, kind)
     r = np.where((kind == 1) & after, r + 0.1, r)
     r = np.where((kind == 2) & after, r[onset, np.arange(rows)], r)
     d2 = np.where((kind == 3) & after, d2 + 0.02, d2)
@@ -284,7 +295,7 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
     from firmware_py import plausibility as pl
     from sim_plant.campaign.batch_monitor import BatchMonitor
 
-    rows, steps = 50, 900
+    rows, steps = 52, 900
     x = _monitor_inputs(rows, steps, 3)
     cfg = pl.PlausibilityConfig(ts=0.002)
     batch = BatchMonitor(cfg, rows)
@@ -292,7 +303,7 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
     states = [pl.MonitorState() for _ in range(rows)]
     seen = 0
     pair = (x["lat"][0], x["d2"][0])
-    healthy = np.arange(rows) % 10 == 0  # rows without faults, gaps or pauses
+    healthy = (np.arange(rows) % 10 == 0) & (np.arange(rows) < 50)  # rows without faults, gaps or pauses
     if held:  # a second monitor of the healthy rows alone: with no row paused, the shortcut runs
         quiet = BatchMonitor(cfg, int(healthy.sum()))
         quiet_pair = (x["lat"][0][healthy], x["d2"][0][healthy])
@@ -312,13 +323,14 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux", "r2")))
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
-                         "kin_n", "since", "yaw_pair_n", "yaw_pair_idx"):
+                         "kin_n", "since", "yaw_pair_n", "yaw_pair_idx", "turn_n", "turn_settled"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
-            for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err"):
+            for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err", "turn_res", "turn_r",
+                         "turn_err"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    assert seen == 2 * pl.CHECK_SPEED - 1, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
+    assert seen == 2 * pl.CHECK_TURN - 1, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
         assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,

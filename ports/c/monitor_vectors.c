@@ -2,12 +2,12 @@
  *
  *   monitor_vectors < INPUT
  *
- * INPUT: a line "monitor" + the 24 mrs_monitor_config_t numbers in struct order, a line
+ * INPUT: a line "monitor" + the 34 mrs_monitor_config_t numbers in struct order, a line
  * "authority" + the 7 mrs_authority_config_t numbers, then one line per control period:
  * "delta_driver delta_driver_redundant yaw_rate lat_accel speed aux_cmd_applied u_request
  * yaw_rate_redundant" (nan for a missing input).  OUTPUT: a line "coeffs" + the monitor's and
  * the authority's coefficients, then per period "bits flags kin_err pair_err model_err u
- * auth_flags yaw_pair_err" (the limiter cut by the flags' MRS_CUT_CHECKS), every
+ * auth_flags yaw_pair_err turn_err" (the limiter cut by the flags' MRS_CUT_CHECKS), every
  * real as %.17g so that a double reads back exactly.  "defaults" alone prints the default
  * configurations instead.  Exit 2 on unreadable input, 3 on an invalid calibration.
  * tests/test_c_monitor.py drives it against firmware_py/plausibility.py. */
@@ -40,11 +40,12 @@ static void print_defaults(void)
     mrs_monitor_default_config(&m);
     mrs_authority_default_config(&a);
     printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
+           "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
            m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
            m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r, m.kin_gap, m.mu_min, m.actuator_tau,
-           m.yaw_pair_bound, m.sensor_tau, m.side_accel, m.speed_step);
+           m.yaw_pair_bound, m.sensor_tau, m.side_accel, m.speed_step, m.turn_yaw_min, m.turn_yaw_tol, m.turn_lat_tol,
+           m.turn_lat_rel, m.turn_speed_rel, m.turn_yaw_bias, m.turn_lat_bias);
     printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
            a.fault_fade_rate, a.panic_window, a.engage, a.rearm_time);
 }
@@ -52,7 +53,7 @@ static void print_defaults(void)
 int main(void)
 {
     char line[LINE_MAX_LEN];
-    double v[27];
+    double v[34];
     mrs_monitor_config_t mg;
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
@@ -67,7 +68,7 @@ int main(void)
         print_defaults();
         return 0;
     }
-    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 27) != 0) {
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 34) != 0) {
         return 2;
     }
     mg.ts = v[0];
@@ -97,6 +98,13 @@ int main(void)
     mg.sensor_tau = v[24];
     mg.side_accel = v[25];
     mg.speed_step = v[26];
+    mg.turn_yaw_min = v[27];
+    mg.turn_yaw_tol = v[28];
+    mg.turn_lat_tol = v[29];
+    mg.turn_lat_rel = v[30];
+    mg.turn_speed_rel = v[31];
+    mg.turn_yaw_bias = v[32];
+    mg.turn_lat_bias = v[33];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 8) != 0) {
         return 2;
@@ -112,10 +120,12 @@ int main(void)
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g\n",
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
            mc.model_alpha, mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m,
            mc.moment_m, mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps,
-           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step);
+           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
+           mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
+           mc.turn_lat_bias);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);
     while (fgets(line, sizeof line, stdin) != NULL) {
@@ -126,8 +136,8 @@ int main(void)
         }
         bits = mrs_monitor_step(&mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5], v[7]);
         u = mrs_authority_step(&ac, &as, v[6], bits, (uint8_t)((ms.flags & MRS_CUT_CHECKS) != 0u));
-        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g\n", (unsigned)bits, (unsigned)ms.flags, ms.kin_err,
-               ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err);
+        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g\n", (unsigned)bits, (unsigned)ms.flags, ms.kin_err,
+               ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err, ms.turn_err);
     }
     return 0;
 }

@@ -34,6 +34,13 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->sensor_tau = 0.0075;
     cfg->side_accel = 0.6;
     cfg->speed_step = 1.5;
+    cfg->turn_yaw_min = 0.1;
+    cfg->turn_yaw_tol = 0.05;
+    cfg->turn_lat_tol = 0.1;
+    cfg->turn_lat_rel = 0.08;
+    cfg->turn_speed_rel = 0.02;
+    cfg->turn_yaw_bias = 0.006;
+    cfg->turn_lat_bias = 0.05;
 }
 
 static int positive(double x)
@@ -53,7 +60,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     const double p[] = {g->ts, g->speed_min, g->yaw_bound, g->yaw_raw_fraction, g->steer_bound, g->model_margin, g->model_tau,
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
-                        g->yaw_pair_bound, g->sensor_tau, g->speed_step};
+                        g->yaw_pair_bound, g->sensor_tau, g->speed_step, g->turn_yaw_min, g->turn_yaw_tol,
+                        g->turn_lat_tol, g->turn_speed_rel};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -63,7 +71,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     }
     if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
         g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
-        !(g->side_accel >= 0.0 && g->side_accel < 1e3)) {
+        !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
+        !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3)) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
@@ -97,6 +106,13 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->delta_alpha = 1.0 - exp(-g->ts / g->sensor_tau);
     c->side_accel = g->side_accel;
     c->speed_step = g->speed_step;
+    c->turn_yaw_min = g->turn_yaw_min;
+    c->turn_yaw_tol = g->turn_yaw_tol;
+    c->turn_lat_tol = g->turn_lat_tol;
+    c->turn_lat_rel = g->turn_lat_rel;
+    c->turn_speed_rel = g->turn_speed_rel;
+    c->turn_yaw_bias = g->turn_yaw_bias;
+    c->turn_lat_bias = g->turn_lat_bias;
     return 0;
 }
 
@@ -143,6 +159,11 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw2_seen = 0u;
     s->speed_last = 0.0;
     s->speed_seen = 0u;
+    s->turn_n = 0;
+    s->turn_settled = 0u;
+    s->turn_r0 = s->turn_a0 = 0.0;
+    s->turn_res = s->turn_r = 0.0;
+    s->turn_err = 0.0;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -223,6 +244,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     }
     if (!(lat_ok && st2_ok)) {
         flags |= MRS_MISSING;
+        s->turn_n = 0; /* the steady-turn check starts afresh when the frame is back */
+        s->turn_settled = 0u;
         if (s->since >= c->kin_gap_steps) {
             /* a long gap: no difference across it, the kinematic window restarts; a shorter
              * one is bridged as a lost frame is (the next sample's interval spans it) */
@@ -235,6 +258,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->yaw_pair_n = 0;
         s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
         s->kin_n = 0;
+        s->turn_n = 0;
+        s->turn_settled = 0u;
         s->started = 0u;
         MRS_BITS(flags);
         return s->bits;
@@ -267,6 +292,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->st2_ref = delta_driver;
         s->yaw_ref_ok = s->st_ref_ok = 0u;
         s->delta_lag = delta;
+        s->turn_n = 0;
+        s->turn_settled = 0u;
         s->started = 1u;
     }
     /* the wheel angle as the filtered a_y and yaw rate show its effect (the kinematic check) */
@@ -385,6 +412,46 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         e = MRS_MAG(delta_driver - delta_driver_redundant);
         s->pair_err = e * c->inv_steer_bound;
         MRS_COUNT(s->pair_count, e > c->steer_bound, c->steer_count, MRS_CHECK_STEER_PAIR);
+        /* 7. the speed against a_y / r in a steady turn (blocks of MRS_TURN_BLOCK samples) */
+        if (MRS_MAG(yaw_rate) < c->turn_yaw_min) {
+            s->turn_n = 0;
+            s->turn_settled = 0u;
+        } else {
+            if (s->turn_n > 0) {
+                /* still the block's turn: r and a_y near its first sample's, r on the same side */
+                e = MRS_MAG(yaw_rate - s->turn_r0);
+                x = MRS_MAG(lat_accel - s->turn_a0);
+                rm = MRS_MAG(s->turn_a0);
+                if (e > c->turn_yaw_tol || x > c->turn_lat_tol + c->turn_lat_rel * rm || yaw_rate * s->turn_r0 <= 0.0) {
+                    s->turn_n = 0;
+                    s->turn_settled = 0u;
+                }
+            }
+            if (s->turn_n == 0) {
+                s->turn_r0 = yaw_rate;
+                s->turn_a0 = lat_accel;
+                s->turn_res = 0.0;
+                s->turn_r = 0.0;
+            }
+            s->turn_res += yaw_rate * speed - lat_accel;
+            s->turn_r += yaw_rate;
+            s->turn_n += 1;
+            if (s->turn_n >= MRS_TURN_BLOCK) {
+                /* the speed less a_y / r over the block (r-weighted), against what the sensors'
+                 * offsets and the rest of the side slip can make of it at the block's mean |r| */
+                e = MRS_MAG(s->turn_res / s->turn_r);
+                rm = MRS_MAG(s->turn_r * (1.0 / MRS_TURN_BLOCK));
+                bound = c->turn_speed_rel * speed + (c->turn_yaw_bias * speed + c->turn_lat_bias) / rm;
+                if (s->turn_settled) {
+                    s->turn_err = e / bound;
+                    if (e > bound) {
+                        s->latched |= MRS_CHECK_TURN;
+                    }
+                }
+                s->turn_settled = 1u;
+                s->turn_n = 0;
+            }
+        }
     }
     if (lat_ok) {
         s->lat_prev = lat_accel;

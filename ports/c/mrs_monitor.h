@@ -30,14 +30,16 @@
 #define MRS_MISSING 0x80u
 #define MRS_CHECK_YAW_PAIR 0x100u
 #define MRS_CHECK_SPEED 0x200u /* the speed jumped between two values by more than speed_step */
+#define MRS_CHECK_TURN 0x400u /* the speed disagrees with a_y / r in a steady turn */
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
 #define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
-                        MRS_CHECK_SPEED)
+                        MRS_CHECK_SPEED | MRS_CHECK_TURN)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
 
 #define MRS_KIN_WINDOW 4
 #define MRS_YAW_PAIR_WINDOW 5
+#define MRS_TURN_BLOCK 10 /* redundant samples in one block of the steady-turn speed check */
 
 /* Authority limiter flags. */
 #define MRS_AUTH_MAGNITUDE 0x01u
@@ -60,6 +62,10 @@ typedef struct {
     double sensor_tau; /* the sensors' filters' lag on a_y and r, s: the kinematic check's wheel angle takes it */
     double side_accel; /* m/s^2 of a_y a side force may add: the kinematic bound widens by it / v while the yaw pair runs */
     double speed_step; /* m/s: the most the speed may change from one value to the next */
+    /* the steady-turn speed check: |r| >= turn_yaw_min; r within turn_yaw_tol and a_y within
+     * turn_lat_tol + turn_lat_rel |a_y| of the block's first sample; |v - a_y / r| against
+     * turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r| */
+    double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -74,15 +80,18 @@ typedef struct {
     double yaw_pair_bound, inv_yaw_pair_bound;
     double delta_alpha; /* 1 - exp(-ts / sensor_tau) */
     double side_accel, speed_step;
+    double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
     uint8_t started, have_sample, yaw_ref_ok, st_ref_ok, bits;
     uint8_t yaw2_seen; /* the yaw-rate sensor's second element received since the reset */
     uint8_t speed_seen; /* speed_last holds a valid speed received since the speed was last invalid */
+    uint8_t turn_settled; /* the steady-turn check's block before the current one was steady */
     uint16_t latched, flags;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
+    int32_t turn_n; /* samples in the steady-turn check's current block */
     double lat_prev, steer2_prev, r_model, raw_prev, beta_prev, lat_beta_prev, aux_lag;
     double yaw_last, yaw_ref, lat_last, lat_ref, st_last, st_ref, st2_last, st2_ref;
     double kin_err, pair_err, model_err;
@@ -91,6 +100,7 @@ typedef struct {
     double delta_lag; /* the wheel angle through the sensors' lag */
     double lag_beta_prev, kin_sensor[MRS_KIN_WINDOW]; /* what that lag moves the nominal car's beta' */
     double speed_last;
+    double turn_r0, turn_a0, turn_res, turn_r, turn_err; /* the block's first r, a_y; sums of r v - a_y, r */
 } mrs_monitor_state_t;
 
 typedef struct {

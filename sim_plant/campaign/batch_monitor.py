@@ -39,12 +39,13 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
-           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "speed_last")
+           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "speed_last", "turn_r0", "turn_a0",
+           "turn_res", "turn_r", "turn_err")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
-         "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n")
-_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen")
-#: every value the detailed flags can take (the highest bit is CHECK_SPEED)
-_FLAG_VALUES = 2 * pl.CHECK_SPEED
+         "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n")
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen", "turn_settled")
+#: every value the detailed flags can take (the highest bit is CHECK_TURN)
+_FLAG_VALUES = 2 * pl.CHECK_TURN
 
 
 class BatchMonitor:
@@ -138,13 +139,16 @@ class BatchMonitor:
             st2_ok = (-1e3 < d2) & (d2 < 1e3)
             missing = ~(lat_ok & st2_ok)
             flags |= np.where(missing | self._lost(r, r2), pl.MISSING, 0)
+            self._set("turn_n", missing, 0)  # the steady-turn check starts afresh when the frame is back
+            self._set("turn_settled", missing, False)
             gap = missing & (self.since >= c.kin_gap_steps)  # a shorter gap is bridged (the scalar's comment)
             self._set("have_sample", gap, False)
             self._set("kin_n", gap, 0)
             paused = ~act
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
-                         "kin_n"):
+                         "kin_n", "turn_n"):
                 self._set(name, paused, 0)
+            self._set("turn_settled", paused, False)
             self._set("started", paused, False)
             self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
             self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
@@ -170,7 +174,7 @@ class BatchMonitor:
                             ("lat_prev", lat), ("steer2_prev", d2), ("yaw_last", r), ("lat_last", lat),
                             ("st_last", d), ("st2_last", d2), ("yaw_ref", r_kin), ("lat_ref", r), ("st_ref", d2),
                             ("st2_ref", d), ("yaw_ref_ok", False), ("st_ref_ok", False), ("delta_lag", delta),
-                            ("started", True)):
+                            ("turn_n", 0), ("turn_settled", False), ("started", True)):
             self._set(name, init, value)
         self._set("delta_lag", act, self.delta_lag + c.delta_alpha * (delta - self.delta_lag))
         self._set("r_model", act, self.r_model + c.model_alpha * (r_ss - self.r_model))
@@ -226,9 +230,40 @@ class BatchMonitor:
         self._set("pair_err", new, e * c.inv_steer_bound)
         self.pair_count, trip = _count(self.pair_count, e > c.steer_bound, new, c.steer_count)
         self.latched |= np.where(trip, pl.CHECK_STEER_PAIR, 0)
+        self._turn(new, r, lat, v)
         self._set("lat_prev", act & lat_ok, lat)
         self._set("steer2_prev", act & st2_ok, d2)
         self._frozen_checks(act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin)
+
+    def _turn(self, new: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray) -> None:
+        """Check 7, the speed against a_y / r in a steady turn, in the rows with a new sample."""
+        c = self.c
+        low = new & (np.abs(r) < c.turn_yaw_min)
+        turn = new & ~low
+        away = turn & (self.turn_n > 0) & ((np.abs(r - self.turn_r0) > c.turn_yaw_tol)
+                                           | (np.abs(lat - self.turn_a0) > c.turn_lat_tol + c.turn_lat_rel
+                                              * np.abs(self.turn_a0)) | (r * self.turn_r0 <= 0.0))
+        restart = low | away
+        self._set("turn_n", restart, 0)
+        self._set("turn_settled", restart, False)
+        if not turn.any():
+            return
+        first = turn & (self.turn_n == 0)
+        for name, value in (("turn_r0", r), ("turn_a0", lat), ("turn_res", 0.0), ("turn_r", 0.0)):
+            self._set(name, first, value)
+        self._set("turn_res", turn, self.turn_res + (r * v - lat))
+        self._set("turn_r", turn, self.turn_r + r)
+        self._set("turn_n", turn, self.turn_n + 1)
+        full = turn & (self.turn_n >= pl.TURN_BLOCK)
+        if full.any():
+            e = np.abs(self.turn_res / self.turn_r)
+            rm = np.abs(self.turn_r * (1.0 / pl.TURN_BLOCK))
+            bound = c.turn_speed_rel * v + (c.turn_yaw_bias * v + c.turn_lat_bias) / rm
+            judged = full & self.turn_settled
+            self._set("turn_err", judged, e / bound)
+            self.latched |= np.where(judged & (e > bound), pl.CHECK_TURN, 0)
+            self._set("turn_settled", full, True)
+            self._set("turn_n", full, 0)
 
     def _frozen_checks(self, act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin) -> None:
         c = self.c
@@ -315,8 +350,10 @@ class BatchMonitor:
             self._steady(d, d2, r, lat, v, aux, r2, act)
         for k, old in kept.items():
             setattr(self, k, np.where(act, getattr(self, k), old))
-        for k in ("model_count", "yaw_same", "lat_same", "st_same", "st2_same", "kin_count", "pair_count", "kin_n"):
+        for k in ("model_count", "yaw_same", "lat_same", "st_same", "st2_same", "kin_count", "pair_count", "kin_n",
+                  "turn_n"):
             setattr(self, k, np.where(act, getattr(self, k), 0))
+        self.turn_settled = self.turn_settled & act
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
         self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0)

@@ -13,7 +13,8 @@ fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pa
 error passes 0.03 rad/s, and may never reach the kinematic 0.035); for the lateral acceleration
 the kinematic bound times v, plus ``side_accel`` when the car has the second element; for a
 steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; none for
-the speed, whose check looks at its jumps (``speed_step``), not at an error.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
+the speed, whose checks look at its jumps (``speed_step``) and, in a steady turn, at a_y / r over
+half-second blocks (``CHECK_TURN``), not at its error.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
 lockstep the log's wall-clock stamps are not simulated time."""
 
 from __future__ import annotations

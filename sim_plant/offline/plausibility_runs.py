@@ -156,7 +156,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
     seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant")}
     held: dict[str, float] = {"yaw_rate_redundant": math.nan}
-    margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair"), 0.0)
+    margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair", "turn"), 0.0)
     pipeline: deque[float] = deque([0.0])
     applied = 0.0
     for k in range(n):
@@ -196,7 +196,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
             seen[ch][k] = held[ch]
         st = mon.state
         for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err),
-                           ("yaw_pair", st.yaw_pair_err)):
+                           ("yaw_pair", st.yaw_pair_err), ("turn", st.turn_err)):
             margins[key] = max(margins[key], value)
         # as the plant node: the car gets the lagging actuator's mean position over the step
         car.advance(driver + actuator.mean, scene.m_z)
