@@ -173,8 +173,8 @@ class PlausibilityConfig:
     turn_lat_tol: float = 0.1
     turn_lat_rel: float = 0.08
     turn_speed_rel: float = 0.02
-    turn_yaw_bias: float = 0.006
-    turn_lat_bias: float = 0.05
+    turn_yaw_bias: float = 0.011
+    turn_lat_bias: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,6 +292,10 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
+    if not cfg.turn_yaw_tol < 2.0 * cfg.turn_yaw_min:
+        # a block's r all on one side, so that its sum of r is never 0 (check 7 divides by it)
+        raise ValueError(f"turn_yaw_tol must be below 2 turn_yaw_min, got {cfg.turn_yaw_tol!r} and "
+                         f"{cfg.turn_yaw_min!r}")
     for name in ("yaw_count", "steer_count"):
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
@@ -557,13 +561,14 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             s.turn_settled = False
         else:
             if s.turn_n > 0:
-                # still the block's turn: r and a_y near its first sample's, r on the same side
+                # still the block's turn: r and a_y near its first sample's (r then on the same
+                # side: configure keeps turn_yaw_tol below 2 turn_yaw_min)
                 e = yaw_rate - s.turn_r0
                 e = -e if e < 0.0 else e
                 x = lat_accel - s.turn_a0
                 x = -x if x < 0.0 else x
                 rm = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
-                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * rm or yaw_rate * s.turn_r0 <= 0.0:
+                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * rm:
                     s.turn_n = 0
                     s.turn_settled = False
             if s.turn_n == 0:

@@ -48,7 +48,7 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
         bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
-                    ms.turn_err))
+                    ms.turn_err, ms.turn_n, int(ms.turn_settled)))
     return out
 
 
@@ -62,7 +62,7 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     for line in lines[1:]:
         f = line.split()
         out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
-                    float(f[8])))
+                    float(f[8]), int(f[9]), int(f[10])))
     return out
 
 
@@ -116,6 +116,21 @@ def _lost_edges(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
     return out
 
 
+def _turn_rows(samples: int = 80, r: float = 0.3, v: float = 10.0, measured: float = 11.5) -> list[tuple[float, ...]]:
+    """A steady turn whose speed reads 15 % high, with a lost redundant frame (sample 14), the
+    yaw rate missing for a frame (sample 40: every check pauses) and an a_y step (sample 60):
+    each restarts the steady-turn check's blocks, and its trips latch in between."""
+    c = pl.configure(pl.PlausibilityConfig())
+    d = r * (c.wheelbase + c.k_us * measured * measured) / measured
+    rows = []
+    for j in range(samples):
+        lat = r * v + (-0.4 if j >= 60 else 0.0) + (1e-3 if j % 2 else 0.0)
+        for k in range(25):
+            yaw = math.nan if j == 40 else r + (1e-4 if k % 2 else 0.0)
+            rows.append((d, d, yaw, math.nan if j == 14 else lat, measured, 0.0, 0.0, yaw))
+    return rows
+
+
 CASES = {
     "split-mu, fault-free": lambda: _run_rows(pr.scn.load("split-mu")),
     "yaw bias in a curve": lambda: _run_rows(pr.steady_curve(20.0, 1.0).with_sensor_faults(
@@ -134,6 +149,7 @@ CASES = {
     "the speed stuck at another value in a curve": lambda: _run_rows(
         pr.steady_curve(12.5, 0.8, a_y=3.0).with_sensor_faults((SensorFault("speed", "stuck", 1.0, 33.0),)),
         SensorConfig(seed=7)),
+    "a steady turn with a wrong speed, its blocks restarted by a gap, a pause and an a_y step": _turn_rows,
     "a speed drifting in a steady turn (the steady-turn check)": lambda: _run_rows(
         pr.steady_curve(10.0, 1.0, a_y=0.45 * 9.81, duration=4.0).with_sensor_faults(
             (SensorFault("speed", "drift", 1.4, -1.0),)), SensorConfig(seed=44)),
@@ -184,7 +200,7 @@ def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
-    for bits, f, *_, af, _yaw_pair_err, _turn_err in out:
+    for bits, f, *_, af, _yaw_pair_err, _turn_err, _turn_n, _settled in out:
         flags |= f
         auth |= af
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
@@ -209,11 +225,23 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
-def test_an_invalid_calibration_is_refused(runner: Path) -> None:
-    bad = _config_lines(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0), au.AuthorityConfig())
-    assert subprocess.run([str(runner)], input=bad, capture_output=True, text=True).returncode == 3
-    with pytest.raises(ValueError, match="yaw_bound"):
-        pl.configure(dataclasses.replace(pl.PlausibilityConfig(), yaw_bound=-1.0))
+@pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01}])
+def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
+    cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
+    assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,
+                          text=True).returncode == 3
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        pl.configure(cfg)
+
+
+def test_the_turn_case_settles_trips_and_restarts_its_blocks() -> None:
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), _turn_rows())
+    settled = [bool(row[10]) for row in out]
+    assert settled.count(False) > 0 and settled.count(True) > 0
+    # settled, then reset by each of the three (the gap, the pause, the a_y step)
+    falls = [k // 25 for k in range(1, len(out)) if settled[k - 1] and not settled[k]]
+    assert [j for j in falls if j in (14, 40, 60)] == [14, 40, 60]
+    assert any(f & pl.CHECK_TURN for _, f, *_ in out)
 
 
 def test_the_step_functions_call_nothing(tmp_path: Path) -> None:

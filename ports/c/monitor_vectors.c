@@ -7,7 +7,7 @@
  * "delta_driver delta_driver_redundant yaw_rate lat_accel speed aux_cmd_applied u_request
  * yaw_rate_redundant" (nan for a missing input).  OUTPUT: a line "coeffs" + the monitor's and
  * the authority's coefficients, then per period "bits flags kin_err pair_err model_err u
- * auth_flags yaw_pair_err turn_err" (the limiter cut by the flags' MRS_CUT_CHECKS), every
+ * auth_flags yaw_pair_err turn_err turn_n turn_settled" (the limiter cut by the flags' MRS_CUT_CHECKS), every
  * real as %.17g so that a double reads back exactly.  "defaults" alone prints the default
  * configurations instead.  Exit 2 on unreadable input, 3 on an invalid calibration.
  * tests/test_c_monitor.py drives it against firmware_py/plausibility.py. */
@@ -136,8 +136,9 @@ int main(void)
         }
         bits = mrs_monitor_step(&mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5], v[7]);
         u = mrs_authority_step(&ac, &as, v[6], bits, (uint8_t)((ms.flags & MRS_CUT_CHECKS) != 0u));
-        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g\n", (unsigned)bits, (unsigned)ms.flags, ms.kin_err,
-               ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err, ms.turn_err);
+        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g %d %u\n", (unsigned)bits, (unsigned)ms.flags, ms.kin_err,
+               ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err, ms.turn_err, (int)ms.turn_n,
+               (unsigned)ms.turn_settled);
     }
     return 0;
 }

@@ -39,8 +39,8 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->turn_lat_tol = 0.1;
     cfg->turn_lat_rel = 0.08;
     cfg->turn_speed_rel = 0.02;
-    cfg->turn_yaw_bias = 0.006;
-    cfg->turn_lat_bias = 0.05;
+    cfg->turn_yaw_bias = 0.011;
+    cfg->turn_lat_bias = 0.1;
 }
 
 static int positive(double x)
@@ -72,7 +72,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
         g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
-        !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3)) {
+        !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
+        !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min)) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
@@ -418,11 +419,12 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             s->turn_settled = 0u;
         } else {
             if (s->turn_n > 0) {
-                /* still the block's turn: r and a_y near its first sample's, r on the same side */
+                /* still the block's turn: r and a_y near its first sample's (r then on the same
+                 * side: configure keeps turn_yaw_tol below 2 turn_yaw_min) */
                 e = MRS_MAG(yaw_rate - s->turn_r0);
                 x = MRS_MAG(lat_accel - s->turn_a0);
                 rm = MRS_MAG(s->turn_a0);
-                if (e > c->turn_yaw_tol || x > c->turn_lat_tol + c->turn_lat_rel * rm || yaw_rate * s->turn_r0 <= 0.0) {
+                if (e > c->turn_yaw_tol || x > c->turn_lat_tol + c->turn_lat_rel * rm) {
                     s->turn_n = 0;
                     s->turn_settled = 0u;
                 }

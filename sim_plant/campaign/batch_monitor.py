@@ -242,7 +242,7 @@ class BatchMonitor:
         turn = new & ~low
         away = turn & (self.turn_n > 0) & ((np.abs(r - self.turn_r0) > c.turn_yaw_tol)
                                            | (np.abs(lat - self.turn_a0) > c.turn_lat_tol + c.turn_lat_rel
-                                              * np.abs(self.turn_a0)) | (r * self.turn_r0 <= 0.0))
+                                              * np.abs(self.turn_a0)))
         restart = low | away
         self._set("turn_n", restart, 0)
         self._set("turn_settled", restart, False)

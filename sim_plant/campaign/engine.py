@@ -66,7 +66,8 @@ METRICS = {
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
     "detection_time": ("s", "first PLAUS_FAULT less when the fault's error left its bound for 0.3 s (0: it never "
-                            "did, or was reported before; inf: never reported)"),
+                            "did, or was reported before, and always for a speed fault, whose error no bound "
+                            "judges: see fault_steps; inf: never reported)"),
     "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
                                 "the fault makes the command cause, its fade included (0 without a fault or a "
                                 "controller)"),

@@ -94,7 +94,8 @@ def onset(e: Evidence) -> float | None:
 
 def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) -> list[ErrorSample]:
     """The falsified signal's error and its bound at each frame the controller got (for a
-    fault the plant injects: at each plant step, measured less true, from its trace)."""
+    fault the plant injects: at each plant step, measured less true, from its trace).  A row
+    on the speed has none (``sensor_bound`` raises ValueError): the matrix has no such row."""
     fault = e.row.fault
     signal = fault.signal or names.SENSOR_SIGNAL[fault.target]
     sensor = _SENSOR[signal]
