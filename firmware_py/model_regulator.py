@@ -258,10 +258,14 @@ def reset(s: State) -> None:
 
 # One function on purpose (about 120 lines): it is the body that ports/c/mrs_controller.c's
 # mrs_step() transcribes statement for statement, and a port's mrs_step makes no calls.
-def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed: float) -> float:
+def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed: float,
+         hold: bool = False) -> float:
     """One control period. Returns the auxiliary front-wheel angle command in rad.
 
-    Inputs: driver's front-wheel angle (rad), measured yaw rate (rad/s), speed (m/s).
+    Inputs: driver's front-wheel angle (rad), measured yaw rate (rad/s), speed (m/s); ``hold``
+    (the plausibility monitor's suspicion of the yaw rate, not yet confirmed): the command may
+    move toward zero but no further from it than it is, inside the law's own clamp, so that
+    the state follows the command it held (no windup) and the release keeps the rate limit.
     ``s.status`` and ``s.fault_flags`` tell what happened.  A NaN fails every range
     comparison below, so non-finite inputs are caught by the same checks.
     """
@@ -340,6 +344,14 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
         lo = -c.u_max
     if hi > c.u_max:
         hi = c.u_max
+    if hold:
+        # lo <= u_prev <= hi already, so the window keeps u_prev and 0's side of it
+        if s.u_prev > 0.0:
+            lo = lo if lo > 0.0 else 0.0
+            hi = s.u_prev if s.u_prev < hi else hi
+        else:
+            hi = hi if hi < 0.0 else 0.0
+            lo = s.u_prev if s.u_prev > lo else lo
 
     if c.model_delay == 0:
         # Constant law only (configure() checks it). y = p + g_w0 * u_a with
@@ -376,7 +388,7 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
         s.hist_idx = i
 
     s.z = g_w1 * w - g_r1 * rho + a * y
-    if s.recovering and lo_slew < u < hi_slew:
+    if s.recovering and not hold and lo_slew < u < hi_slew:
         s.recovering = False  # the slew no longer binds: caught up with the control law
     s.u_prev = u
     s.status = STATUS_SATURATED if (u >= c.u_max or u <= -c.u_max) else STATUS_ACTIVE
@@ -391,8 +403,8 @@ class ModelRegulator:
         self.coefficients = configure(self.config)
         self.state = State()
 
-    def step(self, delta_driver: float, yaw_rate: float, speed: float) -> float:
-        return step(self.coefficients, self.state, delta_driver, yaw_rate, speed)
+    def step(self, delta_driver: float, yaw_rate: float, speed: float, hold: bool = False) -> float:
+        return step(self.coefficients, self.state, delta_driver, yaw_rate, speed, hold)
 
     def reset(self) -> None:
         reset(self.state)

@@ -39,6 +39,12 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    moves that residual, so its bound sits just above the two elements' noise and offsets, and a
    stuck or scaled element is found while the command it drove is still small; the limiter then
    removes the command at its rate bound (``authority_step``'s ``cut``), not at the fault fade.
+   Before that, a single sample of r - r_2 over ``yaw_pair_hold`` is a suspicion
+   (``SUSPECT_YAW_PAIR``, not latched) on which the law's command may shrink but not grow
+   (``step()``'s ``hold``, inside its own clamp: no windup), for at most ``YAW_PAIR_WINDOW``
+   samples until ``YAW_PAIR_WINDOW`` samples in a row within it re-arm it: the law's answer
+   to a sensor error that reaches it through the sensor's filter builds up while the
+   window's mean is still confirming it.
 5. **Frozen**: a value that does not change at all (bit for bit) for ``frozen_time`` while its
    partner (yaw rate <-> a_y / v, one steering channel <-> the other) moves by more than
    ``frozen_move_*``: a real sensor's noise toggles its LSB, so an unchanging value while the
@@ -94,6 +100,10 @@ FROZEN_LAT = 0x10
 FROZEN_STEER = 0x20
 FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
+#: The yaw-rate pair's latest sample is over ``yaw_pair_hold``, which its window has not
+#: confirmed (not latched): the node passes it to ``step()``'s ``hold``, on which the law's
+#: command may shrink but not grow (docs/controller.md, "The pair's suspicion").
+SUSPECT_YAW_PAIR = 0x800
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
 #: rate's (CtrlStatus_Plausibility 1).
 YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
@@ -175,6 +185,10 @@ class PlausibilityConfig:
     turn_speed_rel: float = 0.02
     turn_yaw_bias: float = 0.011
     turn_lat_bias: float = 0.1
+    # |r - r_2| of a single sample over this, rad/s, is a suspicion: the command may shrink but
+    # not grow for up to YAW_PAIR_WINDOW such samples (re-armed by as many within it in a row).
+    # Two thirds of the bound: 2.4 SDs above two opposite 0.3 deg/s offsets (docs/controller.md)
+    yaw_pair_hold: float = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,6 +220,7 @@ class MonitorCoefficients:
     aux_alpha: float  # the actuator's lag per period: 1 - exp(-ts / actuator_tau)
     yaw_pair_bound: float
     inv_yaw_pair_bound: float
+    yaw_pair_hold: float
     delta_alpha: float  # the sensors' lag per period: 1 - exp(-ts / sensor_tau)
     side_accel: float
     speed_step: float
@@ -227,6 +242,7 @@ class MonitorState:
                  "kin_err", "pair_err", "model_err", "kin_raw", "kin_comp", "kin_idx", "kin_n", "since",
                  "have_sample", "raw_prev", "beta_prev", "yaw_ref_ok", "st_ref_ok", "kin_lat",
                  "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
+                 "yaw_hold_n", "yaw_clear_n",
                  "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen",
                  "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err")
 
@@ -267,6 +283,8 @@ def reset_monitor(s: MonitorState) -> None:
     s.yaw_pair_idx = 0
     s.yaw_pair_n = 0  # samples in the window so far
     s.yaw_pair_err = 0.0
+    s.yaw_hold_n = 0  # samples of this suspicion the command was held on (at most YAW_PAIR_WINDOW)
+    s.yaw_clear_n = 0  # samples in a row within yaw_pair_hold (YAW_PAIR_WINDOW of them re-arm the hold)
     s.yaw2_seen = False  # the yaw-rate sensor's second element has been received this cycle
     s.delta_lag = 0.0  # the wheel angle through the sensors' lag (sensor_tau)
     s.kin_sensor = [0.0] * KIN_WINDOW  # how much that lag moves the nominal car's beta' (C: double[4])
@@ -284,14 +302,18 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
     check_positive(cfg, ("ts", "speed_min", "yaw_bound", "yaw_raw_fraction", "steer_bound", "model_margin", "model_tau", "model_time",
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
-                          "yaw_pair_bound", "sensor_tau", "speed_step", "turn_yaw_min", "turn_yaw_tol",
-                          "turn_lat_tol", "turn_speed_rel"))
+                          "yaw_pair_bound", "yaw_pair_hold", "sensor_tau", "speed_step", "turn_yaw_min",
+                          "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
+    if not cfg.yaw_pair_hold <= cfg.yaw_pair_bound:
+        # a suspicion is what the window has not confirmed yet: above the bound it never comes first
+        raise ValueError(f"yaw_pair_hold must not exceed yaw_pair_bound, got {cfg.yaw_pair_hold!r} and "
+                         f"{cfg.yaw_pair_bound!r}")
     if not cfg.turn_yaw_tol < 2.0 * cfg.turn_yaw_min:
         # a block's r all on one side, so that its sum of r is never 0 (check 7 divides by it)
         raise ValueError(f"turn_yaw_tol must be below 2 turn_yaw_min, got {cfg.turn_yaw_tol!r} and "
@@ -316,7 +338,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
-        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
+        inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, yaw_pair_hold=cfg.yaw_pair_hold,
+        delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
         side_accel=cfg.side_accel, speed_step=cfg.speed_step, turn_yaw_min=cfg.turn_yaw_min,
         turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
         turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias)
@@ -448,6 +471,19 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         if i >= YAW_PAIR_WINDOW:
             i = 0
         s.yaw_pair_idx = i
+        # The suspicion: this sample alone over yaw_pair_hold, held on for at most a window's
+        # samples (an offset between hold and bound is not a fault: it must not freeze the law)
+        e = yaw_rate - yaw_rate_redundant
+        if e > c.yaw_pair_hold or e < -c.yaw_pair_hold:
+            s.yaw_clear_n = 0
+            if s.yaw_hold_n < YAW_PAIR_WINDOW:
+                s.yaw_hold_n += 1
+                flags |= SUSPECT_YAW_PAIR
+        else:
+            if s.yaw_clear_n < YAW_PAIR_WINDOW:
+                s.yaw_clear_n += 1
+            if s.yaw_clear_n >= YAW_PAIR_WINDOW:
+                s.yaw_hold_n = 0
         if s.yaw_pair_n < YAW_PAIR_WINDOW:
             s.yaw_pair_n += 1
         if s.yaw_pair_n >= YAW_PAIR_WINDOW:

@@ -48,7 +48,7 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
         bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
-                    ms.turn_err, ms.turn_n, int(ms.turn_settled)))
+                    ms.turn_err, ms.turn_n, int(ms.turn_settled), ms.yaw_hold_n, ms.yaw_clear_n))
     return out
 
 
@@ -62,7 +62,7 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     for line in lines[1:]:
         f = line.split()
         out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
-                    float(f[8]), int(f[9]), int(f[10])))
+                    float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12])))
     return out
 
 
@@ -153,6 +153,9 @@ CASES = {
     "a speed drifting in a steady turn (the steady-turn check)": lambda: _run_rows(
         pr.steady_curve(10.0, 1.0, a_y=0.45 * 9.81, duration=4.0).with_sensor_faults(
             (SensorFault("speed", "drift", 1.4, -1.0),)), SensorConfig(seed=44)),
+    "a yaw-rate offset at the suspicion's threshold (held, re-armed, never confirmed)": lambda: _run_rows(
+        pr.steady_curve(20.0, 1.0, a_y=1.0).with_sensor_faults((SensorFault("yaw_rate", "bias", 1.0, 0.02),)),
+        SensorConfig(seed=99)),
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
@@ -200,12 +203,21 @@ def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
-    for bits, f, *_, af, _yaw_pair_err, _turn_err, _turn_n, _settled in out:
+    for bits, f, *_, af, _yaw_pair_err, _turn_err, _turn_n, _settled, _hold_n, _clear_n in out:
         flags |= f
         auth |= af
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
     assert flags & pl.CHECK_YAW_PAIR
     assert auth & au.AUTH_FAULT and auth & au.AUTH_RATE
+
+
+def test_the_unconfirmed_offset_case_holds_re_arms_and_never_faults() -> None:
+    rows = CASES["a yaw-rate offset at the suspicion's threshold (held, re-armed, never confirmed)"]()
+    out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+    held = [bool(row[1] & pl.SUSPECT_YAW_PAIR) for row in out]
+    starts = sum(1 for k in range(1, len(held)) if held[k] and not held[k - 1])
+    assert not any(bits & pl.PLAUS_FAULT for bits, *_ in out)
+    assert starts >= 2 and max(row[11] for row in out) == pl.YAW_PAIR_WINDOW  # capped, then re-armed
 
 
 def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
@@ -221,11 +233,12 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
                 mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
                 mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
-                mc.turn_lat_bias]
+                mc.turn_lat_bias, mc.yaw_pair_hold]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
-@pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01}])
+@pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},
+                                 {"yaw_pair_hold": 0.031}, {"yaw_pair_hold": 0.0}])
 def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
     cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
     assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,

@@ -77,6 +77,7 @@ class Drive:
     burst: int = 0  # every 2nd redundant frame comes in one drain with the frames of the `burst` periods before it
     second_yaw: bool = False  # the yaw-rate frames carry the sensor's second element (the car's r); else SNA
     second_yaw_lost: float = math.inf  # s from which the second element is SNA (the element failed)
+    second_yaw_offset: float = 0.0  # rad/s the second element reads below the car's r
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -94,8 +95,8 @@ class Drive:
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
                       names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta},
                       names.MSG_YAW: {names.SIG_YAW_RATE: r_meas,
-                                      names.SIG_YAW_RATE_2: r if self.second_yaw and t < self.second_yaw_lost
-                                      else math.nan}}
+                                      names.SIG_YAW_RATE_2: r - self.second_yaw_offset
+                                      if self.second_yaw and t < self.second_yaw_lost else math.nan}}
             period = []
             for msg, n in every.items():
                 if k % n or (msg == names.MSG_REDUNDANT and not self.redundant):
@@ -228,6 +229,22 @@ def test_a_second_yaw_rate_element_lost_on_the_bus_is_degraded_as_in_python(seco
     plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
     assert set(plaus[:k_lost]) == {0} and set(plaus[k_lost + 1:]) == {pl.PLAUS_DEGRADED}
     assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
+
+
+def test_the_pair_s_suspicion_holds_the_law_in_both_nodes_without_a_fault(secoc_check: Path) -> None:
+    # The elements 0.025 rad/s apart: every sample over yaw_pair_hold (0.02), the window's mean
+    # under the bound (0.03).  The law's command is held (it may not grow) for 5 samples at a
+    # time, re-armed only by 5 samples within the threshold, which never come: held once, from
+    # the first sample, and then free.  No fault, no bus bit; both nodes byte for byte.
+    free, _ = _run(secoc_check, Drive(second_yaw=True))
+    cmds, statuses = _run(secoc_check, Drive(second_yaw=True, second_yaw_offset=0.025))
+    assert {int(s[names.SIG_STATUS_PLAUS]) for s in statuses} == {0}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
+    u_free = [c[names.SIG_CMD_ANGLE] for c in free]
+    u_held = [c[names.SIG_CMD_ANGLE] for c in cmds]
+    differ = [k for k, (a, b) in enumerate(zip(u_free, u_held)) if a != b]
+    assert differ and differ[0] < pl.YAW_PAIR_WINDOW  # held from the start
+    assert all(abs(u_held[k]) <= abs(u_held[k - 1]) for k in range(1, pl.YAW_PAIR_WINDOW))
 
 
 def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in_python(secoc_check: Path) -> None:

@@ -323,14 +323,16 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux", "r2")))
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
-                         "kin_n", "since", "yaw_pair_n", "yaw_pair_idx", "turn_n", "turn_settled"):
+                         "kin_n", "since", "yaw_pair_n", "yaw_pair_idx", "turn_n", "turn_settled", "yaw_hold_n",
+                         "yaw_clear_n"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err", "turn_res", "turn_r",
                          "turn_err"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    assert seen == 2 * pl.CHECK_TURN - 1, f"flags seen {seen:#x}"  # every check tripped somewhere, and MISSING
+    # every check tripped somewhere, MISSING and the yaw-rate pair's suspicion (the highest bit)
+    assert seen == 2 * pl.SUSPECT_YAW_PAIR - 1, f"flags seen {seen:#x}"
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
         assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,
@@ -447,3 +449,36 @@ def test_batch_sensors_refuse_a_second_yaw_element_they_do_not_model() -> None:
                   SensorConfig(yaw_rate_redundant=YawRateSensorConfig(lowpass_hz=20.0))):
         with pytest.raises(ValueError, match="second element"):
             BatchSensors(*args, config=other)
+
+
+@pytest.mark.parametrize("config", [None, "paper"], ids=("shipped", "paper-constant-law"))
+def test_batch_law_with_the_monitor_s_hold_equals_the_scalar_one_row_by_row(config: str | None) -> None:
+    """``BatchLaw.step`` with ``hold`` (the monitor's suspicion of the yaw rate) against
+    ``model_regulator.step`` row by row: random holds over commands that grow, shrink, cross
+    zero, saturate and recover from faults and low speed (the slew window while recovering)."""
+    from firmware_py.calibration import PAPER_CONFIG
+    from sim_plant.campaign.batch_law import BatchLaw
+
+    # the paper's plain law: no modelled delay, the algebraic loop's clamp (model_delay 0)
+    cfg = mr.ControllerConfig() if config is None else PAPER_CONFIG
+    rows, steps = 30, 600
+    rng = np.random.default_rng(11)
+    d = np.cumsum(rng.normal(0.0, 0.002, (steps, rows)), axis=0)
+    r = np.cumsum(rng.normal(0.0, 0.01, (steps, rows)), axis=0)
+    r[rng.random((steps, rows)) < 0.005] = np.nan  # a fault: fade, then re-initialise and recover
+    v = np.where(rng.random((steps, rows)) < 0.01, 3.0, 20.0)  # now and then below the activation speed
+    hold = rng.random((steps, rows)) < 0.3
+    batch = BatchLaw(cfg, rows)
+    c = mr.configure(cfg)
+    states = [mr.State() for _ in range(rows)]
+    held_moves = 0
+    for k in range(steps):
+        before = batch.u_prev.copy()
+        u = batch.step(d[k], r[k], v[k], hold[k])
+        for i, s in enumerate(states):
+            expected = mr.step(c, s, float(d[k, i]), float(r[k, i]), float(v[k, i]), bool(hold[k, i]))
+            assert u[i] == expected and batch.status[i] == s.status, (k, i)
+            if hold[k, i] and s.status != mr.STATUS_FAULT and v[k, i] > 5.0:
+                assert abs(expected) <= abs(before[i]) and expected * before[i] >= 0.0, (k, i)
+                held_moves += expected != before[i]
+    assert held_moves > 0  # a held command moved toward zero somewhere

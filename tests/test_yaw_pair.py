@@ -87,6 +87,48 @@ def test_the_pair_fault_cuts_the_command_at_the_rate_bound() -> None:
     assert au.authority_step(c, s, 0.01, 0, 1) == pytest.approx(0.01)
 
 
+def test_a_sample_over_the_hold_threshold_is_a_suspicion_for_at_most_a_window() -> None:
+    # 0.025 apart: over yaw_pair_hold (0.02) in every sample, under the bound in the mean
+    mon = pl.PlausibilityMonitor()
+    over, clear = 0.025, 0.0
+    seq = [clear] * 10 + [over] * 12 + [clear] * 4 + [-over] * 2 + [clear] * 5 + [-over] * 2
+    suspect = []
+    for d in seq:
+        mon.step(0.0, 0.0, 0.01, 0.2, 20.0, 0.0, 0.01 - d)
+        suspect.append(bool(mon.state.flags & pl.SUSPECT_YAW_PAIR))
+    w = pl.YAW_PAIR_WINDOW
+    # the first w samples over it, then none until w samples in a row within it re-arm it (4 do
+    # not), of either sign; never latched, never a fault
+    expected = [False] * 10 + [True] * w + [False] * (12 - w) + [False] * 4 + [False] * 2 + [False] * 5 + [True] * 2
+    assert suspect == expected
+    assert not mon.state.latched and not mon.state.bits & pl.PLAUS_FAULT
+
+
+def test_a_suspicion_lets_the_law_s_command_shrink_but_not_grow() -> None:
+    # The law at 20 m/s answering a yaw-rate error that grows and then shrinks, held throughout:
+    # its command never moves away from zero nor crosses it, and follows the free law's request
+    # wherever that lies between zero and where the held command is.
+    from firmware_py import model_regulator as mr
+    c = mr.configure(mr.ControllerConfig())
+    held, free = mr.State(), mr.State()
+    for s in (held, free):
+        mr.step(c, s, 0.0, 0.0, 20.0)
+        for _ in range(20):
+            mr.step(c, s, 0.0, -0.02, 20.0)  # a positive command builds
+    u0 = held.u_prev
+    assert u0 > math.radians(0.5)
+    errors = [-0.03, -0.04, -0.02, 0.0, 0.01, 0.03, 0.06, 0.1, 0.1]
+    last = u0
+    for r in errors:
+        u = mr.step(c, held, 0.0, r, 20.0, True)
+        request = mr.step(c, free, 0.0, r, 20.0)
+        assert 0.0 <= u <= last  # toward zero only, never past it
+        if 0.0 <= request <= last:
+            assert u == request
+        last = u
+    assert last == 0.0  # the error reversed: the held command went to zero and stayed there
+
+
 def _caused(v: float, fault: SensorFault | None, second: SensorConfig | None) -> tuple[float, pr.MonitorRun]:
     """The largest |r - r of the fault-free twin| after the onset (the campaigns' fault_yaw_rate)
     in a 2 m/s^2 curve on a dry road, and the faulty run."""
@@ -110,6 +152,25 @@ def test_in_closed_loop_the_pair_keeps_the_caused_yaw_under_the_target(v: float,
     assert caused <= 0.05 and run.fault_time is not None and run.fault_time < 1.3
     without, _ = _caused(v, fault, None)
     assert without > 0.05  # what the pair is for: today's monitor alone lets this through
+
+
+def test_in_closed_loop_the_suspicion_lowers_the_yaw_a_stuck_element_causes() -> None:
+    # Stuck 0.045 rad/s above the truth in a 30 m/s curve: the filtered error ramps in, the law
+    # answers it at once, and the window confirms it 10 ms later.  Without the suspicion
+    # (yaw_pair_hold at the bound: it comes no earlier than the window's trip) the command grows
+    # meanwhile; measured 0.0105 against 0.0144 rad/s.
+    second = SensorConfig(seed=99, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=-0.3))
+    sensors = SensorConfig(seed=1, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=0.3))
+    base = replace(pr.steady_curve(30.0, 1.0, duration=2.0), sensors=sensors)
+    hit = base.with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 2.0 / 30.0 + 0.045),))
+    caused = {}
+    for hold in (pl.PlausibilityConfig().yaw_pair_hold, BOUND):
+        mon = pl.PlausibilityConfig(yaw_pair_hold=hold)
+        twin, run = pr.run(base, second_yaw=second, monitor=mon), pr.run(hit, second_yaw=second, monitor=mon)
+        k = round(1.0 / TS)
+        caused[hold] = float(np.max(np.abs(run.r_true[k:] - twin.r_true[k:])))
+        assert run.fault_time is not None and run.fault_time < 1.02
+    assert caused[pl.PlausibilityConfig().yaw_pair_hold] < 0.8 * caused[BOUND]
 
 
 def test_in_closed_loop_the_pair_raises_no_alarm_without_a_fault() -> None:

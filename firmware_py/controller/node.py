@@ -257,7 +257,14 @@ class ControllerNode:
             inp.age += 1
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
-        u = mr.step(self.coeffs, self.state, values[0], values[1], values[2])
+        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.second_value  # NaN: SNA, no element
+        bits = self.plausibility  # held between yaw-rate samples
+        for _ in range(steps):  # a sample lost on the way is held at the newest values
+            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
+                                   values[2], self.command, yaw_2)
+        # before the law: the monitor's suspicion of the yaw rate holds the law's command
+        u = mr.step(self.coeffs, self.state, values[0], values[1], values[2],
+                    (self.monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)
         if self.state.fault_flags and not cause:
             cause |= CAUSE_RANGE
         if self.state.status == mr.STATUS_INACTIVE and not cause:
@@ -266,11 +273,6 @@ class ControllerNode:
             self._sync_age += 1
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
-        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.second_value  # NaN: SNA, no element
-        bits = self.plausibility  # held between yaw-rate samples
-        for _ in range(steps):  # a sample lost on the way is held at the newest values
-            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
-                                   values[2], self.command, yaw_2)
         # a pair check's fault (yaw rate or steering) is found while its command builds: removed at
         # the limiter's rate bound, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,

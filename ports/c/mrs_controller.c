@@ -215,7 +215,7 @@ void mrs_init_state(mrs_state_t *s)
 }
 
 mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
-                    mrs_real_t speed)
+                    mrs_real_t speed, uint8_t hold)
 {
     uint8_t flags = 0u;
     mrs_real_t u, inv_kn, rho, du, lo_slew, hi_slew, lo, hi, w, y, f, a, g_w0, g_w1, g_r0, g_r1;
@@ -310,6 +310,16 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
     if (hi > c->u_max) {
         hi = c->u_max;
     }
+    if (hold != 0u) {
+        /* lo <= u_prev <= hi already, so the window keeps u_prev and 0's side of it */
+        if (s->u_prev > (mrs_real_t)0) {
+            lo = lo > (mrs_real_t)0 ? lo : (mrs_real_t)0;
+            hi = s->u_prev < hi ? s->u_prev : hi;
+        } else {
+            hi = hi < (mrs_real_t)0 ? hi : (mrs_real_t)0;
+            lo = s->u_prev > lo ? s->u_prev : lo;
+        }
+    }
 
     if (c->model_delay == 0) {
         /* Tustin's algebraic loop, solved exactly: u = clamp(p / (1 - g_w0), lo, hi). */
@@ -348,7 +358,7 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
     }
 
     s->z = g_w1 * w - g_r1 * rho + a * y;
-    if (s->recovering && lo_slew < u && u < hi_slew) {
+    if (s->recovering && hold == 0u && lo_slew < u && u < hi_slew) {
         s->recovering = 0u;
     }
     s->u_prev = u;

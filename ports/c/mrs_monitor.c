@@ -41,6 +41,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->turn_speed_rel = 0.02;
     cfg->turn_yaw_bias = 0.011;
     cfg->turn_lat_bias = 0.1;
+    cfg->yaw_pair_hold = 0.02;
 }
 
 static int positive(double x)
@@ -61,7 +62,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
                         g->yaw_pair_bound, g->sensor_tau, g->speed_step, g->turn_yaw_min, g->turn_yaw_tol,
-                        g->turn_lat_tol, g->turn_speed_rel};
+                        g->turn_lat_tol, g->turn_speed_rel, g->yaw_pair_hold};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -73,7 +74,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
         !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
-        !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min)) {
+        !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min) || !(g->yaw_pair_hold <= g->yaw_pair_bound)) {
         return -1;
     }
     wheelbase = g->nominal_l_f + g->nominal_l_r;
@@ -114,6 +115,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->turn_speed_rel = g->turn_speed_rel;
     c->turn_yaw_bias = g->turn_yaw_bias;
     c->turn_lat_bias = g->turn_lat_bias;
+    c->yaw_pair_hold = g->yaw_pair_hold;
     return 0;
 }
 
@@ -157,6 +159,8 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw_pair_idx = 0;
     s->yaw_pair_n = 0;
     s->yaw_pair_err = 0.0;
+    s->yaw_hold_n = 0;
+    s->yaw_clear_n = 0;
     s->yaw2_seen = 0u;
     s->speed_last = 0.0;
     s->speed_seen = 0u;
@@ -314,6 +318,22 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             i = 0;
         }
         s->yaw_pair_idx = i;
+        /* the suspicion: this sample alone over yaw_pair_hold, for at most a window's samples */
+        e = yaw_rate - yaw_rate_redundant;
+        if (e > c->yaw_pair_hold || e < -c->yaw_pair_hold) {
+            s->yaw_clear_n = 0;
+            if (s->yaw_hold_n < MRS_YAW_PAIR_WINDOW) {
+                s->yaw_hold_n += 1;
+                flags |= MRS_SUSPECT_YAW_PAIR;
+            }
+        } else {
+            if (s->yaw_clear_n < MRS_YAW_PAIR_WINDOW) {
+                s->yaw_clear_n += 1;
+            }
+            if (s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW) {
+                s->yaw_hold_n = 0;
+            }
+        }
         if (s->yaw_pair_n < MRS_YAW_PAIR_WINDOW) {
             s->yaw_pair_n += 1;
         }

@@ -31,6 +31,9 @@
 #define MRS_CHECK_YAW_PAIR 0x100u
 #define MRS_CHECK_SPEED 0x200u /* the speed jumped between two values by more than speed_step */
 #define MRS_CHECK_TURN 0x400u /* the speed disagrees with a_y / r in a steady turn */
+/* the yaw-rate pair's latest sample over yaw_pair_hold, not confirmed (not latched): the node
+ * passes it as mrs_step's hold, on which the law's command may shrink but not grow */
+#define MRS_SUSPECT_YAW_PAIR 0x800u
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
 #define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
@@ -66,6 +69,7 @@ typedef struct {
      * turn_lat_tol + turn_lat_rel |a_y| of the block's first sample; |v - a_y / r| against
      * turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r| */
     double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
+    double yaw_pair_hold; /* |r - r_2| of one sample over this, rad/s: the suspicion (<= yaw_pair_bound) */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -81,6 +85,7 @@ typedef struct {
     double delta_alpha; /* 1 - exp(-ts / sensor_tau) */
     double side_accel, speed_step;
     double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
+    double yaw_pair_hold;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
@@ -92,6 +97,8 @@ typedef struct {
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
     int32_t turn_n; /* samples in the steady-turn check's current block */
+    int32_t yaw_hold_n; /* samples of this suspicion the command was held on (at most MRS_YAW_PAIR_WINDOW) */
+    int32_t yaw_clear_n; /* samples in a row within yaw_pair_hold (MRS_YAW_PAIR_WINDOW of them re-arm the hold) */
     double lat_prev, steer2_prev, r_model, raw_prev, beta_prev, lat_beta_prev, aux_lag;
     double yaw_last, yaw_ref, lat_last, lat_ref, st_last, st_ref, st2_last, st2_ref;
     double kin_err, pair_err, model_err;

@@ -250,7 +250,18 @@ int mrs_node_control(mrs_node_t *n)
     }
     /* Which measurement this command answers; NONE when no valid yaw rate went into it. */
     n->answers = isnan(values[1]) ? MRS_MEAS_NONE : n->in[1].last_counter;
-    u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2]);
+    /* The monitor steps on the yaw-rate sensor's samples (a lost one at the newest values) and
+     * holds its verdict between them; it sees the command sent last period (n->command: 0 before
+     * the first).  Before the law: its suspicion of the yaw rate holds the law's command. */
+    /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
+     * pauses the pair check. */
+    yaw2 = isnan(values[1]) ? (double)NAN : yaw->value2;
+    for (k = 0; k < steps; ++k) {
+        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
+                                    (double)values[2], n->command, yaw2);
+    }
+    u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2],
+                             (uint8_t)((n->mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));
     if (n->state.fault_flags && !cause) {
         cause |= MRS_CAUSE_RANGE;
     }
@@ -263,16 +274,7 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    /* The monitor steps on the yaw-rate sensor's samples (a lost one at the newest values) and
-     * holds its verdict between them; it sees the command sent last period (n->command: 0 before
-     * the first); the limiter bounds this period's request with the monitor's verdict. */
-    /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
-     * pauses the pair check. */
-    yaw2 = isnan(values[1]) ? (double)NAN : yaw->value2;
-    for (k = 0; k < steps; ++k) {
-        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
-                                    (double)values[2], n->command, yaw2);
-    }
+    /* the limiter bounds this period's request with the monitor's verdict */
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
                                     (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u));
     state = n->state.status;

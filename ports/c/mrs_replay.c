@@ -11,8 +11,8 @@
  * node.py's monitor_steps, 0 when it holds its verdict; absent counts as 1; YAW_RATE_2 the yaw-rate
  * sensor's second element, absent or nan when there is none), as
  * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
- * does: u_req = mrs_step(...), the monitor (STEPS times) on the inputs and the previous line's
- * command, the limiter on u_req; each output line is
+ * does: the monitor (STEPS times) on the inputs and the previous line's command, u_req =
+ * mrs_step(..., its suspicion of the yaw rate), the limiter on u_req; each output line is
  * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
  * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
  * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
@@ -103,10 +103,11 @@ int main(int argc, char **argv)
             fprintf(stderr, "mrs_replay: line %ld: expected three, five, six or seven numbers (the sixth a count of steps)\n", n);
             return 2;
         }
-        u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2]);
         for (k = 0; k < (int)v[5]; ++k) {
             plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6]);
         }
+        u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
+                                 (uint8_t)((mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
                                     (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u));
         state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;

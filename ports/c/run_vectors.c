@@ -146,7 +146,7 @@ int main(int argc, char **argv)
             fclose(f);
             return fail("malformed row in", argv[2]);
         }
-        u = mrs_step(&c, &s, (mrs_real_t)v[1], (mrs_real_t)v[2], (mrs_real_t)v[3]);
+        u = mrs_step(&c, &s, (mrs_real_t)v[1], (mrs_real_t)v[2], (mrs_real_t)v[3], 0u);
         track((double)u, v[4], &u_err, &u_mag);
         track((double)s.u_prev, v[6], &u_err, &u_mag);
         track((double)s.z, v[5], &z_err, &z_mag);

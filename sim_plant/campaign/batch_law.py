@@ -60,20 +60,24 @@ class BatchLaw:
         self._ok_speed = self._slow = self._law_speed = None  # the range check, below active, the law's speed
         self._inv_kn: np.ndarray | None = None
 
-    def step(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    def step(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, speed: np.ndarray,
+             hold: np.ndarray | None = None) -> np.ndarray:
         """One control period of every row; the commands (rad).  ``status`` and
-        ``fault_flags`` per row as the scalar ``State`` has them."""
+        ``fault_flags`` per row as the scalar ``State`` has them.  ``hold``: ``step()``'s per row
+        (None: no row's)."""
         c = self.c
+        if hold is not None and not hold.any():
+            hold = None
         if speed is not self._speed:
             self._speed_terms(speed)
         if (self._speed_ok and self._flags_clear and _within(delta_driver, c.driver_angle_max)
                 and _within(yaw_rate, c.yaw_rate_max)):
-            return self._advance(delta_driver, yaw_rate, None, None)
+            return self._advance(delta_driver, yaw_rate, None, None, hold)
         idle, bad = self._check(delta_driver, yaw_rate)
         if idle is None:
-            return self._advance(delta_driver, yaw_rate, None, None)
+            return self._advance(delta_driver, yaw_rate, None, None, hold)
         with np.errstate(all="ignore"):  # an idle row's arithmetic (NaN, huge inputs) is dropped
-            return self._advance(delta_driver, yaw_rate, idle, bad)
+            return self._advance(delta_driver, yaw_rate, idle, bad, hold)
 
     def _speed_terms(self, speed: np.ndarray) -> None:
         c = self.c
@@ -110,7 +114,7 @@ class BatchLaw:
         return (idle if idle.any() else None), bad
 
     def _advance(self, delta_driver: np.ndarray, yaw_rate: np.ndarray, idle: np.ndarray | None,
-                 bad: np.ndarray | None) -> np.ndarray:
+                 bad: np.ndarray | None, hold: np.ndarray | None = None) -> np.ndarray:
         """The active path for every row; then, for the ``idle`` rows, the fade (``bad``: those
         with an input fault)."""
         c = self.c
@@ -133,8 +137,16 @@ class BatchLaw:
         hi_slew = u_prev + du
         lo = np.maximum(lo_slew, -c.u_max)
         hi = np.minimum(hi_slew, c.u_max)
+        if hold is not None:
+            # step()'s hold: the window keeps u_prev and 0's side of it (its comparisons' ties)
+            pos = u_prev > 0.0
+            lo, hi = (np.where(hold, np.where(pos, np.maximum(lo, 0.0), np.maximum(u_prev, lo)), lo),
+                      np.where(hold, np.where(pos, np.minimum(u_prev, hi), np.minimum(hi, 0.0)), hi))
         u = self._law(delta_driver, rho, lo, hi, law)
-        still = None if recovering is None else recovering & ~((lo_slew < u) & (u < hi_slew))
+        inside = (lo_slew < u) & (u < hi_slew)
+        if hold is not None:
+            inside &= ~hold
+        still = None if recovering is None else recovering & ~inside
         status = np.where((u >= c.u_max) | (u <= -c.u_max), mr.STATUS_SATURATED, mr.STATUS_ACTIVE).astype(np.int8)
         if idle is None:
             self.recovering, self.u_prev, self.status = still, u, status

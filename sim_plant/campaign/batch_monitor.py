@@ -42,10 +42,11 @@ _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_las
            "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "speed_last", "turn_r0", "turn_a0",
            "turn_res", "turn_r", "turn_err")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
-         "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n")
+         "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n", "yaw_hold_n",
+         "yaw_clear_n")
 _BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen", "turn_settled")
-#: every value the detailed flags can take (the highest bit is CHECK_TURN)
-_FLAG_VALUES = 2 * pl.CHECK_TURN
+#: every value the detailed flags can take (the highest bit is SUSPECT_YAW_PAIR)
+_FLAG_VALUES = 2 * pl.SUSPECT_YAW_PAIR
 
 
 class BatchMonitor:
@@ -150,7 +151,7 @@ class BatchMonitor:
                 self._set(name, paused, 0)
             self._set("turn_settled", paused, False)
             self._set("started", paused, False)
-            self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
+            flags |= self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
             self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
@@ -316,13 +317,15 @@ class BatchMonitor:
         self.yaw2_seen |= ok
         return lost
 
-    def _yaw_pair(self, act: np.ndarray | None, r: np.ndarray, r2: np.ndarray | None) -> None:
+    def _yaw_pair(self, act: np.ndarray | None, r: np.ndarray, r2: np.ndarray | None) -> np.ndarray | int:
         """Check 4, the yaw-rate pair, in the rows that ``act`` (None: every row): the mean of
         r - r2 over the last ``YAW_PAIR_WINDOW`` samples; a row without the second element
-        (NaN, or ``r2`` None) or paused restarts its window."""
+        (NaN, or ``r2`` None) or paused restarts its window.  Returns the flags' SUSPECT_YAW_PAIR
+        (not latched): the rows whose latest r - r2 is over ``yaw_pair_hold`` (``monitor_step``'s
+        suspicion, at most ``YAW_PAIR_WINDOW`` samples until as many within it re-arm it)."""
         if r2 is None:
             self.yaw_pair_n.fill(0)
-            return
+            return 0
         c, w = self.c, self.yaw_pair
         ok = (-1e3 < r2) & (r2 < 1e3)
         if act is not None:
@@ -335,6 +338,15 @@ class BatchMonitor:
         e = np.abs((w[0] + w[1] + w[2] + w[3] + w[4]) * (1.0 / pl.YAW_PAIR_WINDOW))
         self.yaw_pair_err = np.where(full, e * c.inv_yaw_pair_bound, self.yaw_pair_err)
         np.bitwise_or(self.latched, pl.CHECK_YAW_PAIR, out=self.latched, where=full & (e > c.yaw_pair_bound))
+        # the suspicion: this sample over yaw_pair_hold, for at most a window's samples
+        e = r - r2
+        over = ok & ((e > c.yaw_pair_hold) | (e < -c.yaw_pair_hold))
+        suspect = over & (self.yaw_hold_n < pl.YAW_PAIR_WINDOW)
+        self.yaw_hold_n += suspect
+        within_ = ok & ~over
+        self.yaw_clear_n = np.where(over, 0, self.yaw_clear_n + (within_ & (self.yaw_clear_n < pl.YAW_PAIR_WINDOW)))
+        self.yaw_hold_n = np.where(within_ & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW), 0, self.yaw_hold_n)
+        return np.where(suspect, pl.SUSPECT_YAW_PAIR, 0)
 
     # monitor_step's path for a period without a new redundant sample, every row checking: the
     # model check, the count since the last sample and the four frozen checks with new_sample
@@ -356,7 +368,7 @@ class BatchMonitor:
         self.turn_settled = self.turn_settled & act
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
-        self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0)
+        self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0) | (self.flags & pl.SUSPECT_YAW_PAIR)
         self.bits = self._bits_of[self.flags]
         return self.bits
 
@@ -413,8 +425,8 @@ class BatchMonitor:
             self.st2_same += moved
         else:
             _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
-        self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
-        self.flags = latched | np.where(self._lost(r, r2), pl.MISSING, 0)
+        suspect = self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
+        self.flags = latched | np.where(self._lost(r, r2), pl.MISSING, 0) | suspect
         self.bits = self._bits_of[self.flags]
         return self.bits
 

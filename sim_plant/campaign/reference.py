@@ -15,8 +15,8 @@ with the bus taken out:
   period late, ``MRS_CtrlStatus`` every 50 periods, its plausibility bits reaching the actuator
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
-* the controller: ``u = step(d, r, v)``, ``bits = monitor_step(mc, ms, d, d2, r, lat, v,
-  previous_command, r_2)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
+* the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2)``,
+  ``u = step(d, r, v, ms.flags & SUSPECT_YAW_PAIR)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
   ``bits & PLAUS_FAULT``.
 
 The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
@@ -128,9 +128,10 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         speed_seen[k], yaw_2_seen[k] = held["speed"], yaw_rate_2
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
         if ctrl is not None and ac is not None:
-            u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"])
             bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
                             held["speed"], command, yaw_rate_2)
+            u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"],
+                          (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS)
             state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
             if (k + 1) % status_every == 0:

@@ -221,14 +221,15 @@ class _Replayer:
         return vals[0], vals[1], vals[2], lat, steer_2, yaw_2
 
     def _shadow(self, inputs: tuple[float, float, float, float, float, float], monitor_steps: int) -> float:
-        """The command the node should send for ``inputs``: step(), the monitor's ``monitor_steps``
-        steps (none: its held bits) and the authority limiter, run on copies of the node's states."""
+        """The command the node should send for ``inputs``: the monitor's ``monitor_steps`` steps
+        (none: its held bits), step() with its suspicion of the yaw rate and the authority
+        limiter, run on copies of the node's states."""
         node = self.node
         d, r, v, lat, d2, r2 = inputs
-        u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v)
         bits, monitor = node.plausibility, copy.deepcopy(node.monitor)
         for _ in range(monitor_steps):
             bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2)
+        u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v, (monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
                                  monitor.flags & pl.CUT_CHECKS)
 

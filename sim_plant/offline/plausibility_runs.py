@@ -182,11 +182,13 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         for ch in CHANNELS:
             if k % every[ch] == 0:
                 held[ch] = read[ch]
-        u = reg.step(held["steer"], held["yaw_rate"], held["speed"])
         # the command sent the period before, as the controller node passes it (the monitor
         # models the actuator's lag itself)
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
                         pipeline[0], held["yaw_rate_redundant"])
+        # before the law, as the node: the monitor's suspicion of the yaw rate holds its command
+        u = reg.step(held["steer"], held["yaw_rate"], held["speed"],
+                     guard and (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
         if guard:
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut)
         pipeline.append(u)
