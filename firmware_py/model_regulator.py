@@ -265,7 +265,8 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     Inputs: driver's front-wheel angle (rad), measured yaw rate (rad/s), speed (m/s); ``hold``
     (the plausibility monitor's suspicion of the yaw rate, not yet confirmed): the command may
     move toward zero but no further from it than it is, inside the law's own clamp, so that
-    the state follows the command it held (no windup) and the release keeps the rate limit.
+    the state follows the command it held: no windup, so the release does not jump to a request
+    that grew meanwhile (and a calibrated rate limit still bounds it).
     ``s.status`` and ``s.fault_flags`` tell what happened.  A NaN fails every range
     comparison below, so non-finite inputs are caught by the same checks.
     """

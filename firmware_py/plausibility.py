@@ -311,7 +311,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
     if not cfg.yaw_pair_hold <= cfg.yaw_pair_bound:
-        # a suspicion is what the window has not confirmed yet: above the bound it never comes first
+        # a suspicion comes before the fault it suspects: its threshold is not above the fault's
         raise ValueError(f"yaw_pair_hold must not exceed yaw_pair_bound, got {cfg.yaw_pair_hold!r} and "
                          f"{cfg.yaw_pair_bound!r}")
     if not cfg.turn_yaw_tol < 2.0 * cfg.turn_yaw_min:
@@ -471,8 +471,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         if i >= YAW_PAIR_WINDOW:
             i = 0
         s.yaw_pair_idx = i
-        # The suspicion: this sample alone over yaw_pair_hold, held on for at most a window's
-        # samples (an offset between hold and bound is not a fault: it must not freeze the law)
+        # The suspicion, capped: an offset between hold and bound is no fault the window confirms,
+        # and must not keep the law's command from growing for as long as it lasts
         e = yaw_rate - yaw_rate_redundant
         if e > c.yaw_pair_hold or e < -c.yaw_pair_hold:
             s.yaw_clear_n = 0

@@ -268,3 +268,47 @@ def test_the_step_functions_call_nothing(tmp_path: Path) -> None:
     for fn in ("mrs_monitor_step", "mrs_authority_step"):
         body = dis.split(f"<{fn}>:")[1].split("\n\n")[0]
         assert "call" not in body, fn
+
+
+def test_the_c_law_s_hold_is_bit_identical_to_python_through_the_replay_driver(tmp_path: Path) -> None:
+    """``mrs_replay`` (the monitor, ``mrs_step`` with the suspicion's hold, the limiter) against
+    the same three in Python, per period to the last bit: a second element that now agrees, now
+    sits between the hold and the bound (suspected, never confirmed), commands of both signs
+    held, the car slowed below the activation speed and back (the law re-initialised and
+    recovering while held)."""
+    from firmware_py import calibration_file
+    from firmware_py import model_regulator as mr
+    from sim_plant.harness import replay_c
+
+    exe = replay_c.build()
+    cfg = mr.ControllerConfig()
+    rng = random.Random(18)
+    rows = []
+    apart = 0.0
+    for k in range(4000):
+        if k % 20 == 0:  # each spell of agreement re-arms the suspicion for the next
+            apart = rng.choice((0.0, 0.025, -0.025, 0.0))
+        v = 3.0 if 1500 <= k < 1600 else 20.0
+        r = 0.05 * math.sin(k / 60.0) + rng.gauss(0.0, 0.002)
+        d = 0.01 * math.sin(k / 90.0)
+        rows.append((d, r, v, v * r, d, 1, r - apart + rng.gauss(0.0, 0.001)))
+    path = tmp_path / "replay.cfg"
+    path.write_text(calibration_file.dumps(cfg))
+    text = "".join(" ".join(repr(float(x)) for x in row) + "\n" for row in rows)
+    proc = subprocess.run([str(exe), str(path)], input=text, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    c_u = [float(line.split()[0]) for line in proc.stdout.splitlines()]
+
+    c, st = mr.configure(cfg), mr.State()
+    mc, ms = pl.configure(pl.PlausibilityConfig(ts=cfg.ts)), pl.MonitorState()
+    ac, ast = au.configure_authority(au.AuthorityConfig(ts=cfg.ts, u_max=cfg.aux_limit)), au.AuthorityState()
+    u_prev, py_u, held = 0.0, [], {1: 0, -1: 0}
+    for d, r, v, lat, d2, _steps, r2 in rows:
+        bits = pl.monitor_step(mc, ms, d, d2, r, lat, v, u_prev, r2)
+        hold = (ms.flags & pl.SUSPECT_YAW_PAIR) != 0
+        if hold and st.u_prev != 0.0:
+            held[1 if st.u_prev > 0.0 else -1] += 1
+        u_prev = au.authority_step(ac, ast, mr.step(c, st, d, r, v, hold), bits, ms.flags & pl.CUT_CHECKS)
+        py_u.append(u_prev)
+    assert c_u == py_u
+    assert held[1] > 0 and held[-1] > 0  # both branches of the hold compared

@@ -245,6 +245,8 @@ def test_the_pair_s_suspicion_holds_the_law_in_both_nodes_without_a_fault(secoc_
     differ = [k for k, (a, b) in enumerate(zip(u_free, u_held)) if a != b]
     assert differ and differ[0] < pl.YAW_PAIR_WINDOW  # held from the start
     assert all(abs(u_held[k]) <= abs(u_held[k - 1]) for k in range(1, pl.YAW_PAIR_WINDOW))
+    # and free after the cap: the command follows the law again, closing on the free drive's
+    assert abs(u_held[-1]) > 1e-4 and abs(u_held[-1] - u_free[-1]) < 0.1 * abs(u_free[-1])
 
 
 def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in_python(secoc_check: Path) -> None:

@@ -318,7 +318,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             i = 0;
         }
         s->yaw_pair_idx = i;
-        /* the suspicion: this sample alone over yaw_pair_hold, for at most a window's samples */
+        /* the suspicion, capped so that an offset the window never confirms cannot freeze the law */
         e = yaw_rate - yaw_rate_redundant;
         if (e > c->yaw_pair_hold || e < -c->yaw_pair_hold) {
             s->yaw_clear_n = 0;

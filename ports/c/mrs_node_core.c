@@ -274,7 +274,7 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    /* the limiter bounds this period's request with the monitor's verdict */
+    /* independent of the law: a pair's fault removes the command at the rate bound, not faded */
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
                                     (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u));
     state = n->state.status;

@@ -1,9 +1,9 @@
 /*
  * One controller on one bus, C99 port of firmware_py/controller/node.py (ControllerNode): the
  * receive chain of mrsteer_dbc.link.RxLink (length -> CRC -> counter value -> range -> MAC ->
- * counter sequence), each input's freshness, mrs_step(), the plausibility monitor and the
- * authority limiter (mrs_monitor.c: firmware_py.plausibility, firmware_py.authority) on its
- * command, and the command and status frames of
+ * counter sequence), each input's freshness, the plausibility monitor, mrs_step() (held on the
+ * monitor's suspicion of the yaw rate) and the authority limiter (mrs_monitor.c:
+ * firmware_py.plausibility, firmware_py.authority) on its command, and the command and status frames of
  * mrsteer_dbc.link.TxLink (alive counter, SecOC fields and MAC when keyed, CRC last).
  * Frames are packed and unpacked only through mrs_contract.c, i.e. the cantools-generated codec.
  */

@@ -8,8 +8,8 @@ array per slot of ``MonitorState``.  The coefficients are the firmware's own
 (``plausibility.configure``).  ``tests/test_campaign_engine.py`` holds it equal to the scalar
 code row by row and period by period: the bits, the flags, the counters, the residuals.
 
-``engine`` runs it after the law, as the controller node does, with the yaw-rate sensor's
-second element (``yaw_rate_redundant``) every period.  ``step`` has a shortcut for the periods
+``engine`` runs it before the law, as the controller node does (its suspicion of the yaw rate
+holds the law), with the yaw-rate sensor's second element (``yaw_rate_redundant``) every period.  ``step`` has a shortcut for the periods
 between redundant samples (the scalar's branches for such a period, checked by the same tests).
 """
 
@@ -338,14 +338,14 @@ class BatchMonitor:
         e = np.abs((w[0] + w[1] + w[2] + w[3] + w[4]) * (1.0 / pl.YAW_PAIR_WINDOW))
         self.yaw_pair_err = np.where(full, e * c.inv_yaw_pair_bound, self.yaw_pair_err)
         np.bitwise_or(self.latched, pl.CHECK_YAW_PAIR, out=self.latched, where=full & (e > c.yaw_pair_bound))
-        # the suspicion: this sample over yaw_pair_hold, for at most a window's samples
+        # the suspicion, capped so that an offset the window never confirms cannot freeze the law
         e = r - r2
         over = ok & ((e > c.yaw_pair_hold) | (e < -c.yaw_pair_hold))
         suspect = over & (self.yaw_hold_n < pl.YAW_PAIR_WINDOW)
         self.yaw_hold_n += suspect
-        within_ = ok & ~over
-        self.yaw_clear_n = np.where(over, 0, self.yaw_clear_n + (within_ & (self.yaw_clear_n < pl.YAW_PAIR_WINDOW)))
-        self.yaw_hold_n = np.where(within_ & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW), 0, self.yaw_hold_n)
+        clear = ok & ~over
+        self.yaw_clear_n = np.where(over, 0, self.yaw_clear_n + (clear & (self.yaw_clear_n < pl.YAW_PAIR_WINDOW)))
+        self.yaw_hold_n = np.where(clear & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW), 0, self.yaw_hold_n)
         return np.where(suspect, pl.SUSPECT_YAW_PAIR, 0)
 
     # monitor_step's path for a period without a new redundant sample, every row checking: the

@@ -155,7 +155,7 @@ class _Group:
             raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
         self.status_every = status_cycle(ts)
         self.law = self.monitor = self.limiter = None
-        if config is not None:  # the controller node: step(), the monitor, the authority limiter
+        if config is not None:  # the controller node: the monitor, step() (held on its suspicion), the limiter
             self.law = BatchLaw(config, n)
             self.monitor = BatchMonitor(pl.PlausibilityConfig(ts=ts), n)
             self.limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)), n)
