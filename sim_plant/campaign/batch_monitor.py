@@ -9,8 +9,9 @@ array per slot of ``MonitorState``.  The coefficients are the firmware's own
 code row by row and period by period: the bits, the flags, the counters, the residuals.
 
 ``engine`` runs it before the law, as the controller node does (its suspicion of the yaw rate
-holds the law), with the yaw-rate sensor's second element (``yaw_rate_redundant``) every period.  ``step`` has a shortcut for the periods
-between redundant samples (the scalar's branches for such a period, checked by the same tests).
+holds the law), with the yaw-rate sensor's second element (``yaw_rate_redundant``) every
+period.  ``step`` has a shortcut for the periods between redundant samples (the scalar's
+branches for such a period, checked by the same tests).
 """
 
 from __future__ import annotations
@@ -331,7 +332,8 @@ class BatchMonitor:
         if act is not None:
             ok &= act
         i, cols = self.yaw_pair_idx, self._cols
-        w[i, cols] = np.where(ok, r - r2, w[i, cols])
+        apart = r - r2  # this sample of the pair: into the window, and the suspicion's
+        w[i, cols] = np.where(ok, apart, w[i, cols])
         self.yaw_pair_idx = np.where(ok, np.where(i + 1 >= pl.YAW_PAIR_WINDOW, 0, i + 1), i)
         self.yaw_pair_n = np.where(ok, np.minimum(self.yaw_pair_n + 1, pl.YAW_PAIR_WINDOW), 0)
         full = ok & (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW)
@@ -339,8 +341,7 @@ class BatchMonitor:
         self.yaw_pair_err = np.where(full, e * c.inv_yaw_pair_bound, self.yaw_pair_err)
         np.bitwise_or(self.latched, pl.CHECK_YAW_PAIR, out=self.latched, where=full & (e > c.yaw_pair_bound))
         # the suspicion, capped so that an offset the window never confirms cannot freeze the law
-        e = r - r2
-        over = ok & ((e > c.yaw_pair_hold) | (e < -c.yaw_pair_hold))
+        over = ok & ((apart > c.yaw_pair_hold) | (apart < -c.yaw_pair_hold))
         suspect = over & (self.yaw_hold_n < pl.YAW_PAIR_WINDOW)
         self.yaw_hold_n += suspect
         clear = ok & ~over
