@@ -44,19 +44,20 @@ def _yaw(t: float, value: float, k: int) -> tuple[float, int, bytes]:
     return (t, C.frame_id(names.MSG_YAW), C.encode(names.MSG_YAW, {names.SIG_YAW_RATE: value}, k % 15))
 
 
-def _speed(t: float, k: int) -> tuple[float, int, bytes]:
-    return (t, C.frame_id(names.MSG_SPEED), C.encode(names.MSG_SPEED, {names.SIG_SPEED: 20.0}, k % 15))
+def _speed(t: float, k: int, value: float = 20.0) -> tuple[float, int, bytes]:
+    return (t, C.frame_id(names.MSG_SPEED), C.encode(names.MSG_SPEED, {names.SIG_SPEED: value}, k % 15))
 
 
 def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, fade: float = FADE,
              unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
              early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END,
              status_lag: float = 0.0, episode: tuple[float, float] | None = None, gap: bool = False,
-             redundant_lost: tuple[int, ...] | None = None) -> Evidence:
+             redundant_lost: tuple[int, ...] | None = None, speed_error=lambda t: 0.0) -> Evidence:
     """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
-    ONSET on the controller's), a command every period (U0, FAULT from ONSET + ``detect``,
-    faded at ``fade``), a status every 100 ms; with ``redundant_lost``, the redundant frame every
-    50 ms on the controller's bus but for those samples (counted from 0 s)."""
+    ONSET on the controller's; the speed likewise, 20 m/s + speed_error(t)), a command every
+    period (U0, FAULT from ONSET + ``detect``, faded at ``fade``), a status every 100 ms; with
+    ``redundant_lost``, the redundant frame every 50 ms on the controller's bus but for those
+    samples (counted from 0 s)."""
     n = int(round(end / TS))
     vehicle, ctl, cmds, angles, statuses = [], [], [], [], []
     t_fault = None if detect is None else ONSET + detect
@@ -73,7 +74,7 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
                 names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4, names.SIG_STEER_ANGLE_2: 0.0}, (k // 25) % 15)))
         if k % 5 == 0 and not stall:
             vehicle.append(_speed(t, k // 5))
-            ctl.append(_speed(t + 1e-4, k // 5))
+            ctl.append(_speed(t + 1e-4, k // 5, 20.0 + (speed_error(t) if t >= ONSET else 0.0)))
         faulted = (t_fault is not None and t >= t_fault) or (episode is not None and episode[0] <= t < episode[1])
         if t_fault is not None and t >= t_fault:
             u = min(0.0, u + fade * TS)
@@ -191,11 +192,29 @@ def test_sensor_rows_are_the_issues_kinds() -> None:
     assert all(r.fault.stop == r.duration and not r.no_fault and r.detect_within is None for r in sensor)
     targets = {(r.fault.target, r.fault.signal) for r in sensor}
     assert {(names.MSG_YAW, None), (names.MSG_STEER, None), (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
-            (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2)} <= targets
+            (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2), (names.MSG_SPEED, None)} <= targets
     # an offset of 3 deg/s, a gain of 0.5 and 1.5, a drift of 1 deg/s per s: the issue's ranges
     params = {(r.fault.kind, round(r.fault.param, 6)) for r in sensor}
     assert {("sensor_bias", round(math.radians(3.0), 6)), ("sensor_scale", 0.5), ("sensor_scale", 1.5),
             ("sensor_drift", round(math.radians(1.0), 6))} <= params
+
+
+def test_a_speed_row_is_judged_against_the_speed_checks_jump() -> None:
+    # The speed has no error bound but the jump its check lets pass (speed_step 1.5 m/s): a
+    # step fault's error leaves it at the onset, so detection counts from there.
+    row = _row("curve: speed gain 0.5")
+    assert (row.fault.target, row.fault.kind, row.plausibility) == (names.MSG_SPEED, "sensor_scale", names.PLAUS_YAW)
+    halved = dict(error=lambda t: 0.0, speed_error=lambda t: -10.0)
+    series = [s for s in error_series(evidence(row, **halved)) if s[0] >= ONSET]
+    assert series and all(err == pytest.approx(-10.0, abs=0.002) and bound == 1.5 for _, err, bound in series)
+    fails, observed, _ = _judge(evidence(row, **halved))
+    assert fails == [], fails
+    assert "error over its bound 0 ms after onset (peak 6.7x)" in "; ".join(observed)
+    fails, _, _ = _judge(evidence(row, detect=0.35, **halved))
+    assert any("reported late" in f for f in fails)
+    # an offset the jump check lets pass does not test the monitor
+    fails, _, _ = _judge(evidence(row, error=lambda t: 0.0, speed_error=lambda t: 1.0, detect=None))
+    assert any("reached 0.67 of its bound" in f for f in fails), fails
 
 
 def test_the_curve_scenario_is_a_driver_steering_1_5_deg(tmp_path) -> None:
@@ -220,6 +239,21 @@ def test_under_secoc_the_plant_injects_the_sensor_rows_faults(tmp_path) -> None:
     channel2 = F.rows.plant_fault(secured["curve: steering channel 2 stuck at 0"])
     frozen = F.rows.plant_fault(secured["yaw rate frozen (value, counter runs)"])
     assert (channel2.sensor, channel2.value) == ("steer_redundant", 0.0) and frozen.value is None
+
+
+def test_a_speed_fault_the_plant_injects_is_measured_from_the_traced_speed() -> None:
+    row = {r.name: r for r in F.secured_rows()}["curve: speed gain 0.5"]
+    assert row.at_plant and F.rows.plant_fault(row).sensor == "speed"
+    e = evidence(row, error=lambda t: 0.0)
+    n = int(round(END / TS))
+    t = [k * TS for k in range(n)]
+    columns = {"t_s": t, "wall_s": t, "yaw_rate_rad_s": [R] * n, "v_m_s": [20.0] * n,
+               "speed_measured_m_s": [10.0 if tk >= ONSET else 20.0 for tk in t]}
+    e = replace(e, bridge={"first_affected": None, "last_affected": None, "affected": 0},
+                trace=Trace(t, [0.0] * n, [0.0] * n, t, columns))
+    series = error_series(e)
+    assert [err for tk, err, _ in series if tk >= ONSET] == [-10.0] * sum(tk >= ONSET for tk in t)
+    assert {b for _, _, b in series} == {1.5} and max(abs(err) for tk, err, _ in series if tk < ONSET) == 0.0
 
 
 def test_a_fault_the_plant_injects_is_timed_and_measured_from_its_trace() -> None:

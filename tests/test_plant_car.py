@@ -15,6 +15,7 @@ from mrsteer_dbc import names
 from sim_plant.car import disturbances as dist
 from sim_plant.car import scenario as scn
 from sim_plant.car.plants import Car
+from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.nodes.plant import PlantNode
 
@@ -75,6 +76,15 @@ def test_noisy_sensors_are_seeded_and_the_true_state_is_traced(channel: str) -> 
     true = trace[:, PlantNode.TRACE_COLUMNS.index("yaw_rate_rad_s")]
     traced = trace[:, PlantNode.TRACE_COLUMNS.index("yaw_rate_measured_rad_s")]
     assert measured == pytest.approx(traced, abs=1e-6)  # the frames carry the sensor's value
+    # The speed as measured is traced beside the true one (a fault's error is their difference).
+    halved = base.with_sensor_faults((SensorFault("speed", "scale", 0.2, 0.5),))
+    faulty, faulty_frames = _play(f"{channel}-speed", halved)
+    steps, every = np.array(faulty.stats.trace), faulty.every[names.MSG_SPEED]
+    speeds = np.array(_signal(faulty_frames, names.MSG_SPEED, names.SIG_SPEED))
+    v_measured = steps[::every, PlantNode.TRACE_COLUMNS.index("speed_measured_m_s")]
+    v_true = steps[::every, PlantNode.TRACE_COLUMNS.index("v_m_s")]
+    assert speeds == pytest.approx(v_measured, abs=0.002)
+    assert v_measured[-1] == pytest.approx(0.5 * v_true[-1], abs=0.01)
     # Before the 0.5 s moment the car is still (r = 0): the sensor shows noise through its filter.
     assert np.all(true == 0.0) and 0.0 < np.std(measured) < math.radians(0.22)
 

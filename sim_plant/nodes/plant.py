@@ -100,7 +100,8 @@ class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
                      "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "yaw_rate_measured_rad_s",
                      "steer_measured_rad", "lat_accel_measured_m_s2", "steer_redundant_measured_rad",
-                     "yaw_rate_redundant_measured_rad_s", "wall_s")  # wall_s last: written to the microsecond
+                     "yaw_rate_redundant_measured_rad_s", "speed_measured_m_s",
+                     "wall_s")  # wall_s last: written to the microsecond
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
                  delay_steps: int = 1, cmd_timeout: float = CMD_TIMEOUT_S, lockstep_timeout: float = 1.0,
@@ -252,7 +253,7 @@ class PlantNode:
             self.stats.trace.append((t, driver, applied, m_z + self.plant.loads.m_z, self.scene.mu, self.scene.v, float(y[0]), float(y[1]),
                                      float(y[2]), self.latest_cmd, measured_yaw, measured[SIG_STEER_ANGLE],
                                      measured[SIG_LAT_ACCEL], measured[SIG_STEER_ANGLE_2], measured[SIG_YAW_RATE_2],
-                                     time.time()))
+                                     measured[SIG_SPEED], time.time()))
         # A lagging actuator moves within the step: the car gets the position's mean over it.
         self.plant.advance(driver + (applied if position is None else position.mean), m_z)
         if not self.plant.linear:

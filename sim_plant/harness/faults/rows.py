@@ -137,6 +137,10 @@ SENSOR_ROWS = (
             f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
     _sensor("curve: yaw-rate gain 0.5", "sensor_scale", names.MSG_YAW, 0.5, _YAW,
             f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+    # A speed the car cannot have changed to: the jump check finds it at its onset.  Where the
+    # driver steers the law follows K_n(v) of the wrong speed; reported as the yaw rate's bit.
+    _sensor("curve: speed gain 0.5", "sensor_scale", names.MSG_SPEED, 0.5, _YAW,
+            f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
     # The element the law does not use: only the pair check can see it.
     _sensor("curve: yaw-rate element 2 stuck at 0", "sensor_stuck", names.MSG_YAW, 0.0, _YAW,
             f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_YAW_RATE_2, scenario=CURVE),

@@ -26,7 +26,8 @@ the bound ``offline.plausibility_runs.sensor_bound`` states: the yaw rate's ``ya
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
 plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
-(``PlausibilityConfig``'s defaults, as the controller runs).
+(``PlausibilityConfig``'s defaults, as the controller runs); the speed's, which ``sensor_bound``
+does not state, the speed check's ``speed_step`` (``row_bound``).
 It counts as left the bound when it stays over it for 300 ms or until the fault is reported.
 """
 
@@ -76,7 +77,8 @@ _TRACE_COLUMNS = {names.SIG_YAW_RATE: ("yaw_rate_measured_rad_s", "yaw_rate_rad_
                   names.SIG_STEER_ANGLE: ("steer_measured_rad", "driver_angle_rad"),
                   names.SIG_LAT_ACCEL: ("lat_accel_measured_m_s2", "lat_accel_m_s2"),
                   names.SIG_STEER_ANGLE_2: ("steer_redundant_measured_rad", "driver_angle_rad"),
-                  names.SIG_YAW_RATE_2: ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s")}
+                  names.SIG_YAW_RATE_2: ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s"),
+                  names.SIG_SPEED: ("speed_measured_m_s", "v_m_s")}
 
 
 #: The sensor (``sensor_bound``'s name) each falsified signal carries.
@@ -92,10 +94,19 @@ def onset(e: Evidence) -> float | None:
     return next((w for t, w in zip(tr.t, tr.wall) if t >= e.row.fault.start - 1e-9), None)
 
 
+def row_bound(sensor: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool) -> float:
+    """``sensor_bound``, and for the speed the largest change its jump check lets pass between
+    two samples (``speed_step``): the matrix's speed rows are step faults, whose error appears
+    in one jump at the onset.  A speed that drifts has no error bound outside a steady turn
+    (docs/controller.md, "Why a steady-turn speed check"), so it makes no row."""
+    if sensor == "speed":
+        return cfg.speed_step
+    return float(sensor_bound(sensor, cfg, r, v, pair))
+
+
 def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) -> list[ErrorSample]:
-    """The falsified signal's error and its bound at each frame the controller got (for a
-    fault the plant injects: at each plant step, measured less true, from its trace).  A row
-    on the speed has none (``sensor_bound`` raises ValueError): the matrix has no such row."""
+    """The falsified signal's error and its bound (``row_bound``) at each frame the controller got
+    (for a fault the plant injects: at each plant step, measured less true, from its trace)."""
     fault = e.row.fault
     signal = fault.signal or names.SENSOR_SIGNAL[fault.target]
     sensor = _SENSOR[signal]
@@ -104,7 +115,7 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
         measured, true = (cols[c] for c in _TRACE_COLUMNS[signal])
         pair = signal == names.SIG_LAT_ACCEL and any(
             math.isfinite(x) for x in cols.get(_TRACE_COLUMNS[names.SIG_YAW_RATE_2][0], ()))
-        return [(w, m - x, sensor_bound(sensor, cfg, r, v, pair)) for w, m, x, r, v in
+        return [(w, m - x, row_bound(sensor, cfg, r, v, pair)) for w, m, x, r, v in
                 zip(e.trace.wall, measured, true, cols["yaw_rate_rad_s"], cols["v_m_s"])]
     truth = _values(e.vehicle_frames, fault.target, signal)
     seen = _values(e.frames, fault.target, signal)
@@ -112,8 +123,7 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
     speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
     yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
     pair = signal == names.SIG_LAT_ACCEL and any(math.isfinite(x) for _, x in yaw2)
-    return [(tc, got - x, sensor_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0),
-                                       pair))
+    return [(tc, got - x, row_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair))
             for (tv, x), (tc, got) in zip(truth, seen)]
 
 
