@@ -33,7 +33,7 @@ class AuthorityConfig:
     fault_fade_rate: float = math.radians(30.0)  # rad/s toward 0 on a plausibility fault: a wrong command
     panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
     engage: float = math.radians(0.1)  # |u| above this counts as intervening
-    rearm_time: float = 1.0  # s of |u| <= engage before the window starts afresh
+    rearm_time: float = 1.0  # s of |u| and |u_request| <= engage before the window starts afresh
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,6 +75,9 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
     +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
     fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
     ``panic_window`` unless the inputs are known consistent (every check running: no DEGRADED).
+    The window starts afresh after ``rearm_time`` in which neither the command nor the request
+    intervened: a request the time rule faded stays faded until the law lets go of it, rather
+    than coming back for another window each time the faded command has rested.
     ``cut`` nonzero with a fault (the node passes the monitor's ``flags & CUT_CHECKS``: a pair
     check): the fault was found while its command is still building, so the command is removed
     at ``rate_max``, not faded.  ``s.flags`` says which bound acted."""
@@ -104,7 +107,7 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
         d = -du
         flags |= AUTH_RATE if du == c.du_max else 0
     u = s.u + d
-    if u > c.engage or u < -c.engage:
+    if u > c.engage or u < -c.engage or u_request > c.engage or u_request < -c.engage:
         if s.engaged < c.window_steps:
             s.engaged += 1
         s.quiet = 0

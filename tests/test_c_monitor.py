@@ -142,6 +142,9 @@ CASES = {
         pr.steady_curve(10.0, 1.0, a_y=3.4, ramp=0.0, duration=2.0)),
     "second yaw-rate element lost half way (DEGRADED)": lambda: _lost_second_element(
         _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
+    "a request that persists while DEGRADED (the time rule fades it, its rest does not re-arm)": lambda: [
+        (*row[:6], 0.01, *row[7:]) for row in _lost_second_element(
+            _run_rows(pr.steady_curve(20.0, 1.0, duration=4.0), SensorConfig(seed=5)))],
     "second element lost with the first missing and below speed_min": lambda: _lost_edges(
         _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
     "a side-wind gust at 10 m/s, the pair in the loop (side_accel)": lambda: _run_rows(
@@ -170,6 +173,13 @@ def test_the_c_monitor_and_limiter_are_bit_identical_to_python(runner: Path, cas
     assert len(c) == len(py) == len(rows)
     for k, (x, y) in enumerate(zip(py, c)):
         assert x == y, f"period {k}: python {x} != C {y}"
+
+
+def test_a_persisting_request_stays_faded_after_the_window() -> None:
+    rows = CASES["a request that persists while DEGRADED (the time rule fades it, its rest does not re-arm)"]()
+    u = [out[5] for out in _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)]
+    faded = next(k for k in range(len(u) // 2, len(u)) if u[k] == 0.0)
+    assert len(u) - faded > round(1.0 / 0.002) and set(u[faded:]) == {0.0}  # rested over rearm_time: still 0
 
 
 def test_a_lost_second_element_is_degraded_from_its_first_missing_sample() -> None:

@@ -205,6 +205,18 @@ def test_authority_ends_an_intervention_at_the_panic_window_only_when_degraded()
     assert au.authority_step(c, s2, 0.01, pl.PLAUS_DEGRADED) > 0.0
 
 
+def test_a_request_the_time_rule_faded_does_not_re_arm_the_window() -> None:
+    # The faded command rests, but the law still asks: no fresh window until it lets go.
+    c, s = au.configure_authority(au.AuthorityConfig()), au.AuthorityState()
+    window, rearm = round(2.0 / TS), round(1.0 / TS)
+    u = [au.authority_step(c, s, 0.02, pl.PLAUS_DEGRADED) for _ in range(window + 10 * rearm)]
+    faded = u.index(0.0)
+    assert window < faded < window + rearm and set(u[faded:]) == {0.0} and s.flags == au.AUTH_TIME
+    rest = [au.authority_step(c, s, 0.0, pl.PLAUS_DEGRADED) for _ in range(rearm)]
+    assert s.engaged == 0 and rest[-1] == 0.0  # the law at rest for rearm_time: the window starts afresh
+    assert au.authority_step(c, s, 0.02, pl.PLAUS_DEGRADED) > 0.0
+
+
 # ------------------------------------------------------------------ offline, closed loop
 
 FAULT_FREE = [("split-mu", 0), ("split-mu", 1), ("side-wind", 0), ("side-wind", 2), ("blow-out", 1),

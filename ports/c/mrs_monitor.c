@@ -598,7 +598,8 @@ double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t
         flags |= (du == c->du_max) ? MRS_AUTH_RATE : 0u;
     }
     u = s->u + d;
-    if (u > c->engage || u < -c->engage) {
+    /* the request too: a request the time rule faded does not re-arm the window by resting the command */
+    if (u > c->engage || u < -c->engage || u_request > c->engage || u_request < -c->engage) {
         if (s->engaged < c->window_steps) {
             s->engaged += 1;
         }

@@ -49,7 +49,7 @@ class BatchAuthority:
         d = np.where(up, du, np.where(down, -du, d))
         flags |= np.where((up | down) & (du == c.du_max), au.AUTH_RATE, 0)
         self.flags = flags
-        return self._move(d)
+        return self._move(d, u_request)
 
     def _checked(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None) -> np.ndarray:
         """``step`` with every request finite and no row DEGRADED (so none timed out): a
@@ -75,14 +75,15 @@ class BatchAuthority:
             faulted = au.AUTH_FAULT | (np.where(cutting & (bounded != d), au.AUTH_RATE, 0) if cutting is not None else 0)
             flags = np.where(fault, faulted, flags)
         self.flags = flags
-        return self._move(bounded)
+        return self._move(bounded, u_request)
 
-    def _move(self, d: np.ndarray) -> np.ndarray:
+    def _move(self, d: np.ndarray, u_request: np.ndarray) -> np.ndarray:
         """The command moved by ``d``, and the intervention's window counted (``authority_step``'s
-        counters: |u| > engage is its two comparisons, False for NaN alike)."""
+        counters: the command or the request over engage, |x| > engage being its two
+        comparisons, False for NaN alike)."""
         c = self.c
         u = self.u + d
-        acting = np.abs(u) > c.engage
+        acting = (np.abs(u) > c.engage) | (np.abs(u_request) > c.engage)
         self.engaged += acting & (self.engaged < c.window_steps)
         quiet = np.where(acting, 0, self.quiet + (self.quiet < c.rearm_steps))
         # (an acting row's quiet is 0, below rearm_steps >= 1)
