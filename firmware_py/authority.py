@@ -32,7 +32,7 @@ class AuthorityConfig:
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 when the time is up: a hand-back to the driver
     fault_fade_rate: float = math.radians(30.0)  # rad/s toward 0 on a plausibility fault: a wrong command
     panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time
-    engage: float = math.radians(0.1)  # |u| above this counts as intervening
+    engage: float = math.radians(0.1)  # |u| or |u_request| above this counts as intervening
     rearm_time: float = 1.0  # s of |u| and |u_request| <= engage before the window starts afresh
 
 

@@ -68,7 +68,7 @@ within it, and trips at ``*_count``; 2 likewise per control period, tripping at
 ``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block over its bound.
 A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing redundant input
 (NaN: the node's freshness check) pauses the checks that need it and sets DEGRADED; below
-``speed_min`` every check pauses and its counters restart, DEGRADED too (``SLOW``).
+``speed_min`` every check pauses and its counters restart.
 
 ``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
 is a fault (the command fades to zero), ``PLAUS_DEGRADED`` a degraded state (fewer checks; the
@@ -104,9 +104,6 @@ MISSING = 0x80  # a redundant input is missing (not latched)
 #: confirmed (not latched): the node passes it to ``step()``'s ``hold``, on which the law's
 #: command may shrink but not grow (docs/controller.md, "The pair's suspicion").
 SUSPECT_YAW_PAIR = 0x800
-#: The speed is valid but below ``speed_min``, where every check pauses (not latched): DEGRADED,
-#: since the law may still act (down to its ``speed_active_min``) on inputs nothing checks.
-SLOW = 0x1000
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
 #: rate's (CtrlStatus_Plausibility 1).
 YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
@@ -413,14 +410,12 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.turn_n = 0
         s.turn_settled = False
         s.started = False
-        if 0.0 <= speed < c.speed_min:
-            flags |= SLOW
         bits = 0
         if flags & YAW_CHECKS:
             bits |= PLAUS_YAW
         if flags & STEER_CHECKS:
             bits |= PLAUS_STEER
-        if flags & (MISSING | SLOW):
+        if flags & MISSING:
             bits |= PLAUS_DEGRADED
         s.flags = flags
         s.bits = bits

@@ -331,8 +331,8 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    # every check tripped somewhere, MISSING, the yaw-rate pair's suspicion and SLOW (the highest bit)
-    assert seen == 2 * pl.SLOW - 1, f"flags seen {seen:#x}"
+    # every check tripped somewhere, MISSING and the yaw-rate pair's suspicion (the highest bit)
+    assert seen == 2 * pl.SUSPECT_YAW_PAIR - 1, f"flags seen {seen:#x}"
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
         assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,

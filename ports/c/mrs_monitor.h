@@ -34,8 +34,6 @@
 /* the yaw-rate pair's latest sample over yaw_pair_hold, not confirmed (not latched): the node
  * passes it as mrs_step's hold, on which the law's command may shrink but not grow */
 #define MRS_SUSPECT_YAW_PAIR 0x800u
-/* the speed valid but below speed_min, where every check pauses (not latched): DEGRADED */
-#define MRS_SLOW 0x1000u
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
 #define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \

@@ -46,8 +46,8 @@ _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_s
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n", "yaw_hold_n",
          "yaw_clear_n")
 _BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen", "turn_settled")
-#: every value the detailed flags can take (the highest bit is SLOW)
-_FLAG_VALUES = 2 * pl.SLOW
+#: every value the detailed flags can take (the highest bit is SUSPECT_YAW_PAIR)
+_FLAG_VALUES = 2 * pl.SUSPECT_YAW_PAIR
 
 
 class BatchMonitor:
@@ -80,8 +80,7 @@ class BatchMonitor:
         #: the CtrlStatus_Plausibility bits of each value of the detailed flags
         self._bits_of = np.array([(pl.PLAUS_YAW if f & pl.YAW_CHECKS else 0) | (pl.PLAUS_STEER if f & pl.STEER_CHECKS
                                                                                else 0)
-                                  | (pl.PLAUS_DEGRADED if f & (pl.MISSING | pl.SLOW) else 0)
-                                  for f in range(_FLAG_VALUES)],
+                                  | (pl.PLAUS_DEGRADED if f & pl.MISSING else 0) for f in range(_FLAG_VALUES)],
                                  dtype=np.int64)
 
     def _set(self, name: str, rows: np.ndarray, value) -> None:
@@ -141,8 +140,7 @@ class BatchMonitor:
             lat_ok = (-1e3 < lat) & (lat < 1e3)
             st2_ok = (-1e3 < d2) & (d2 < 1e3)
             missing = ~(lat_ok & st2_ok)
-            flags |= np.where(missing | self._lost(r, r2), pl.MISSING, 0) | np.where((0.0 <= v) & (v < c.speed_min),
-                                                                                      pl.SLOW, 0)
+            flags |= np.where(missing | self._lost(r, r2), pl.MISSING, 0)
             self._set("turn_n", missing, 0)  # the steady-turn check starts afresh when the frame is back
             self._set("turn_settled", missing, False)
             gap = missing & (self.since >= c.kin_gap_steps)  # a shorter gap is bridged (the scalar's comment)
@@ -159,7 +157,7 @@ class BatchMonitor:
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
-                | np.where((flags & (pl.MISSING | pl.SLOW)) != 0, pl.PLAUS_DEGRADED, 0))
+                | np.where((flags & pl.MISSING) != 0, pl.PLAUS_DEGRADED, 0))
         self.flags, self.bits = flags, bits
         return bits
 
@@ -371,8 +369,7 @@ class BatchMonitor:
         self.turn_settled = self.turn_settled & act
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
-        self.flags = (self.latched | np.where(self._lost(r, r2), pl.MISSING, 0) | (self.flags & pl.SUSPECT_YAW_PAIR)
-                      | np.where((0.0 <= v) & (v < self.c.speed_min), pl.SLOW, 0))
+        self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0) | (self.flags & pl.SUSPECT_YAW_PAIR)
         self.bits = self._bits_of[self.flags]
         return self.bits
 

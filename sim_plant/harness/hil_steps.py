@@ -61,7 +61,7 @@ class Step:
     lat_accel_measured_m_s2: float = math.nan
     steer_redundant_measured_rad: float = math.nan
     yaw_rate_redundant_measured_rad_s: float = math.nan
-    speed_measured_m_s: float = math.nan  # the speed frame's value (v_m_s: the truth)
+    speed_measured_m_s: float = math.nan  # the speed sensor's reading at the step (v_m_s: the truth)
 
 
 STEP_COLUMNS = tuple(f.name for f in fields(Step))
