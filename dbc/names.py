@@ -13,7 +13,7 @@ from __future__ import annotations
 MSG_STEER = "MRS_DriverSteer"  # driver's front-wheel angle (vehicle -> controller)
 MSG_YAW = "MRS_YawRate"  # yaw rate, the feedback signal (vehicle -> controller)
 MSG_SPEED = "MRS_VehicleSpeed"  # speed over ground (vehicle -> controller)
-MSG_REDUNDANT = "MRS_RedundantSensors"  # lateral acceleration, second steering channel (plausibility)
+MSG_REDUNDANT = "MRS_RedundantSensors"  # lateral acceleration, second steering channel, second speed (plausibility)
 MSG_CMD = "MRS_AuxSteerCmd"  # the auxiliary steering command (controller -> actuator)
 MSG_STATUS = "MRS_CtrlStatus"  # controller status and diagnostics
 MSG_SYNC = "MRS_SecOCSync"  # SecOC freshness epoch (actuator -> controller)
@@ -31,6 +31,7 @@ SIG_YAW_RATE_2 = "YawRate_YawRate2"  # the yaw-rate sensor's second element
 SIG_SPEED = "VehicleSpeed_Speed"
 SIG_LAT_ACCEL = "RedundantSensors_LatAccel"
 SIG_STEER_ANGLE_2 = "RedundantSensors_SteerAngle"
+SIG_SPEED_2 = "RedundantSensors_Speed2"  # the second, independent speed
 SIG_CMD_STATE = "AuxSteerCmd_State"
 SIG_CMD_ANGLE = "AuxSteerCmd_Angle"
 SIG_CMD_MEAS = "AuxSteerCmd_MeasCounter"

@@ -61,14 +61,22 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    a_y / r (their r-weighted mean) against ``turn_speed_rel`` v plus what the sensors' offsets
    make of it, (``turn_yaw_bias`` v + ``turn_lat_bias``) / |r|.  A speed that drifts, which
    never jumps, is found here; straight on, nothing depends on the speed the law is given.
+8. **Speed pair**: the speed against a second, independent speed (``speed_redundant``, from the
+   redundant frame: the wheel speeds on a car), in every period while both are valid, before
+   the pause below ``speed_min`` (a drift carries the reading under it): |v - v_2| over
+   ``speed_pair_bound`` + ``speed_pair_rel`` min(v, v_2), counted as the model check, trips at
+   ``speed_pair_time``.  A drift, however slow and wherever the car is, is found once it has
+   carried the speed that far; NaN (a sender without it) pauses the check, and the source lost
+   after it was received is DEGRADED, as for the yaw-rate pair.
 
 Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
-within it, and trips at ``*_count``; 2 likewise per control period, tripping at
-``model_time``; 4 trips on one window over its bound (at other rates than 500 Hz its
-``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block over its bound.
+within it, and trips at ``*_count``; 2 and 8 likewise per control period, tripping at
+``model_time`` and ``speed_pair_time``; 4 trips on one window over its bound (at other rates
+than 500 Hz its ``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block
+over its bound.
 A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing redundant input
 (NaN: the node's freshness check) pauses the checks that need it and sets DEGRADED; below
-``speed_min`` every check pauses and its counters restart.
+``speed_min`` every check but 6 and 8 pauses and its counters restart.
 
 ``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
 is a fault (the command fades to zero), ``PLAUS_DEGRADED`` a degraded state (fewer checks; the
@@ -95,6 +103,7 @@ CHECK_STEER_PAIR = 0x04  # the two steering channels
 CHECK_YAW_PAIR = 0x100  # the two yaw-rate elements (C: the flags are 16 bits)
 CHECK_SPEED = 0x200  # the speed jumped between two samples by more than a car can change it
 CHECK_TURN = 0x400  # the speed disagrees with a_y / r in a steady turn
+CHECK_SPEED_PAIR = 0x1000  # the speed disagrees with the second speed
 FROZEN_YAW = 0x08
 FROZEN_LAT = 0x10
 FROZEN_STEER = 0x20
@@ -106,11 +115,12 @@ MISSING = 0x80  # a redundant input is missing (not latched)
 SUSPECT_YAW_PAIR = 0x800
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
 #: rate's (CtrlStatus_Plausibility 1).
-YAW_CHECKS = CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
+YAW_CHECKS = (CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
+              | CHECK_SPEED_PAIR)
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: The pair checks, which find a fault while the command it drove is still building: the node
 #: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
-CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED
+CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED | CHECK_SPEED_PAIR
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
@@ -189,6 +199,12 @@ class PlausibilityConfig:
     # not grow for up to YAW_PAIR_WINDOW such samples (re-armed by as many within it in a row).
     # Two thirds of the bound: 2.4 SDs above two opposite 0.3 deg/s offsets (docs/controller.md)
     yaw_pair_hold: float = 0.02
+    # The speed pair (8; docs/controller.md): |v - v_2| <= speed_pair_bound + speed_pair_rel
+    # min(v, v_2) (m/s): above the second source's rounding (0.15 m/s), the tyres' rolling-radius
+    # spread (a few %) and the wheels' slip in normal driving; over it for speed_pair_time (s) trips
+    speed_pair_bound: float = 1.0
+    speed_pair_rel: float = 0.05
+    speed_pair_time: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,6 +247,9 @@ class MonitorCoefficients:
     turn_speed_rel: float
     turn_yaw_bias: float
     turn_lat_bias: float
+    speed_pair_bound: float
+    speed_pair_rel: float
+    speed_pair_steps: int
 
 
 class MonitorState:
@@ -244,7 +263,8 @@ class MonitorState:
                  "lat_beta_prev", "aux_lag", "yaw_pair", "yaw_pair_idx", "yaw_pair_n", "yaw_pair_err",
                  "yaw_hold_n", "yaw_clear_n",
                  "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen",
-                 "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err")
+                 "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err",
+                 "speed2_seen", "speed_pair_count", "speed_pair_err")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -296,6 +316,9 @@ def reset_monitor(s: MonitorState) -> None:
     s.turn_r0 = s.turn_a0 = 0.0  # the block's first r and a_y
     s.turn_res = s.turn_r = 0.0  # the block's sums of r v - a_y and of r
     s.turn_err = 0.0
+    s.speed2_seen = False  # the second speed has been received this cycle
+    s.speed_pair_count = 0
+    s.speed_pair_err = 0.0
 
 
 def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
@@ -303,10 +326,11 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
                           "yaw_pair_bound", "yaw_pair_hold", "sensor_tau", "speed_step", "turn_yaw_min",
-                          "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel"))
+                          "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel", "speed_pair_bound", "speed_pair_time"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
-    for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias"):
+    for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias",
+                 "speed_pair_rel"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
@@ -342,7 +366,9 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
         side_accel=cfg.side_accel, speed_step=cfg.speed_step, turn_yaw_min=cfg.turn_yaw_min,
         turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
-        turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias)
+        turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias,
+        speed_pair_bound=cfg.speed_pair_bound, speed_pair_rel=cfg.speed_pair_rel,
+        speed_pair_steps=max(1, round(cfg.speed_pair_time / cfg.ts)))
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -353,11 +379,11 @@ def check_positive(cfg: object, names: tuple[str, ...]) -> None:
             raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# One control period; long because it is the seven checks inline, in the order the C port has
+# One control period; long because it is the eight checks inline, in the order the C port has
 # them (no calls, by the porting rules), each a few lines.
 def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
                  yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float,
-                 yaw_rate_redundant: float = math.nan) -> int:
+                 yaw_rate_redundant: float = math.nan, speed_redundant: float = math.nan) -> int:
     """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
     detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
     monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
@@ -366,7 +392,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     yaw-rate sensor's second element, pauses its pair check when NaN; DEGRADED too once the
     element has been received since ``reset_monitor`` while the first element is valid (a lost
     element).  A sender without it (SNA from the start, or the default NaN) never sets it:
-    every result is then as without the check."""
+    every result is then as without the check.  ``speed_redundant``, the second speed, likewise
+    for the speed pair."""
     # --- 6. speed: a jump no car makes.  Before the pause below, which a speed stuck under
     #     speed_min would otherwise bring on: K_n(v) follows the wrong speed whatever it is.
     if 0.0 <= speed < 1e3:
@@ -380,6 +407,30 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     else:
         s.speed_seen = False  # missing (the node's freshness): the next valid value starts afresh
     flags = s.latched
+    # --- 8. speed pair: before the pause too, since a drifting speed carries the reading under
+    #     speed_min while the car is still fast.
+    if 0.0 <= speed_redundant < 1e3:
+        s.speed2_seen = True
+        if 0.0 <= speed < 1e3:
+            e = speed - speed_redundant
+            e = -e if e < 0.0 else e
+            x = speed if speed < speed_redundant else speed_redundant
+            bound = c.speed_pair_bound + c.speed_pair_rel * x
+            s.speed_pair_err = e / bound
+            if e > bound:
+                s.speed_pair_count += 1
+                if s.speed_pair_count >= c.speed_pair_steps:
+                    s.speed_pair_count = c.speed_pair_steps
+                    s.latched |= CHECK_SPEED_PAIR
+            elif s.speed_pair_count > 0:
+                s.speed_pair_count -= 1
+        else:
+            s.speed_pair_count = 0
+    else:
+        s.speed_pair_count = 0
+        if s.speed2_seen and 0.0 <= speed < 1e3:
+            flags |= MISSING  # the car has the second speed and it is gone: the pair pauses
+    flags |= s.latched
     # A NaN fails every comparison: these are False for NaN and +-inf.
     primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
         -1e3 < aux_cmd_applied < 1e3)
@@ -706,6 +757,7 @@ class PlausibilityMonitor:
         self.state = MonitorState()
 
     def step(self, delta_driver: float, delta_driver_redundant: float, yaw_rate: float, lat_accel: float,
-             speed: float, aux_cmd_applied: float, yaw_rate_redundant: float = math.nan) -> int:
+             speed: float, aux_cmd_applied: float, yaw_rate_redundant: float = math.nan,
+             speed_redundant: float = math.nan) -> int:
         return monitor_step(self.coefficients, self.state, delta_driver, delta_driver_redundant, yaw_rate,
-                            lat_accel, speed, aux_cmd_applied, yaw_rate_redundant)
+                            lat_accel, speed, aux_cmd_applied, yaw_rate_redundant, speed_redundant)

@@ -44,11 +44,12 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
     mc, ac = pl.configure(m), au.configure_authority(a)
     ms, ast = pl.MonitorState(), au.AuthorityState()
     out = []
-    for dd, dd2, r, ay, v, aux, u, r2 in rows:
-        bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2)
+    for dd, dd2, r, ay, v, aux, u, r2, v2 in rows:
+        bits = pl.monitor_step(mc, ms, dd, dd2, r, ay, v, aux, r2, v2)
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
-                    ms.turn_err, ms.turn_n, int(ms.turn_settled), ms.yaw_hold_n, ms.yaw_clear_n))
+                    ms.turn_err, ms.turn_n, int(ms.turn_settled), ms.yaw_hold_n, ms.yaw_clear_n, ms.speed_pair_err,
+                    ms.speed_pair_count, int(ms.speed2_seen)))
     return out
 
 
@@ -62,17 +63,19 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     for line in lines[1:]:
         f = line.split()
         out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
-                    float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12])))
+                    float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12]), float(f[13]), int(f[14]), int(f[15])))
     return out
 
 
+# A row: delta_driver, delta_driver_redundant, yaw_rate, lat_accel, speed, aux_cmd_applied, u_request,
+# yaw_rate_redundant, speed_redundant (the last NaN unless a case gives the second speed).
 def _run_rows(sc, second_yaw: SensorConfig | None = None) -> list[tuple[float, ...]]:
     r = pr.run(sc, second_yaw=second_yaw)
     h = r.held
     aux = np.concatenate([[0.0], r.aux[:-1]])  # the angle acting on the car at each period
-    return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"],
-                                                         h["lat_accel"], h["speed"], aux, r.aux,
-                                                         h["yaw_rate_redundant"])]
+    return [(*(float(x) for x in row), math.nan) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"],
+                                                                 h["lat_accel"], h["speed"], aux, r.aux,
+                                                                 h["yaw_rate_redundant"])]
 
 
 def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
@@ -92,7 +95,7 @@ def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
             row[rng.randrange(8)] = math.nan
         if rng.random() < 0.001:
             row[rng.randrange(8)] = rng.choice((math.inf, -math.inf))
-        rows.append(tuple(row))
+        rows.append((*row, math.nan))  # no second speed (the random case with one: _random_speed_pair_rows)
     return rows
 
 
@@ -100,7 +103,7 @@ def _lost_second_element(rows: list[tuple[float, ...]]) -> list[tuple[float, ...
     """The rows with the yaw-rate sensor's second element missing (NaN, SNA on the bus) from
     the middle on, as a car whose element fails."""
     half = len(rows) // 2
-    return rows[:half] + [(*row[:7], math.nan) for row in rows[half:]]
+    return rows[:half] + [(*row[:7], math.nan, *row[8:]) for row in rows[half:]]
 
 
 def _lost_edges(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
@@ -110,9 +113,9 @@ def _lost_edges(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
     element valid, and where every check pauses."""
     half, out = len(rows) // 2, list(rows[:len(rows) // 2])
     for k, row in enumerate(rows[half:], start=half):
-        d, d2, r, lat, v, aux, u, r2 = row
+        d, d2, r, lat, v, aux, u, r2, v2 = row
         out.append((d, d2, math.nan if k % 3 == 0 else r, lat, 3.0 if k >= 3 * len(rows) // 4 else v, aux, u,
-                    math.nan if k % 2 == 0 else r2))
+                    math.nan if k % 2 == 0 else r2, v2))
     return out
 
 
@@ -127,8 +130,59 @@ def _turn_rows(samples: int = 80, r: float = 0.3, v: float = 10.0, measured: flo
         lat = r * v + (-0.4 if j >= 60 else 0.0) + (1e-3 if j % 2 else 0.0)
         for k in range(25):
             yaw = math.nan if j == 40 else r + (1e-4 if k % 2 else 0.0)
-            rows.append((d, d, yaw, math.nan if j == 14 else lat, measured, 0.0, 0.0, yaw))
+            rows.append((d, d, yaw, math.nan if j == 14 else lat, measured, 0.0, 0.0, yaw, math.nan))
     return rows
+
+
+SPEED2_EVERY = 25  # periods of 2 ms in MRS_RedundantSensors' 50 ms, which carries the second speed
+SPEED2_LSB = 0.3  # m/s: RedundantSensors_Speed2's resolution
+
+
+def _with_second_speed(rows: list[tuple[float, ...]], seed: int = 3) -> list[tuple[float, ...]]:
+    """The rows with a second speed that agrees: the (held) speed plus 0.02 m/s of white noise,
+    in 0.3 m/s steps, renewed once per redundant frame."""
+    rng = random.Random(seed)
+    out, v2 = [], math.nan
+    for k, row in enumerate(rows):
+        if k % SPEED2_EVERY == 0:
+            v2 = round((row[4] + rng.gauss(0.0, 0.02)) / SPEED2_LSB) * SPEED2_LSB
+        out.append((*row[:8], v2))
+    return out
+
+
+def _drifting_speed(rows: list[tuple[float, ...]], start: int, rate: float) -> list[tuple[float, ...]]:
+    """The rows with the (first) speed drifting by ``rate`` m/s per second from period ``start``
+    on, the second speed left as it is: a drift never jumps (check 6 does not see it)."""
+    return [(*row[:4], row[4] + rate * (max(0, k - start) * 0.002), *row[5:]) for k, row in enumerate(rows)]
+
+
+def _lost_second_speed(rows: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+    """The rows (with a second speed) with it missing, from the middle on, in every other period,
+    the speed in every third (both in every sixth), and both at 3 m/s (under speed_min) in the
+    last quarter: the lost speed's rule asks for the speed valid, at any speed."""
+    half, out = len(rows) // 2, list(rows[:len(rows) // 2])
+    for k, row in enumerate(rows[half:], start=half):
+        slow = k >= 3 * len(rows) // 4
+        v = math.nan if k % 3 == 0 else (3.0 if slow else row[4])
+        v2 = math.nan if k % 2 == 0 else (3.0 if slow else row[8])
+        out.append((*row[:4], v, *row[5:8], v2))
+    return out
+
+
+def _random_speed_pair_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
+    """_random_rows with a second speed: the speed plus noise, in spells apart by 0, 1.2 or 3 m/s
+    (within, about at and over the pair's bound), now and then NaN, inf or negative; the speed's
+    own NaN and inf included (the pair then restarts its count)."""
+    rng = random.Random(seed + 1000)
+    out, apart = [], 0.0
+    for k, row in enumerate(_random_rows(seed, n)):
+        if k % 300 == 0:
+            apart = rng.choice((0.0, 0.0, 1.2, -1.2, 3.0))
+        v2 = row[4] + apart + rng.gauss(0.0, 0.1)
+        if rng.random() < 0.005:
+            v2 = rng.choice((math.nan, math.inf, -math.inf, -1.0))
+        out.append((*row[:8], v2))
+    return out
 
 
 CASES = {
@@ -162,6 +216,15 @@ CASES = {
     "yaw-rate element stuck, the pair in the loop": lambda: _run_rows(
         pr.steady_curve(30.0, 1.0).with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.0, 0.01),)),
         SensorConfig(seed=99)),
+    "a second speed that agrees (the speed pair runs and never trips)": lambda: _with_second_speed(
+        _run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5))),
+    "the speed drifting down at 20 m/s (the speed pair trips), then under speed_min": lambda: _drifting_speed(
+        _with_second_speed(_run_rows(pr.steady_curve(20.0, 1.0, duration=4.0))), 250, -6.0),
+    "the speed drifting under speed_min at 6 m/s (the speed pair trips there)": lambda: _drifting_speed(
+        _with_second_speed(_run_rows(pr.steady_curve(6.0, 1.0, a_y=1.0))), 100, -2.0),
+    "the second speed lost half way (DEGRADED), with the speed missing and under speed_min": lambda: _lost_second_speed(
+        _with_second_speed(_run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5)))),
+    "random inputs with a second speed, NaN and inf": lambda: _random_speed_pair_rows(11),
 }
 
 
@@ -208,14 +271,66 @@ def test_the_speed_drift_case_trips_the_steady_turn_check() -> None:
     assert 1.4 < first * 0.002 < 3.0 and not any(f & pl.CHECK_TURN for _, f, *_ in out[:first])
 
 
+def _monitor_out(rows: list[tuple[float, ...]]) -> list[tuple]:
+    return _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
+
+
+def test_a_second_speed_that_agrees_or_is_absent_changes_nothing() -> None:
+    rows = CASES["a second speed that agrees (the speed pair runs and never trips)"]()
+    agree, absent = _monitor_out(rows), _monitor_out([(*row[:8], math.nan) for row in rows])
+    assert [row[:13] for row in agree] == [row[:13] for row in absent]  # the bits, flags, command, the rest
+    assert all(row[15] == 1 for row in agree) and not any(row[15] for row in absent)  # the pair ran, or never
+    assert 0.0 < max(row[13] for row in agree) < 0.5 and not any(row[1] & pl.CHECK_SPEED_PAIR for row in agree)
+
+
+@pytest.mark.parametrize("case, above_speed_min", [
+    ("the speed drifting down at 20 m/s (the speed pair trips), then under speed_min", True),
+    ("the speed drifting under speed_min at 6 m/s (the speed pair trips there)", False)])
+def test_a_drifting_speed_trips_the_speed_pair_after_speed_pair_time(case: str, above_speed_min: bool) -> None:
+    rows = CASES[case]()
+    out = _monitor_out(rows)
+    cfg, steps = pl.PlausibilityConfig(), pl.configure(pl.PlausibilityConfig()).speed_pair_steps
+    over = [abs(v - v2) > cfg.speed_pair_bound + cfg.speed_pair_rel * min(v, v2) for *_, v, _a, _u, _r2, v2 in rows]
+    first_over = over.index(True)
+    assert all(over[first_over:])  # the drift only grows: the count rises by one a period
+    trip = next(k for k, row in enumerate(out) if row[1] & pl.CHECK_SPEED_PAIR)
+    assert trip == first_over + steps - 1
+    assert all(row[0] & pl.PLAUS_YAW and row[1] & pl.CHECK_SPEED_PAIR for row in out[trip:])  # latched
+    assert (rows[trip][4] >= cfg.speed_min) == above_speed_min
+    assert not any(row[1] & pl.CHECK_SPEED for row in out)  # a drift, not a jump
+    assert min(row[4] for row in rows) < cfg.speed_min  # and the speed ends under speed_min
+
+
+def test_a_lost_second_speed_is_degraded_while_the_speed_is_valid() -> None:
+    rows = CASES["the second speed lost half way (DEGRADED), with the speed missing and under speed_min"]()
+    out = _monitor_out(rows)
+    half = len(rows) // 2
+    assert not any(row[0] & pl.PLAUS_DEGRADED for row in out[:half])
+    for k in range(half, len(rows)):
+        v, v2, bits = rows[k][4], rows[k][8], out[k][0]
+        assert bool(bits & pl.PLAUS_DEGRADED) == (math.isnan(v2) and not math.isnan(v)), (k, v, v2, bits)
+    assert any(rows[k][4] < pl.PlausibilityConfig().speed_min and out[k][0] & pl.PLAUS_DEGRADED
+               for k in range(half, len(rows)))
+    assert not any(row[1] & pl.CHECK_SPEED_PAIR for row in out)
+
+
+def test_the_random_second_speed_case_counts_up_and_down_and_trips() -> None:
+    rows = _random_speed_pair_rows(11)
+    out = _monitor_out(rows)
+    counts = [row[14] for row in out]
+    assert any(b < a for a, b in zip(counts, counts[1:]) if 0 < b) and max(counts) == 50
+    assert any(row[1] & pl.CHECK_SPEED_PAIR for row in out)
+    assert any(not 0.0 <= row[8] < 1e3 and math.isfinite(row[4]) for row in rows)  # the second speed invalid
+
+
 def test_the_random_case_exercises_every_branch(runner: Path) -> None:
     rows = _random_rows(7)
     out = _python(pl.PlausibilityConfig(), au.AuthorityConfig(panic_window=0.5), rows)
     flags = 0
     auth = 0
-    for bits, f, *_, af, _yaw_pair_err, _turn_err, _turn_n, _settled, _hold_n, _clear_n in out:
-        flags |= f
-        auth |= af
+    for row in out:
+        flags |= row[1]
+        auth |= row[6]
     assert flags & pl.MISSING and flags & pl.CHECK_STEER_PAIR and flags & pl.CHECK_KINEMATIC
     assert flags & pl.CHECK_YAW_PAIR
     assert auth & au.AUTH_FAULT and auth & au.AUTH_RATE
@@ -243,12 +358,23 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
                 mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
                 mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
-                mc.turn_lat_bias, mc.yaw_pair_hold]
+                mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, mc.speed_pair_steps]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
+@pytest.mark.parametrize("changed", [{"ts": 0.001, "speed_pair_time": 0.25}, {"speed_pair_time": 0.0007},
+                                     {"speed_pair_time": 0.0011}, {"ts": 0.01, "speed_pair_time": 0.37}])
+def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str, float]) -> None:
+    m, a = dataclasses.replace(pl.PlausibilityConfig(), **changed), au.AuthorityConfig()
+    first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
+                           check=True).stdout.split()
+    assert int(first[-1]) == pl.configure(m).speed_pair_steps
+
+
 @pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},
-                                 {"yaw_pair_hold": 0.031}, {"yaw_pair_hold": 0.0}])
+                                 {"yaw_pair_hold": 0.031}, {"yaw_pair_hold": 0.0}, {"speed_pair_bound": 0.0},
+                                 {"speed_pair_time": -0.1}, {"speed_pair_time": math.inf},
+                                 {"speed_pair_rel": -0.01}, {"speed_pair_rel": 1e3}, {"speed_pair_rel": math.nan}])
 def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
     cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
     assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,

@@ -78,6 +78,8 @@ class Drive:
     second_yaw: bool = False  # the yaw-rate frames carry the sensor's second element (the car's r); else SNA
     second_yaw_lost: float = math.inf  # s from which the second element is SNA (the element failed)
     second_yaw_offset: float = 0.0  # rad/s the second element reads below the car's r
+    second_speed: float = math.nan  # RedundantSensors_Speed2 (NaN: SNA, a car without it)
+    second_speed_drift: float = 0.0  # m/s per s it drifts by from STUCK_T
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -93,7 +95,9 @@ class Drive:
             r = gain * delta + (DISTURBANCE if t >= DIST_T else 0.0)
             r_meas = STUCK if self.stuck_yaw and t >= STUCK_T else r
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
-                      names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta},
+                      names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta,
+                                            names.SIG_SPEED_2: self.second_speed
+                                            + self.second_speed_drift * max(0.0, t - STUCK_T)},
                       names.MSG_YAW: {names.SIG_YAW_RATE: r_meas,
                                       names.SIG_YAW_RATE_2: r - self.second_yaw_offset
                                       if self.second_yaw and t < self.second_yaw_lost else math.nan}}
@@ -216,6 +220,21 @@ def test_the_yaw_rate_pair_finds_a_stuck_element_at_once_and_cuts_the_command_as
     assert k_zero == k_fault or abs(cmds[k_zero - 1][names.SIG_CMD_ANGLE]) > 0.0  # not sooner
     late = [s for s in statuses if int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT]
     assert late and all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
+
+
+def test_the_speed_pair_finds_a_drifting_second_speed_and_cuts_the_command_as_in_python(secoc_check: Path) -> None:
+    _, clean_statuses = _run(secoc_check, Drive(second_speed=V))
+    assert {s[names.SIG_STATUS_PLAUS] for s in clean_statuses} == {0}  # the speeds agree: no alarm
+    cmds, statuses = _run(secoc_check, Drive(seconds=1.6, second_speed=V, second_speed_drift=-10.0))
+    states = [int(c[names.SIG_CMD_STATE]) for c in cmds]
+    k_fault = states.index(mr.STATUS_FAULT)
+    # The second speed falls at 10 m/s per s, sent every 50 ms: 20 - v2 > 1.0 + 0.05 v2 from
+    # v2 = 18.1 (0.19 s after STUCK_T, the frame at 0.2 s), then speed_pair_time 0.1 s
+    assert k_fault == int((STUCK_T + 0.2 + 0.1) * RATE_HZ) - 1
+    assert set(states[k_fault:]) == {mr.STATUS_FAULT}
+    late = [s for s in statuses if int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT]
+    assert late and all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
+    assert all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[-50:])  # removed, latched
 
 
 def test_a_second_yaw_rate_element_lost_on_the_bus_is_degraded_as_in_python(secoc_check: Path) -> None:

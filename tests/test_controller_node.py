@@ -10,6 +10,7 @@ import pytest
 import mrsteer_dbc
 from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
 from firmware_py.controller import node as rt
 from firmware_py.controller import timing
 
@@ -37,18 +38,21 @@ class Rig:
         self.sensors.send(can.Message(arbitration_id=C.frame_id(name), data=bytes(data), is_extended_id=False))
 
     def cycle(self, yaw: float | None = 0.0, steer: float | None = 0.0, speed: float | None = 20.0,
-              redundant: tuple[float, float] | None = None, **kw) -> tuple[float, dict]:
+              redundant: tuple[float, float] | None = None, speed_2: float | None = None,
+              **kw) -> tuple[float, dict]:
         """One 1 ms cycle; ``redundant`` = (lateral acceleration, second steering channel), sent
         every 50 ms as the plant does, with the LSB toggling as a real sensor's noise does (the
-        monitor takes an unchanged frame for no new sample)."""
+        monitor takes an unchanged frame for no new sample), and ``speed_2`` in it (None: SNA)."""
         if steer is not None:
             self.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
         if speed is not None and self.k % 10 == 0:
             self.send(names.MSG_SPEED, {"VehicleSpeed_Speed": speed})
         if redundant is not None and self.k % 50 == 0:
             lsb = 0.001 * ((self.k // 50) % 2)
-            self.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: redundant[0] + lsb,
-                                            names.SIG_STEER_ANGLE_2: redundant[1]})
+            values = {names.SIG_LAT_ACCEL: redundant[0] + lsb, names.SIG_STEER_ANGLE_2: redundant[1]}
+            if speed_2 is not None:
+                values[names.SIG_SPEED_2] = speed_2
+            self.send(names.MSG_REDUNDANT, values)
         if yaw is not None:
             self.send(names.MSG_YAW, {"YawRate_YawRate": yaw}, **kw)
         self.k += 1
@@ -295,6 +299,23 @@ def test_steering_channels_that_disagree_fault_with_the_steering_bit(rig: Rig) -
     assert not rig.node.plausibility & names.PLAUS_YAW
 
 
+def test_a_second_speed_that_disagrees_faults_with_the_yaw_bit_and_cuts_the_command(rig: Rig) -> None:
+    # 20 m/s against a second speed of 17.4: 2.6 m/s apart, over the pair's 1.0 + 5 % of 17.4
+    # (1.87 m/s); the node must pass RedundantSensors_Speed2 to the monitor.
+    for _ in range(300):
+        _, sig = rig.cycle(yaw=0.0, redundant=(0.0, 0.0), speed_2=20.1)
+    assert rig.node.plausibility == 0 and sig["AuxSteerCmd_State"] != mr.STATUS_FAULT
+    assert rig.node.redundant_inputs()[2] == pytest.approx(20.1)
+    for k in range(300):
+        _, sig = rig.cycle(yaw=0.0, redundant=(0.0, 0.0), speed_2=17.4)
+        if sig["AuxSteerCmd_State"] == mr.STATUS_FAULT:
+            break
+    # the first frame at 17.4 goes out in the loop's first cycle (the rig sends every 50th), and
+    # the pair trips on its speed_pair_time / period = 100th sample over the bound
+    assert k == round(pl.PlausibilityConfig().speed_pair_time / rig.node.period) - 1
+    assert rig.node.monitor.flags & pl.CHECK_SPEED_PAIR and rig.node.plausibility & names.PLAUS_YAW
+
+
 def test_a_redundant_sample_off_its_alive_counters_time_is_withheld_from_the_monitor(rig: Rig) -> None:
     # The monitor differentiates over the periods between samples and pairs each with the yaw
     # rate of its cycle: a sample that a stall delivered late (its counter says 50 ms, the node
@@ -345,7 +366,7 @@ def test_the_monitor_steps_on_the_yaw_rate_samples_not_on_the_cycles(rig: Rig) -
             steps = 2 if j % 7 == 4 else 1
             assert node.monitor_steps() == steps
             d, r, v = (node.input(n).value for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED))
-            lat, d2 = node.redundant_inputs()
+            lat, d2, _ = node.redundant_inputs()
             for _ in range(steps):
                 expected = pl.monitor_step(ref_c, ref_s, d, d2, r, lat, v, node.command)
         node.control()

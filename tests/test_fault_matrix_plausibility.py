@@ -52,12 +52,14 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
              unlatch_at: float | None = None, cause: int = names.CAUSE_PLAUSIBILITY, plaus: int | None = None,
              early_alarm: float | None = None, status_plaus_quiet: int = 0, end: float = END,
              status_lag: float = 0.0, episode: tuple[float, float] | None = None, gap: bool = False,
-             redundant_lost: tuple[int, ...] | None = None, speed_error=lambda t: 0.0) -> Evidence:
+             redundant_lost: tuple[int, ...] | None = None, speed_error=lambda t: 0.0,
+             speed_2: float | None = None) -> Evidence:
     """A run of ``row``: yaw-rate frames (truth R on the vehicle's bus, R + error(t) from
     ONSET on the controller's; the speed likewise, 20 m/s + speed_error(t)), a command every
     period (U0, FAULT from ONSET + ``detect``, faded at ``fade``), a status every 100 ms; with
     ``redundant_lost``, the redundant frame every 50 ms on the controller's bus but for those
-    samples (counted from 0 s)."""
+    samples (counted from 0 s); with ``speed_2``, the vehicle's redundant frame every 50 ms with
+    that second speed (the car has it)."""
     n = int(round(end / TS))
     vehicle, ctl, cmds, angles, statuses = [], [], [], [], []
     t_fault = None if detect is None else ONSET + detect
@@ -72,6 +74,10 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
         if redundant_lost is not None and k % 25 == 0 and k // 25 not in redundant_lost:
             ctl.append((t + 2e-4, C.frame_id(names.MSG_REDUNDANT), C.encode(
                 names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4, names.SIG_STEER_ANGLE_2: 0.0}, (k // 25) % 15)))
+        if speed_2 is not None and k % 25 == 0:
+            vehicle.append((t + 2e-4, C.frame_id(names.MSG_REDUNDANT), C.encode(
+                names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4, names.SIG_STEER_ANGLE_2: 0.0,
+                                      names.SIG_SPEED_2: speed_2}, (k // 25) % 15)))
         if k % 5 == 0 and not stall:
             vehicle.append(_speed(t, k // 5))
             ctl.append(_speed(t + 1e-4, k // 5, 20.0 + (speed_error(t) if t >= ONSET else 0.0)))
@@ -215,6 +221,22 @@ def test_a_speed_row_is_judged_against_the_speed_checks_jump() -> None:
     # an offset the jump check lets pass does not test the monitor
     fails, _, _ = _judge(evidence(row, error=lambda t: 0.0, speed_error=lambda t: 1.0, detect=None))
     assert any("reached 0.67 of its bound" in f for f in fails), fails
+
+
+def test_a_speed_drift_is_judged_against_the_speed_pair_on_a_car_with_the_second_speed() -> None:
+    # The pair bounds the speed's error: 1.0 m/s + 5 % of the true 20 m/s = 2.0 m/s, which a
+    # drift of -2 m/s per s passes 1 s after its onset; without the second speed in the traffic
+    # the bound is the jump check's 1.5 m/s.
+    row = _row("curve: speed drift -2 m/s per s")
+    assert (row.fault.target, row.fault.kind, row.fault.param) == (names.MSG_SPEED, "sensor_drift", -2.0)
+    drift = dict(error=lambda t: 0.0, speed_error=lambda t: -2.0 * (t - ONSET))
+    series = [s for s in error_series(evidence(row, speed_2=20.1, **drift)) if s[0] >= ONSET]
+    assert series and all(bound == pytest.approx(2.0) for _, _, bound in series)
+    assert {bound for _, _, bound in error_series(evidence(row, **drift))} == {1.5}
+    fails, observed, _ = _judge(evidence(row, speed_2=20.1, detect=1.05, **drift))
+    assert fails == [], fails
+    fails, _, _ = _judge(evidence(row, speed_2=20.1, detect=1.4, **drift))
+    assert any("reported late" in f for f in fails), fails
 
 
 def test_the_curve_scenario_is_a_driver_steering_1_5_deg(tmp_path) -> None:

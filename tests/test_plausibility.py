@@ -28,7 +28,7 @@ LAW = mr.ControllerConfig()
 def test_bits_are_the_dbc_names() -> None:
     assert (pl.PLAUS_YAW, pl.PLAUS_STEER, pl.PLAUS_DEGRADED) == (names.PLAUS_YAW, names.PLAUS_STEER,
                                                                   names.PLAUS_DEGRADED)
-    assert pl.YAW_CHECKS & pl.STEER_CHECKS == 0 and (pl.YAW_CHECKS | pl.STEER_CHECKS | pl.MISSING) == 0x7FF
+    assert pl.YAW_CHECKS & pl.STEER_CHECKS == 0 and (pl.YAW_CHECKS | pl.STEER_CHECKS | pl.MISSING) == 0x17FF
     assert (pl.NOMINAL_L_F, pl.NOMINAL_L_R, pl.NOMINAL_MASS, pl.NOMINAL_C_F, pl.NOMINAL_C_R) == (
         mr.NOMINAL_L_F, mr.NOMINAL_L_R, mr.NOMINAL_MASS, mr.NOMINAL_C_F, mr.NOMINAL_C_R)
 

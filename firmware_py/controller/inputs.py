@@ -8,20 +8,22 @@ import math
 
 class Input:
     """Receive state of one sensor message: newest accepted value (and, for a message that
-    carries two measurements such as ``MRS_RedundantSensors``, the second one), its age in
+    carries more measurements, such as ``MRS_RedundantSensors``, the second and third), its age in
     cycles, the rejections in a row and the cause of the last one."""
 
-    __slots__ = ("name", "signal", "second_signal", "missing_cause", "value", "second_value", "age", "limit",
-                 "rejects", "last_counter", "bad_cause")
+    __slots__ = ("name", "signal", "second_signal", "third_signal", "missing_cause", "value", "second_value",
+                 "third_value", "age", "limit", "rejects", "last_counter", "bad_cause")
 
     def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int,
-                 second_signal: str | None = None) -> None:
+                 second_signal: str | None = None, third_signal: str | None = None) -> None:
         self.name = name
         self.signal = signal_name
         self.second_signal = second_signal
+        self.third_signal = third_signal
         self.missing_cause = missing_cause
         self.value = math.nan
         self.second_value = math.nan
+        self.third_value = math.nan
         self.age = limit_cycles + 1  # never received: invalid until the first good frame
         self.limit = limit_cycles
         self.rejects = 0

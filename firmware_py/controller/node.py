@@ -70,7 +70,7 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_SYNC, MSG_YAW, SIG_CMD_ANGLE,
                                SIG_CMD_MEAS, SIG_CMD_STATE, SIG_LAT_ACCEL, SIG_SPEED, SIG_STATUS_CAUSE,
                                SIG_STATUS_FLAGS, SIG_STATUS_LATENESS, SIG_STATUS_OVERRUNS, SIG_STATUS_PLAUS,
-                               SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2,
+                               SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_SPEED_2, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2,
                                SIG_YAW_RATE, SIG_YAW_RATE_2)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
@@ -132,7 +132,8 @@ class ControllerNode:
             c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW), SIG_YAW_RATE_2),
             c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
             # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
-            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT), SIG_STEER_ANGLE_2),
+            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT), SIG_STEER_ANGLE_2,
+                                             SIG_SPEED_2),
         }
         self._by_name = {inp.name: inp for inp in self.inputs.values()}
         self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
@@ -200,6 +201,8 @@ class ControllerNode:
         inp.value = got.signals[inp.signal]
         if inp.second_signal is not None:
             inp.second_value = got.signals[inp.second_signal]
+        if inp.third_signal is not None:
+            inp.third_value = got.signals[inp.third_signal]
         if frame_id == self.redundant_id:
             self.clock.redundant_frame(got.counter)
         inp.last_counter = got.counter
@@ -210,14 +213,15 @@ class ControllerNode:
             return True
         return False
 
-    def redundant_inputs(self) -> tuple[float, float]:
-        """(lateral acceleration, second steering channel) for the monitor this cycle: NaN when
+    def redundant_inputs(self) -> tuple[float, float, float]:
+        """(lateral acceleration, second steering channel, second speed) for the monitor this
+        cycle (the second speed NaN also when the sender has none: SNA): NaN when
         ``MRS_RedundantSensors`` is not fresh, or its sample arrived off its alive counter's
         time (``SampleClock.redundant_in_time``, kept for the sample's hold).  Pure."""
         red = self._redundant
         if self.clock.redundant_in_time and red.valid(self.cfg.e2e_fail_max):
-            return red.value, red.second_value
-        return math.nan, math.nan
+            return red.value, red.second_value, red.third_value
+        return math.nan, math.nan, math.nan
 
     def monitor_steps(self) -> int:
         """How many yaw-rate samples the plausibility monitor steps over in this cycle: those
@@ -245,7 +249,7 @@ class ControllerNode:
         values = []
         fail_max = self.cfg.e2e_fail_max
         red = self._redundant
-        lat, steer_2 = self.redundant_inputs()  # before the ages move on
+        lat, steer_2, speed_2 = self.redundant_inputs()  # before the ages move on
         steps = self.monitor_steps()
         red.age += 1
         self.clock.tick()
@@ -261,7 +265,7 @@ class ControllerNode:
         bits = self.plausibility  # held between yaw-rate samples
         for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
-                                   values[2], self.command, yaw_2)
+                                   values[2], self.command, yaw_2, speed_2)
         # before the law: the monitor's suspicion of the yaw rate holds the law's command
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2],
                     (self.monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)

@@ -68,9 +68,12 @@ REF_SENSOR(ref_yaw, mrs_yaw_rate, yaw_rate,
                (IR(mrs_yaw_rate, yaw_rate, yaw_rate2) ||
                 m.yaw_rate_yaw_rate2 == MRSTEER_MRS_YAW_RATE_YAW_RATE_YAW_RATE2_SNA_CHOICE))
 REF_SENSOR(ref_speed, mrs_vehicle_speed, vehicle_speed, IR(mrs_vehicle_speed, vehicle_speed, speed))
+/* So is the second speed's. */
 REF_SENSOR(ref_red, mrs_redundant_sensors, redundant_sensors,
            IR(mrs_redundant_sensors, redundant_sensors, lat_accel) &&
-               IR(mrs_redundant_sensors, redundant_sensors, steer_angle))
+               IR(mrs_redundant_sensors, redundant_sensors, steer_angle) &&
+               (IR(mrs_redundant_sensors, redundant_sensors, speed2) ||
+                m.redundant_sensors_speed2 == MRSTEER_MRS_REDUNDANT_SENSORS_REDUNDANT_SENSORS_SPEED2_SNA_CHOICE))
 
 static int ref_sync(const uint8_t *d, size_t len, ref_t *r)
 {

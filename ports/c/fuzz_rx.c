@@ -76,6 +76,9 @@ static size_t build(const mrs_node_t *n, int k, unsigned alive, int sign, uint64
         /* a signal with an SNA value: sometimes that (NaN packs as it) */
         phys[in->sig2] = (m->sna[in->sig2] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, in->sig2);
     }
+    if (in->sig3 >= 0) {
+        phys[in->sig3] = (m->sna[in->sig3] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, in->sig3);
+    }
     if (sign) {
         phys[m->fv_epoch] = (double)(epoch & 1u);
         phys[m->fv_counter] = (double)(fv & ((1u << m->fv_counter_bits) - 1u));

@@ -42,6 +42,9 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->turn_yaw_bias = 0.011;
     cfg->turn_lat_bias = 0.1;
     cfg->yaw_pair_hold = 0.02;
+    cfg->speed_pair_bound = 1.0;
+    cfg->speed_pair_rel = 0.05;
+    cfg->speed_pair_time = 0.1;
 }
 
 static int positive(double x)
@@ -62,7 +65,8 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
                         g->model_time, g->frozen_time, g->frozen_move_yaw, g->frozen_move_steer, g->nominal_l_f,
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
                         g->yaw_pair_bound, g->sensor_tau, g->speed_step, g->turn_yaw_min, g->turn_yaw_tol,
-                        g->turn_lat_tol, g->turn_speed_rel, g->yaw_pair_hold};
+                        g->turn_lat_tol, g->turn_speed_rel, g->yaw_pair_hold, g->speed_pair_bound,
+                        g->speed_pair_time};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -74,6 +78,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
         !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
+        !(g->speed_pair_rel >= 0.0 && g->speed_pair_rel < 1e3) ||
         !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min) || !(g->yaw_pair_hold <= g->yaw_pair_bound)) {
         return -1;
     }
@@ -116,6 +121,9 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->turn_yaw_bias = g->turn_yaw_bias;
     c->turn_lat_bias = g->turn_lat_bias;
     c->yaw_pair_hold = g->yaw_pair_hold;
+    c->speed_pair_bound = g->speed_pair_bound;
+    c->speed_pair_rel = g->speed_pair_rel;
+    c->speed_pair_steps = steps_of(g->speed_pair_time, g->ts);
     return 0;
 }
 
@@ -169,6 +177,9 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->turn_r0 = s->turn_a0 = 0.0;
     s->turn_res = s->turn_r = 0.0;
     s->turn_err = 0.0;
+    s->speed2_seen = 0u;
+    s->speed_pair_count = 0;
+    s->speed_pair_err = 0.0;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -216,7 +227,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
 
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
-                         double aux_cmd_applied, double yaw_rate_redundant)
+                         double aux_cmd_applied, double yaw_rate_redundant, double speed_redundant)
 {
     uint16_t flags;
     const int primary_ok = (delta_driver > -1e3 && delta_driver < 1e3) && (yaw_rate > -1e3 && yaw_rate < 1e3) &&
@@ -241,6 +252,25 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->speed_seen = 0u;
     }
     flags = s->latched;
+    /* 8. speed pair: before the pause too (a drifting speed carries the reading under speed_min) */
+    if (speed_redundant >= 0.0 && speed_redundant < 1e3) {
+        s->speed2_seen = 1u;
+        if (speed >= 0.0 && speed < 1e3) {
+            e = MRS_MAG(speed - speed_redundant);
+            rm = speed < speed_redundant ? speed : speed_redundant; /* min(v, v_2) */
+            bound = c->speed_pair_bound + c->speed_pair_rel * rm;
+            s->speed_pair_err = e / bound;
+            MRS_COUNT(s->speed_pair_count, e > bound, c->speed_pair_steps, MRS_CHECK_SPEED_PAIR);
+        } else {
+            s->speed_pair_count = 0;
+        }
+    } else {
+        s->speed_pair_count = 0;
+        if (s->speed2_seen && speed >= 0.0 && speed < 1e3) {
+            flags |= MRS_MISSING; /* the car has the second speed and it is gone: the pair pauses */
+        }
+    }
+    flags |= s->latched;
     if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
         s->yaw2_seen = 1u;
     } else if (s->yaw2_seen && yaw_rate > -1e3 && yaw_rate < 1e3) {

@@ -34,10 +34,11 @@
 /* the yaw-rate pair's latest sample over yaw_pair_hold, not confirmed (not latched): the node
  * passes it as mrs_step's hold, on which the law's command may shrink but not grow */
 #define MRS_SUSPECT_YAW_PAIR 0x800u
+#define MRS_CHECK_SPEED_PAIR 0x1000u /* the speed disagrees with the second speed */
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
-#define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED)
+#define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED | MRS_CHECK_SPEED_PAIR)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
-                        MRS_CHECK_SPEED | MRS_CHECK_TURN)
+                        MRS_CHECK_SPEED | MRS_CHECK_TURN | MRS_CHECK_SPEED_PAIR)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
 
 #define MRS_KIN_WINDOW 4
@@ -70,6 +71,9 @@ typedef struct {
      * turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r| */
     double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
     double yaw_pair_hold; /* |r - r_2| of one sample over this, rad/s: the suspicion (<= yaw_pair_bound) */
+    /* the speed pair: |v - v_2| over speed_pair_bound + speed_pair_rel min(v, v_2) (m/s) for
+     * speed_pair_time (s) trips */
+    double speed_pair_bound, speed_pair_rel, speed_pair_time;
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -86,6 +90,8 @@ typedef struct {
     double side_accel, speed_step;
     double turn_yaw_min, turn_yaw_tol, turn_lat_tol, turn_lat_rel, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
     double yaw_pair_hold;
+    double speed_pair_bound, speed_pair_rel;
+    int32_t speed_pair_steps;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
@@ -93,6 +99,7 @@ typedef struct {
     uint8_t yaw2_seen; /* the yaw-rate sensor's second element received since the reset */
     uint8_t speed_seen; /* speed_last holds a valid speed received since the speed was last invalid */
     uint8_t turn_settled; /* the steady-turn check's block before the current one was steady */
+    uint8_t speed2_seen; /* the second speed received since the reset */
     uint16_t latched, flags;
     int32_t kin_count, pair_count, model_count, kin_idx, kin_n, since, yaw_pair_idx, yaw_pair_n;
     int32_t yaw_same, lat_same, st_same, st2_same;
@@ -108,6 +115,8 @@ typedef struct {
     double lag_beta_prev, kin_sensor[MRS_KIN_WINDOW]; /* what that lag moves the nominal car's beta' */
     double speed_last;
     double turn_r0, turn_a0, turn_res, turn_r, turn_err; /* the block's first r, a_y; sums of r v - a_y, r */
+    int32_t speed_pair_count; /* the speed pair's up/down counter (trips at speed_pair_steps) */
+    double speed_pair_err;
 } mrs_monitor_state_t;
 
 typedef struct {
@@ -133,10 +142,11 @@ int mrs_monitor_configure(const mrs_monitor_config_t *cfg, mrs_monitor_coeffs_t 
 void mrs_monitor_reset(mrs_monitor_state_t *s);
 /* One control period; returns the CtrlStatus_Plausibility bits. NaN marks a missing input;
  * a NaN yaw_rate_redundant pauses the yaw-rate pair check, and is DEGRADED once the element has
- * been received since the reset while yaw_rate is valid (a sender without it never sets it). */
+ * been received since the reset while yaw_rate is valid (a sender without it never sets it).
+ * speed_redundant, the second speed, likewise for the speed pair (while speed is valid). */
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
                          double delta_driver_redundant, double yaw_rate, double lat_accel, double speed,
-                         double aux_cmd_applied, double yaw_rate_redundant);
+                         double aux_cmd_applied, double yaw_rate_redundant, double speed_redundant);
 
 void mrs_authority_default_config(mrs_authority_config_t *cfg);
 int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);

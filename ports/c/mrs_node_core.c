@@ -21,6 +21,7 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     static const int msgs[MRS_N_INPUTS] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED, MRS_MSG_REDUNDANT};
     static const int sigs[MRS_N_INPUTS] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED, MRS_SIG_LAT_ACCEL};
     static const int sigs2[MRS_N_INPUTS] = {-1, MRS_SIG_YAW_RATE_2, -1, MRS_SIG_STEER_ANGLE_2};
+    static const int sigs3[MRS_N_INPUTS] = {-1, -1, -1, MRS_SIG_SPEED_2};
     /* A missing redundant input is no cause: the monitor reports it (PLAUS_DEGRADED). */
     static const unsigned causes[MRS_N_INPUTS] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING,
                                                   MRS_CAUSE_SPEED_MISSING, 0u};
@@ -67,9 +68,11 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         in->msg = msgs[i];
         in->sig = sigs[i];
         in->sig2 = sigs2[i];
+        in->sig3 = sigs3[i];
         in->missing_cause = causes[i];
         in->value = NAN;
         in->value2 = NAN;
+        in->value3 = NAN;
         in->limit = limit_cycles(&mrs_messages[msgs[i]], n->period, cfg->timeout_cycles);
         in->age = in->limit + 1; /* never received: invalid until the first good frame */
         mrs_e2e_receiver_init(&in->seq, (uint8_t)cfg->max_counter_delta);
@@ -224,7 +227,7 @@ int mrs_node_control(mrs_node_t *n)
 {
     unsigned cause = 0u, state;
     mrs_real_t values[3];
-    double lat = NAN, steer2 = NAN, yaw2, u_req;
+    double lat = NAN, steer2 = NAN, speed2 = NAN, yaw2, u_req;
     int i, fault;
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
     /* node.py's monitor_steps and redundant_inputs, before the ages move on: the yaw-rate
@@ -237,6 +240,7 @@ int mrs_node_control(mrs_node_t *n)
     if (fresh(n, red) && n->red_usable) {
         lat = red->value;
         steer2 = red->value2;
+        speed2 = red->value3; /* NaN also when the sender has none (SNA) */
     }
     n->red_cycles += samples;
     n->yaw_samples = 0;
@@ -258,7 +262,7 @@ int mrs_node_control(mrs_node_t *n)
     yaw2 = isnan(values[1]) ? (double)NAN : yaw->value2;
     for (k = 0; k < steps; ++k) {
         n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
-                                    (double)values[2], n->command, yaw2);
+                                    (double)values[2], n->command, yaw2, speed2);
     }
     u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2],
                              (uint8_t)((n->mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));

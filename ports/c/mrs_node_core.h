@@ -32,8 +32,9 @@ typedef struct {
     int msg; /* MRS_MSG_* */
     int sig; /* its measurement signal */
     int sig2; /* a second measurement signal of the same frame, -1 if none */
+    int sig3; /* a third (the redundant frame's second speed), -1 if none */
     unsigned missing_cause; /* 0: an invalid input adds no cause bit (the redundant sensors) */
-    double value, value2;
+    double value, value2, value3;
     long age, limit;
     int rejects;
     unsigned last_counter, bad_cause;

@@ -139,6 +139,9 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
         if (in->sig2 >= 0) {
             in->value2 = phys[in->sig2];
         }
+        if (in->sig3 >= 0) {
+            in->value3 = phys[in->sig3];
+        }
         in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
         in->age = 0;
         if (in->msg == MRS_MSG_REDUNDANT) {

@@ -5,11 +5,11 @@
  *
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
  * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
- * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2]]]"
+ * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2 [SPEED_2]]]]"
  * (rad, rad/s, m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant
  * pair absent counts as invalid; STEPS the monitor's steps in the cycle, 0 to MRS_REPLAY_MAX_STEPS:
  * node.py's monitor_steps, 0 when it holds its verdict; absent counts as 1; YAW_RATE_2 the yaw-rate
- * sensor's second element, absent or nan when there is none), as
+ * sensor's second element, absent or nan when there is none; SPEED_2 the second speed, likewise), as
  * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
  * does: the monitor (STEPS times) on the inputs and the previous line's command, u_req =
  * mrs_step(..., its suspicion of the yaw rate), the limiter on u_req; each output line is
@@ -81,17 +81,17 @@ int main(int argc, char **argv)
     }
     mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
-        double v[7] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN};
+        double v[8] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN};
         char *p = line, *end;
         int k;
         double u_req;
         unsigned state;
         ++n;
-        for (k = 0; k < 7; ++k) {
+        for (k = 0; k < 8; ++k) {
             const double x = strtod(p, &end);
             if (end == p) {
                 if (k < 3) {
-                    fprintf(stderr, "mrs_replay: line %ld: expected three, five, six or seven numbers\n", n);
+                    fprintf(stderr, "mrs_replay: line %ld: expected three, five, six, seven or eight numbers\n", n);
                     return 2;
                 }
                 break;
@@ -100,11 +100,11 @@ int main(int argc, char **argv)
             p = end;
         }
         if (k == 4 || !(v[5] >= 0.0 && v[5] <= (double)MRS_REPLAY_MAX_STEPS && v[5] == floor(v[5]))) {
-            fprintf(stderr, "mrs_replay: line %ld: expected three, five, six or seven numbers (the sixth a count of steps)\n", n);
+            fprintf(stderr, "mrs_replay: line %ld: expected three, five, six, seven or eight numbers (the sixth a count of steps)\n", n);
             return 2;
         }
         for (k = 0; k < (int)v[5]; ++k) {
-            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6]);
+            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6], v[7]);
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
                                  (uint8_t)((mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));

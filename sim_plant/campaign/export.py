@@ -38,6 +38,8 @@ def to_toml(sc: scn.Scenario, comments: list[str] | None = None) -> str:
               f"lowpass_hz = {_num(s.yaw_rate.lowpass_hz)}", f"quantise = {str(s.yaw_rate.quantise).lower()}", ""]
     if not s.yaw_rate_redundant_present:
         lines += ["[sensors.yaw_rate_redundant]", "present = false", ""]
+    if not s.speed_redundant_present:  # the campaign engine's car (docs/campaigns.md)
+        lines += ["[sensors.speed_redundant]", "present = false", ""]
     for f in sc.sensor_faults:
         lines += ["[[sensor_fault]]", f'sensor = "{f.sensor}"', f'kind = "{f.kind}"', f"start = {_num(f.start)}"]
         lines += [f"value = {_num(f.value)}"] if f.value is not None else []

@@ -45,7 +45,8 @@ KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
 #: fault_sensor codes: none, then every sensor of sensor_faults.FAULT_SENSORS (the speed and the
 #: yaw-rate sensor's second element last, as they were added: stored codes keep their meaning)
-FAULT_CHANNELS = ("none", *FAULT_SENSORS)
+#: but the second speed, which the engine's car does not have (docs/campaigns.md)
+FAULT_CHANNELS = ("none", *(s for s in FAULT_SENSORS if s != "speed_redundant"))
 #: fault_kind codes and the sensor_faults kind each one is
 FAULT_KINDS = ("stuck", "offset", "gain", "drift")
 SCALAR_FAULT_KINDS = ("stuck", "bias", "scale", "drift")
@@ -142,8 +143,10 @@ def scenario_for(row: dict[str, float], duration: float) -> Scenario:
                                    rate_limit_deg_s=float(row["actuator_rate"]))
     # The yaw-rate sensor's second element: what a scenario file's [yaw_rate_redundant] defaults
     # to (the first's noise and filter, no bias), so that an exported sample reads back equal.
+    # No second speed: the engine does not model it (docs/campaigns.md), and the exported file says so.
     yaw = YawRateSensorConfig(noise_density=float(row["noise_density"]), bias_deg_s=float(row["bias"]))
-    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0))
+    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0),
+                           speed_redundant_present=False)
     return Scenario(name=f"campaign-sample-{int(row[INDEX])}", duration=duration, v=float(row["v"]),
                     mu=float(row["mu"]), mass=mass, events=(event,),
                     driver=DriverModel("model", float(row["reaction_time"]), float(row["driver_time_constant"])),

@@ -41,7 +41,8 @@ def add_sensor_fault_arg(p: argparse.ArgumentParser) -> None:
     """``--sensor-fault SPEC`` (repeatable; ``sim_plant.car.sensor_faults.parse_spec``)."""
     p.add_argument("--sensor-fault", action="append", default=[], metavar="SENSOR:KIND[:VALUE]@START",
                    help="a sensor fault in well-formed frames, added to the scenario's [[sensor_fault]] tables "
-                   "(repeatable): SENSOR yaw_rate, lat_accel, steer, steer_redundant, speed or "
-                   "yaw_rate_redundant (the yaw-rate sensor's second element); KIND stuck (VALUE "
+                   "(repeatable): SENSOR yaw_rate, lat_accel, steer, steer_redundant, speed, "
+                   "yaw_rate_redundant (the yaw-rate sensor's second element) or speed_redundant (the "
+                   "second speed); KIND stuck (VALUE "
                    "optional: else the value at onset), bias, scale, drift (VALUE per s), noise (VALUE RMS) or "
                    "frozen (no VALUE); VALUE in the signal's SI unit; START in s, e.g. yaw_rate:bias:0.05@1.0")

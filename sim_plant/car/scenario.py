@@ -41,7 +41,7 @@ Sensor faults in well-formed frames (``sensor_faults``: sensor, kind, value in t
 unit, onset; optional ``stop``), on any car::
 
     [[sensor_fault]]
-    sensor = "yaw_rate"     # yaw_rate, lat_accel, steer, steer_redundant, speed, yaw_rate_redundant
+    sensor = "yaw_rate"     # yaw_rate, lat_accel, steer, steer_redundant, speed, yaw_rate_redundant, speed_redundant
     kind = "bias"           # stuck (value optional: the value at onset), bias, scale, drift, noise, frozen
     value = 0.05            # rad/s here
     start = 1.0             # s

@@ -2,7 +2,8 @@
 SecOC, counters), the errors the plausibility monitor (``firmware_py.plausibility``) must find.
 
 A fault (``SensorFault``) names a ``sensor`` (``yaw_rate``, ``lat_accel``, ``steer``,
-``steer_redundant``, ``speed``, ``yaw_rate_redundant``: the yaw-rate sensor's second element), a ``kind``, a ``value`` in the signal's SI unit (rad/s, m/s^2,
+``steer_redundant``, ``speed``, ``yaw_rate_redundant``: the yaw-rate sensor's second element,
+``speed_redundant``: the second speed), a ``kind``, a ``value`` in the signal's SI unit (rad/s, m/s^2,
 rad, m/s) and an onset ``start`` (s; ``stop`` optional, default never).  The kinds:
 
 ==========  ================================================================================
@@ -33,7 +34,8 @@ import numpy as np
 
 from sim_plant.car.model_files import ModelFileError, reject_unknown
 
-FAULT_SENSORS = ("yaw_rate", "lat_accel", "steer", "steer_redundant", "speed", "yaw_rate_redundant")
+FAULT_SENSORS = ("yaw_rate", "lat_accel", "steer", "steer_redundant", "speed", "yaw_rate_redundant",
+                 "speed_redundant")
 FAULT_KINDS = ("stuck", "bias", "scale", "drift", "noise", "frozen")
 #: Kinds whose ``value`` is required (stuck's is optional, frozen has none).
 NEEDS_VALUE = ("bias", "scale", "drift", "noise")

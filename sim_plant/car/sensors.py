@@ -25,6 +25,12 @@ parameters (a ``[yaw_rate_redundant]`` table; by default the first element's noi
 quantisation, and no bias), its own noise stream and its own faults.  ``present = false`` in
 that table models a sensor without it: it reads NaN, which the frame carries as SNA.
 
+The second speed (``speed_redundant``, RedundantSensors_Speed2: on a car the non-driven wheels'
+speeds, for the monitor's speed pair check) is a channel as the speed is: white noise
+(``noise_m_s``, default 0.02 m/s RMS) and quantisation to its signal's 0.3 m/s, its own noise
+stream (after the yaw rate's second element's) and its own faults; ``present = false`` in its
+``[speed_redundant]`` table models a car without it (NaN, SNA).
+
 Lateral acceleration (``MRS_RedundantSensors``, for the plausibility monitor): the true
 a_y = v (beta' + r) of the plant through the same chain as the yaw rate, with ``noise_density``
 in micro-g/sqrt(Hz) (default 180: Bosch BMI160's accelerometer, datasheet BST-BMI160-DS000-07,
@@ -44,7 +50,7 @@ sensors the time before a step's readings.
 
 Noise is seeded: one ``seed`` makes a numpy SeedSequence whose spawned children feed one
 Generator per sensor (yaw rate, steer, speed, lateral acceleration, second steering channel, then
-one per noise fault, then the yaw rate's second element: the first three streams are those of the
+one per noise fault, then the yaw rate's second element, then the second speed: the first three streams are those of the
 three-sensor model before, and each model since added its stream after the others), so runs are
 reproducible and the sensors' streams independent.
 ``SensorConfig.ideal()`` keeps today's exact sensors (output = input).
@@ -70,7 +76,8 @@ DBC_SIGNALS = {"yaw_rate": (names.MSG_YAW, names.SIG_YAW_RATE), "steer": (names.
                "speed": (names.MSG_SPEED, names.SIG_SPEED),
                "lat_accel": (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL),
                "steer_redundant": (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2),
-               "yaw_rate_redundant": (names.MSG_YAW, names.SIG_YAW_RATE_2)}
+               "yaw_rate_redundant": (names.MSG_YAW, names.SIG_YAW_RATE_2),
+               "speed_redundant": (names.MSG_REDUNDANT, names.SIG_SPEED_2)}
 MAX_SEED = 2**63 - 1
 
 
@@ -142,6 +149,8 @@ class SensorConfig:
     faults: tuple[SensorFault, ...] = ()
     yaw_rate_redundant: YawRateSensorConfig = field(default_factory=YawRateSensorConfig)
     yaw_rate_redundant_present: bool = True  # False: the sensor has no second element (NaN, SNA)
+    speed_redundant: ChannelConfig = field(default_factory=lambda: ChannelConfig(noise=0.02))
+    speed_redundant_present: bool = True  # False: the car has no second speed (NaN, SNA)
 
     @classmethod
     def ideal(cls) -> "SensorConfig":
@@ -155,9 +164,10 @@ class SensorConfig:
     def from_mapping(cls, data: dict[str, Any], where: str) -> "SensorConfig":
         """From a TOML table: ``seed`` and the tables [yaw_rate], [steer], [speed], [lat_accel],
         [steer_redundant], [yaw_rate_redundant] (the yaw-rate sensor's second element: the keys
-        it leaves out are [yaw_rate]'s but its bias, and ``present = false`` leaves it out)."""
+        it leaves out are [yaw_rate]'s but its bias, and ``present = false`` leaves it out),
+        [speed_redundant] (the second speed: ``noise``, ``quantise``, ``present``)."""
         reject_unknown(data, {"seed", "yaw_rate", "steer", "speed", "lat_accel", "steer_redundant",
-                              "yaw_rate_redundant"}, where)
+                              "yaw_rate_redundant", "speed_redundant"}, where)
         first = table(data, "yaw_rate", where)
         yaw_cfg = _checked(YawRateSensorConfig, first, YAW_RANGES, f"{where} [yaw_rate]")
         second_yaw = dict(table(data, "yaw_rate_redundant", where))
@@ -171,8 +181,14 @@ class SensorConfig:
                         for name in ("steer", "speed"))
         second = table(data, "steer_redundant", where)
         steer2 = _checked(ChannelConfig, {"noise": 0.01, **second}, CHANNEL_RANGES, f"{where} [steer_redundant]")
+        second_speed = dict(table(data, "speed_redundant", where))
+        speed2_present = boolean(second_speed, "present", True, f"{where} [speed_redundant]")
+        second_speed.pop("present", None)
+        speed2 = _checked(ChannelConfig, {"noise": 0.02, **second_speed}, CHANNEL_RANGES,
+                          f"{where} [speed_redundant]")
         return cls(yaw_cfg, steer, speed, integer(data, "seed", 0, 0, MAX_SEED, where), lat_accel=lat_cfg,
-                   steer_redundant=steer2, yaw_rate_redundant=yaw2_cfg, yaw_rate_redundant_present=present)
+                   steer_redundant=steer2, yaw_rate_redundant=yaw2_cfg, yaw_rate_redundant_present=present,
+                   speed_redundant=speed2, speed_redundant_present=speed2_present)
 
     @classmethod
     def load(cls, spec: str) -> "SensorConfig":
@@ -222,11 +238,13 @@ CHANNELS = ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant")
 #: The yaw-rate sensor's second element: its stream comes after the faults' streams, so every
 #: seed gives the other channels the noise it gave them before the element existed.
 YAW_RATE_REDUNDANT = "yaw_rate_redundant"
-ALL_CHANNELS = (*CHANNELS, YAW_RATE_REDUNDANT)
+#: The second speed: its stream after the yaw rate's second element's, for the same reason.
+SPEED_REDUNDANT = "speed_redundant"
+ALL_CHANNELS = (*CHANNELS, YAW_RATE_REDUNDANT, SPEED_REDUNDANT)
 
 
 class Sensors:
-    """The six sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s,
+    """The seven sensors stepped once per plant step ``ts``; SI units in and out (rad, rad/s,
     m/s, m/s^2).  ``at(t)`` before a step's readings sets the time the faults see."""
 
     def __init__(self, config: SensorConfig, ts: float) -> None:
@@ -247,7 +265,8 @@ class Sensors:
         self.sigma = {"yaw_rate": self.yaw_sigma, "steer": math.radians(config.steer.noise),
                       "speed": config.speed.noise, "lat_accel": self.lat_sigma,
                       "steer_redundant": math.radians(config.steer_redundant.noise),
-                      YAW_RATE_REDUNDANT: math.radians(yaw2.noise_density) * math.sqrt(fs / 2.0)}
+                      YAW_RATE_REDUNDANT: math.radians(yaw2.noise_density) * math.sqrt(fs / 2.0),
+                      SPEED_REDUNDANT: config.speed_redundant.noise}
         self.bias = {"yaw_rate": self.yaw_bias, "lat_accel": self.lat_bias,
                      YAW_RATE_REDUNDANT: math.radians(yaw2.bias_deg_s)}
         self._hz = {"yaw_rate": yaw.lowpass_hz, "lat_accel": lat.lowpass_hz, YAW_RATE_REDUNDANT: yaw2.lowpass_hz}
@@ -264,9 +283,10 @@ class Sensors:
         """Back to the start: the same noise sequence again, the filters unstarted, the faults
         not yet begun."""
         n_fault = len(self.config.faults)
-        children = np.random.SeedSequence(self.config.seed).spawn(len(CHANNELS) + n_fault + 1)
+        children = np.random.SeedSequence(self.config.seed).spawn(len(CHANNELS) + n_fault + 2)
         self._rng = {name: np.random.default_rng(c) for name, c in zip(CHANNELS, children)}
-        self._rng[YAW_RATE_REDUNDANT] = np.random.default_rng(children[-1])
+        self._rng[YAW_RATE_REDUNDANT] = np.random.default_rng(children[-2])
+        self._rng[SPEED_REDUNDANT] = np.random.default_rng(children[-1])
         fs = 1.0 / self.ts
         self._lpf = {name: _Lowpass(hz, fs) for name, hz in self._hz.items() if hz > 0.0 and not self.config.exact}
         self._faults = {name: FaultedChannel(tuple(f for f in self.config.faults if f.sensor == name),
@@ -308,3 +328,7 @@ class Sensors:
     def yaw_rate_redundant(self, r: float) -> float:
         """The second element's reading; NaN for a sensor without one."""
         return self._measure(YAW_RATE_REDUNDANT, r) if self.config.yaw_rate_redundant_present else math.nan
+
+    def speed_redundant(self, v: float) -> float:
+        """The second speed's reading; NaN for a car without one."""
+        return self._measure(SPEED_REDUNDANT, v) if self.config.speed_redundant_present else math.nan

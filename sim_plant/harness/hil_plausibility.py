@@ -12,10 +12,12 @@ fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pa
 ``yaw_pair_bound`` when the car has the sensor's second element (a stuck element is found as its
 error passes 0.03 rad/s, and may never reach the kinematic 0.035); for the lateral acceleration
 the kinematic bound times v, plus ``side_accel`` when the car has the second element; for a
-steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; none for
-the speed, whose checks look at its jumps (``speed_step``) and, in a steady turn, at a_y / r over
-half-second blocks (``CHECK_TURN``), not at its error.  Times are the scenario's, counted in yaw-rate frames (one per plant step): in
-lockstep the log's wall-clock stamps are not simulated time."""
+steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; for either
+speed the speed pair's ``speed_pair_bound + speed_pair_rel v`` when the car has the second speed,
+else none (the speed's other checks look at its jumps, ``speed_step``, and in a steady turn at
+a_y / r over half-second blocks, ``CHECK_TURN``, not at its error).  Times are the scenario's,
+counted in yaw-rate frames (one per plant step): in lockstep the log's wall-clock stamps are not
+simulated time."""
 
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.harness.hil_steps import Step
-from sim_plant.offline.plausibility_runs import sensor_bound
+from sim_plant.offline.plausibility_runs import sensor_bound, speed_pair_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -74,13 +76,16 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
 def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
     """When the scenario's first sensor fault's error (measured less true, from the plant's
     trace) first exceeded the bound the monitor checks it against (the module's docstring);
-    None if it never did, or for a fault of the speed (its check bounds its jumps, not its error)."""
+    None if it never did, or for a fault of the speed on a car without the second speed (its
+    check then bounds its jumps, not its error; with it, the speed pair's ``speed_pair_bound``)."""
     cfg = pl.PlausibilityConfig()
     sensor = min(sc.sensor_faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
         f.sensor == "yaw_rate_redundant" for f in sc.sensor_faults)
 
     def bound(s: Step) -> float:
+        if sensor in ("speed", "speed_redundant"):
+            return float(speed_pair_bound(cfg, s.v_m_s))
         if sensor == "yaw_rate":
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
         return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair))
@@ -89,7 +94,11 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
              "lat_accel": lambda s: s.lat_accel_measured_m_s2 - s.lat_accel_m_s2,
              "steer": lambda s: s.steer_measured_rad - s.driver_angle_rad,
              "steer_redundant": lambda s: s.steer_redundant_measured_rad - s.driver_angle_rad,
-             "yaw_rate_redundant": lambda s: s.yaw_rate_redundant_measured_rad_s - s.yaw_rate_rad_s}.get(sensor)
+             "yaw_rate_redundant": lambda s: s.yaw_rate_redundant_measured_rad_s - s.yaw_rate_rad_s,
+             "speed": lambda s: s.speed_measured_m_s - s.v_m_s,
+             "speed_redundant": lambda s: s.speed_redundant_measured_m_s - s.v_m_s}.get(sensor)
+    if sensor in ("speed", "speed_redundant") and not sc.sensor_config.speed_redundant_present:
+        error = None
     if error is None:
         return None
     return next((s.t_s for s in steps if abs(error(s)) > bound(s)), None)

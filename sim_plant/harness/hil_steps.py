@@ -62,6 +62,7 @@ class Step:
     steer_redundant_measured_rad: float = math.nan
     yaw_rate_redundant_measured_rad_s: float = math.nan
     speed_measured_m_s: float = math.nan  # the speed sensor's reading at the step (v_m_s: the truth)
+    speed_redundant_measured_m_s: float = math.nan  # the second speed's (NaN also for a car without one)
 
 
 STEP_COLUMNS = tuple(f.name for f in fields(Step))

@@ -111,8 +111,9 @@ class Step:
     line: int  # the log line that triggered it (the yaw-rate frame, or the recorded command)
     t: float
     # (delta_driver, yaw_rate, speed) into step(), then (lat_accel, delta_driver_redundant,
-    # yaw_rate_redundant) into the monitor (with the command sent the cycle before); NaN: invalid.
-    inputs: tuple[float, float, float, float, float, float]
+    # yaw_rate_redundant, speed_redundant) into the monitor (with the command sent the cycle
+    # before); NaN: invalid.
+    inputs: tuple[float, float, float, float, float, float, float]
     out: Out
     flags: int = 0  # the firmware's range flags after this step
     status: StatusOut | None = None  # the status frame sent in this cycle
@@ -207,7 +208,7 @@ class _Replayer:
 
     # ------------------------------------------------------------- the node
 
-    def _inputs(self) -> tuple[float, float, float, float, float, float]:
+    def _inputs(self) -> tuple[float, float, float, float, float, float, float]:
         """What ``control()`` is about to pass to ``step()`` and the monitor: the node's freshness
         rule, read from its public input records (and ``redundant_inputs``); ``cycle`` checks the
         node's command against it."""
@@ -216,19 +217,19 @@ class _Replayer:
         for name in (MSG_STEER, MSG_YAW, MSG_SPEED):
             inp = self.node.input(name)
             vals.append(inp.value if inp.valid(e2e_max) else math.nan)
-        lat, steer_2 = self.node.redundant_inputs()
+        lat, steer_2, speed_2 = self.node.redundant_inputs()
         yaw_2 = math.nan if math.isnan(vals[1]) else self.node.input(MSG_YAW).second_value
-        return vals[0], vals[1], vals[2], lat, steer_2, yaw_2
+        return vals[0], vals[1], vals[2], lat, steer_2, yaw_2, speed_2
 
-    def _shadow(self, inputs: tuple[float, float, float, float, float, float], monitor_steps: int) -> float:
+    def _shadow(self, inputs: tuple[float, float, float, float, float, float, float], monitor_steps: int) -> float:
         """The command the node should send for ``inputs``: the monitor's ``monitor_steps`` steps
         (none: its held bits), step() with its suspicion of the yaw rate and the authority
         limiter, run on copies of the node's states."""
         node = self.node
-        d, r, v, lat, d2, r2 = inputs
+        d, r, v, lat, d2, r2, v2 = inputs
         bits, monitor = node.plausibility, copy.deepcopy(node.monitor)
         for _ in range(monitor_steps):
-            bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2)
+            bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2, v2)
         u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v, (monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
                                  monitor.flags & pl.CUT_CHECKS)

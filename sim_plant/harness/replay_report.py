@@ -102,7 +102,7 @@ def steps_csv(steps: Sequence[Step], new: Sequence[Step] | None = None) -> str:
     f = io.StringIO()
     w = csv.writer(f, lineterminator="\n")
     w.writerow(["step", "kind", "line", "t", "delta_driver", "yaw_rate", "speed", "lat_accel", "delta_driver_2",
-                "yaw_rate_2", "monitor_steps", "replayed_angle", "replayed_state",
+                "yaw_rate_2", "speed_2", "monitor_steps", "replayed_angle", "replayed_state",
                 "recorded_angle", "recorded_state", *(["new_angle", "new_state"] if new is not None else [])])
     for i, s in enumerate(steps):
         rec = s.recorded

@@ -59,7 +59,7 @@ from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
 from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_SYNC,
                                MSG_YAW, SIG_BENCH_MU, SIG_BENCH_YAW_MOMENT, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_LAT_ACCEL,
-                               SIG_SPEED, SIG_STATUS_PLAUS, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE,
+                               SIG_SPEED, SIG_STATUS_PLAUS, SIG_SPEED_2, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE,
                                SIG_YAW_RATE_2, VEHICLE_SENSORS)
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
 from sim_plant.car import scenario as scn
@@ -100,7 +100,7 @@ class PlantNode:
     TRACE_COLUMNS = ("t_s", "driver_angle_rad", "aux_applied_rad", "m_z_nm", "mu", "v_m_s",
                      "yaw_rate_rad_s", "beta_rad", "lat_accel_m_s2", "aux_cmd_rad", "yaw_rate_measured_rad_s",
                      "steer_measured_rad", "lat_accel_measured_m_s2", "steer_redundant_measured_rad",
-                     "yaw_rate_redundant_measured_rad_s", "speed_measured_m_s",
+                     "yaw_rate_redundant_measured_rad_s", "speed_measured_m_s", "speed_redundant_measured_m_s",
                      "wall_s")  # wall_s last: written to the microsecond
 
     def __init__(self, bus: can.BusABC, sc: scn.Scenario, mode: str = "lockstep", ts: float = 1e-3,
@@ -196,7 +196,8 @@ class PlantNode:
         if k % self.every[MSG_SPEED] == 0:
             sends.append((MSG_SPEED, {SIG_SPEED: m[SIG_SPEED]}))
         if k % self.every[MSG_REDUNDANT] == 0:
-            sends.append((MSG_REDUNDANT, {SIG_LAT_ACCEL: m[SIG_LAT_ACCEL], SIG_STEER_ANGLE_2: m[SIG_STEER_ANGLE_2]}))
+            sends.append((MSG_REDUNDANT, {SIG_LAT_ACCEL: m[SIG_LAT_ACCEL], SIG_STEER_ANGLE_2: m[SIG_STEER_ANGLE_2],
+                                          SIG_SPEED_2: m[SIG_SPEED_2]}))
         yaw_counter = -1
         if k % self.every[MSG_YAW] == 0:
             sends.append((MSG_YAW, {SIG_YAW_RATE: m[SIG_YAW_RATE], SIG_YAW_RATE_2: m[SIG_YAW_RATE_2]}))
@@ -234,7 +235,8 @@ class PlantNode:
         # a frame carries the reading of the step it is sent at.
         measured = {SIG_STEER_ANGLE: sensors.steer(driver), SIG_SPEED: sensors.speed(self.scene.v),
                     SIG_LAT_ACCEL: sensors.lat_accel(float(y[2])), SIG_STEER_ANGLE_2: sensors.steer_redundant(driver),
-                    SIG_YAW_RATE: sensors.yaw_rate(float(y[0])), SIG_YAW_RATE_2: sensors.yaw_rate_redundant(float(y[0]))}
+                    SIG_YAW_RATE: sensors.yaw_rate(float(y[0])), SIG_YAW_RATE_2: sensors.yaw_rate_redundant(float(y[0])),
+                    SIG_SPEED_2: sensors.speed_redundant(self.scene.v)}
         measured_yaw = measured[SIG_YAW_RATE]
         yaw_counter = self._publish(k, measured)
 
@@ -253,7 +255,7 @@ class PlantNode:
             self.stats.trace.append((t, driver, applied, m_z + self.plant.loads.m_z, self.scene.mu, self.scene.v, float(y[0]), float(y[1]),
                                      float(y[2]), self.latest_cmd, measured_yaw, measured[SIG_STEER_ANGLE],
                                      measured[SIG_LAT_ACCEL], measured[SIG_STEER_ANGLE_2], measured[SIG_YAW_RATE_2],
-                                     measured[SIG_SPEED], time.time()))
+                                     measured[SIG_SPEED], measured[SIG_SPEED_2], time.time()))
         # A lagging actuator moves within the step: the car gets the position's mean over it.
         self.plant.advance(driver + (applied if position is None else position.mean), m_z)
         if not self.plant.linear:

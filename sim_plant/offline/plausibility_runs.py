@@ -16,6 +16,10 @@ offset), never faulted, sampled with the first as one ``MRS_YawRate`` frame woul
 for the monitor's pair check, as ``MRS_YawRate`` carries it; without it the car has none (NaN:
 the check paused).
 
+``second_speed`` gives the monitor the second speed (``RedundantSensors_Speed2``), the
+scenario's own ``speed_redundant`` sensor (with its faults), held at the redundant frame's cycle;
+without it the monitor has none (NaN: the speed pair paused), as before the bus carried it.
+
 ``cut`` is the monitor's flags the node passes as ``authority_step``'s cut (the node's
 ``CUT_CHECKS``: the pair checks; 0 fades every fault instead).
 
@@ -46,14 +50,15 @@ from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 #: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
 _MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.MSG_SPEED,
-            "lat_accel": names.MSG_REDUNDANT, "steer_redundant": names.MSG_REDUNDANT}
+            "lat_accel": names.MSG_REDUNDANT, "steer_redundant": names.MSG_REDUNDANT,
+            "speed_redundant": names.MSG_REDUNDANT}
 
 
 def cycles(ts: float) -> dict[str, int]:
     """Each channel's bus cycle in periods of ``ts`` (the plant node's ``every``): the channel is
     sent, and the controller's value of it renewed, at the steps k with k % cycle == 0."""
     contract = mrsteer_dbc.load()
-    return {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in CHANNELS}
+    return {ch: max(1, round((contract.cycle_time_s(_MESSAGE[ch], ts) or ts) / ts)) for ch in _MESSAGE}
 
 
 @dataclass
@@ -130,6 +135,13 @@ def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray,
     return yaw if sensor == "yaw_rate" else yaw * v + cfg.side_accel * pair
 
 
+def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray) -> float | np.ndarray:
+    """The bound a speed error (either speed's) is judged against on a car with the second
+    speed: the speed pair's ``speed_pair_bound + speed_pair_rel v`` at the true speed ``v`` (the
+    monitor takes the smaller of the two readings, so a reading that falls trips it no later)."""
+    return cfg.speed_pair_bound + cfg.speed_pair_rel * v
+
+
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
     """``sensor_bound`` per period of an offline run: the true yaw rate, the speed the
     controller held, the pair running while the second element's value is there."""
@@ -140,7 +152,8 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 # each of its stages is a few lines that read best in order.
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
-        guard: bool = True, second_yaw: SensorConfig | None = None, cut: int = pl.CUT_CHECKS) -> MonitorRun:
+        guard: bool = True, second_yaw: SensorConfig | None = None, cut: int = pl.CUT_CHECKS,
+        second_speed: bool = False) -> MonitorRun:
     every = cycles(ts)
     scene = ScenarioState(sc)
     car = Car(sc.plant, scene.params(), ts)
@@ -154,9 +167,9 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     ast = au.AuthorityState()
     n = int(round(sc.duration / ts)) + 1
     out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
-    seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant")}
-    held: dict[str, float] = {"yaw_rate_redundant": math.nan}
-    margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair", "turn"), 0.0)
+    seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant", "speed_redundant")}
+    held: dict[str, float] = {"yaw_rate_redundant": math.nan, "speed_redundant": math.nan}
+    margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair", "turn", "speed_pair"), 0.0)
     pipeline: deque[float] = deque([0.0])
     applied = 0.0
     for k in range(n):
@@ -172,8 +185,13 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         sensors.at(t)
         clean.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        if second_speed:
+            read["speed_redundant"] = sensors.speed_redundant(scene.v)
+            if k % every["speed_redundant"] == 0:
+                held["speed_redundant"] = read["speed_redundant"]
         if faulted is not None:
-            out["err"][k] = read[faulted] - getattr(clean, faulted)(truth[faulted])
+            true_value = scene.v if faulted == "speed_redundant" else truth[faulted]
+            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value)
         if second is not None:
             second.at(t)
             r_2 = second.yaw_rate(truth["yaw_rate"])
@@ -185,7 +203,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         # the command sent the period before, as the controller node passes it (the monitor
         # models the actuator's lag itself)
         bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
-                        pipeline[0], held["yaw_rate_redundant"])
+                        pipeline[0], held["yaw_rate_redundant"], held["speed_redundant"])
         # before the law, as the node: the monitor's suspicion of the yaw rate holds its command
         u = reg.step(held["steer"], held["yaw_rate"], held["speed"],
                      guard and (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
@@ -198,7 +216,8 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
             seen[ch][k] = held[ch]
         st = mon.state
         for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err),
-                           ("yaw_pair", st.yaw_pair_err), ("turn", st.turn_err)):
+                           ("yaw_pair", st.yaw_pair_err), ("turn", st.turn_err),
+                           ("speed_pair", st.speed_pair_err)):
             margins[key] = max(margins[key], value)
         # as the plant node: the car gets the lagging actuator's mean position over the step
         car.advance(driver + actuator.mean, scene.m_z)

@@ -141,6 +141,10 @@ SENSOR_ROWS = (
     # driver steers the law follows K_n(v) of the wrong speed; reported as the yaw rate's bit.
     _sensor("curve: speed gain 0.5", "sensor_scale", names.MSG_SPEED, 0.5, _YAW,
             f"FAULT <= 300 ms, {_LATCH}", scenario=CURVE),
+    # A drift never jumps: the speed pair (the car's second speed) finds it once it has carried
+    # the reading past 1.0 m/s + 5 % (2 m/s here, 1 s after the onset).
+    _sensor("curve: speed drift -2 m/s per s", "sensor_drift", names.MSG_SPEED, -2.0, _YAW,
+            f"FAULT <= 300 ms past bound, {_LATCH}", scenario=CURVE, duration=3.4),
     # The element the law does not use: only the pair check can see it.
     _sensor("curve: yaw-rate element 2 stuck at 0", "sensor_stuck", names.MSG_YAW, 0.0, _YAW,
             f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_YAW_RATE_2, scenario=CURVE),
@@ -157,7 +161,8 @@ _PLANT_SENSOR = {(names.MSG_YAW, None): "yaw_rate", (names.MSG_YAW, names.SIG_YA
                  (names.MSG_SPEED, None): "speed", (names.MSG_SPEED, names.SIG_SPEED): "speed",
                  (names.MSG_REDUNDANT, names.SIG_LAT_ACCEL): "lat_accel",
                  (names.MSG_REDUNDANT, names.SIG_STEER_ANGLE_2): "steer_redundant",
-                 (names.MSG_YAW, names.SIG_YAW_RATE_2): "yaw_rate_redundant"}
+                 (names.MSG_YAW, names.SIG_YAW_RATE_2): "yaw_rate_redundant",
+                 (names.MSG_REDUNDANT, names.SIG_SPEED_2): "speed_redundant"}
 
 
 def plant_fault(row: Row) -> SensorFault | None:

@@ -26,8 +26,9 @@ the bound ``offline.plausibility_runs.sensor_bound`` states: the yaw rate's ``ya
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
 plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
-(``PlausibilityConfig``'s defaults, as the controller runs); the speed's, which ``sensor_bound``
-does not state, the speed check's ``speed_step`` (``row_bound``).
+(``PlausibilityConfig``'s defaults, as the controller runs); either speed's, which
+``sensor_bound`` does not state, the speed pair's ``speed_pair_bound`` at the true speed when the
+car has the second speed, else the jump check's ``speed_step`` (``row_bound``).
 It counts as left the bound when it stays over it for 300 ms or until the fault is reported.
 """
 
@@ -45,7 +46,7 @@ from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.car.sensors import DBC_SIGNALS
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, RATE_HZ, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
-from sim_plant.offline.plausibility_runs import sensor_bound
+from sim_plant.offline.plausibility_runs import sensor_bound, speed_pair_bound
 
 #: A sample of the falsified signal as the controller got it: (t, error, bound).
 ErrorSample = tuple[float, float, float]
@@ -78,7 +79,8 @@ _TRACE_COLUMNS = {names.SIG_YAW_RATE: ("yaw_rate_measured_rad_s", "yaw_rate_rad_
                   names.SIG_LAT_ACCEL: ("lat_accel_measured_m_s2", "lat_accel_m_s2"),
                   names.SIG_STEER_ANGLE_2: ("steer_redundant_measured_rad", "driver_angle_rad"),
                   names.SIG_YAW_RATE_2: ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s"),
-                  names.SIG_SPEED: ("speed_measured_m_s", "v_m_s")}
+                  names.SIG_SPEED: ("speed_measured_m_s", "v_m_s"),
+                  names.SIG_SPEED_2: ("speed_redundant_measured_m_s", "v_m_s")}
 
 
 #: The sensor (``sensor_bound``'s name) each falsified signal carries.
@@ -94,13 +96,14 @@ def onset(e: Evidence) -> float | None:
     return next((w for t, w in zip(tr.t, tr.wall) if t >= e.row.fault.start - 1e-9), None)
 
 
-def row_bound(sensor: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool) -> float:
-    """``sensor_bound``, and for the speed the largest change its jump check lets pass between
-    two samples (``speed_step``): the matrix's speed rows are step faults, whose error appears
-    in one jump at the onset.  A speed that drifts has no error bound outside a steady turn
-    (docs/controller.md, "Why a steady-turn speed check"), so it makes no row."""
-    if sensor == "speed":
-        return cfg.speed_step
+def row_bound(sensor: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool,
+              speed_pair: bool = False) -> float:
+    """``sensor_bound``, and for a speed: on a car with the second speed (``speed_pair``) the
+    speed pair's bound (``speed_pair_bound``), else the largest change the jump check lets pass
+    between two samples (``speed_step``), which bounds only a step fault's error (without the
+    pair a drifting speed has no error bound outside a steady turn: docs/controller.md)."""
+    if sensor in ("speed", "speed_redundant"):
+        return float(speed_pair_bound(cfg, v)) if speed_pair else cfg.speed_step
     return float(sensor_bound(sensor, cfg, r, v, pair))
 
 
@@ -115,7 +118,8 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
         measured, true = (cols[c] for c in _TRACE_COLUMNS[signal])
         pair = signal == names.SIG_LAT_ACCEL and any(
             math.isfinite(x) for x in cols.get(_TRACE_COLUMNS[names.SIG_YAW_RATE_2][0], ()))
-        return [(w, m - x, row_bound(sensor, cfg, r, v, pair)) for w, m, x, r, v in
+        speed_pair = any(math.isfinite(x) for x in cols.get(_TRACE_COLUMNS[names.SIG_SPEED_2][0], ()))
+        return [(w, m - x, row_bound(sensor, cfg, r, v, pair, speed_pair)) for w, m, x, r, v in
                 zip(e.trace.wall, measured, true, cols["yaw_rate_rad_s"], cols["v_m_s"])]
     truth = _values(e.vehicle_frames, fault.target, signal)
     seen = _values(e.frames, fault.target, signal)
@@ -123,7 +127,9 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
     speed = _values(e.vehicle_frames, names.MSG_SPEED, names.SIG_SPEED)
     yaw_t, speed_t = [t for t, _ in yaw], [t for t, _ in speed]
     pair = signal == names.SIG_LAT_ACCEL and any(math.isfinite(x) for _, x in yaw2)
-    return [(tc, got - x, row_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair))
+    speed_pair = any(math.isfinite(x) for _, x in _values(e.vehicle_frames, names.MSG_REDUNDANT, names.SIG_SPEED_2))
+    return [(tc, got - x, row_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair,
+                                    speed_pair))
             for (tv, x), (tc, got) in zip(truth, seen)]
 
 
