@@ -65,7 +65,7 @@ CAUSE_AUTH = 0x40
 CAUSE_PLAUSIBILITY = 0x80
 
 # CtrlStatus_Plausibility bits.
-PLAUS_YAW = 0x01  # yaw rate against lateral acceleration or the steering model, or yaw / a_y frozen
+PLAUS_YAW = 0x01  # yaw rate (or the speed scheduling its model) implausible: see the DBC's comment
 PLAUS_STEER = 0x02  # the two steering-angle channels disagree, or one is frozen
 PLAUS_DEGRADED = 0x04  # a redundant input missing: fewer checks, authority limited to the panic window
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, check_positive
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, check_positive, steps_of
 
 # Authority limiter flags (AuthorityState.flags): what bound the command this period.
 AUTH_MAGNITUDE = 0x01
@@ -65,8 +65,8 @@ def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
     check_positive(cfg, tuple(vars(cfg)))
     return AuthorityCoefficients(u_max=cfg.u_max, du_max=cfg.rate_max * cfg.ts, fade_step=cfg.fade_rate * cfg.ts,
                                  fault_fade_step=cfg.fault_fade_rate * cfg.ts,
-                                 window_steps=max(1, round(cfg.panic_window / cfg.ts)), engage=cfg.engage,
-                                 rearm_steps=max(1, round(cfg.rearm_time / cfg.ts)))
+                                 window_steps=steps_of(cfg.panic_window, cfg.ts), engage=cfg.engage,
+                                 rearm_steps=steps_of(cfg.rearm_time, cfg.ts))
 
 
 def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int,

@@ -354,8 +354,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         inv_yaw_raw_fraction=1.0 / cfg.yaw_raw_fraction,
         yaw_count=cfg.yaw_count, steer_bound=cfg.steer_bound, inv_steer_bound=1.0 / cfg.steer_bound,
         steer_count=cfg.steer_count, model_margin=cfg.model_margin, model_rel=cfg.model_rel,
-        model_alpha=1.0 - math.exp(-cfg.ts / cfg.model_tau), model_steps=max(1, round(cfg.model_time / cfg.ts)),
-        frozen_steps=max(1, round(cfg.frozen_time / cfg.ts)), kin_gap_steps=max(1, round(cfg.kin_gap / cfg.ts)),
+        model_alpha=1.0 - math.exp(-cfg.ts / cfg.model_tau), model_steps=steps_of(cfg.model_time, cfg.ts),
+        frozen_steps=steps_of(cfg.frozen_time, cfg.ts), kin_gap_steps=steps_of(cfg.kin_gap, cfg.ts),
         frozen_move_yaw=cfg.frozen_move_yaw,
         frozen_move_steer=cfg.frozen_move_steer, wheelbase=wheelbase, k_us=k_us, ts=cfg.ts,
         inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
@@ -368,7 +368,13 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
         turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias,
         speed_pair_bound=cfg.speed_pair_bound, speed_pair_rel=cfg.speed_pair_rel,
-        speed_pair_steps=max(1, round(cfg.speed_pair_time / cfg.ts)))
+        speed_pair_steps=steps_of(cfg.speed_pair_time, cfg.ts))
+
+
+def steps_of(t: float, ts: float) -> int:
+    """A time in periods of ``ts``, rounded half up (as C's floor(x + 0.5); Python's round()
+    takes a tie to even), at least 1 and at most a C int32's largest."""
+    return min(max(1, math.floor(t / ts + 0.5)), 2**31 - 1)
 
 
 def check_positive(cfg: object, names: tuple[str, ...]) -> None:
@@ -387,8 +393,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
     detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
     monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
-    a missing input: a missing primary input pauses every check (step() faults on it), a
-    missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
+    a missing input: a missing primary input pauses every check but the two on the speed (step()
+    faults on it), a missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
     yaw-rate sensor's second element, pauses its pair check when NaN; DEGRADED too once the
     element has been received since ``reset_monitor`` while the first element is valid (a lost
     element).  A sender without it (SNA from the start, or the default NaN) never sets it:

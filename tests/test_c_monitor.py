@@ -362,13 +362,17 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
-@pytest.mark.parametrize("changed", [{"ts": 0.001, "speed_pair_time": 0.25}, {"speed_pair_time": 0.0007},
-                                     {"speed_pair_time": 0.0011}, {"ts": 0.01, "speed_pair_time": 0.37}])
-def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str, float]) -> None:
+# A time in periods rounds half up in both (Python's round() would take 12.5 to 12, C's floor(x + 0.5)
+# to 13), and a time too long for a C int32 saturates in both.
+@pytest.mark.parametrize("changed, steps", [({"ts": 0.001, "speed_pair_time": 0.25}, 250),
+                                            ({"speed_pair_time": 0.0007}, 1), ({"speed_pair_time": 0.0011}, 1),
+                                            ({"ts": 0.01, "speed_pair_time": 0.37}, 37), ({"ts": 0.008}, 13),
+                                            ({"speed_pair_time": 0.005}, 3), ({"speed_pair_time": 1e12}, 2**31 - 1)])
+def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str, float], steps: int) -> None:
     m, a = dataclasses.replace(pl.PlausibilityConfig(), **changed), au.AuthorityConfig()
     first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
                            check=True).stdout.split()
-    assert int(first[-1]) == pl.configure(m).speed_pair_steps
+    assert int(first[-1]) == pl.configure(m).speed_pair_steps == steps
 
 
 @pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},

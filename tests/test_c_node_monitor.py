@@ -80,6 +80,7 @@ class Drive:
     second_yaw_offset: float = 0.0  # rad/s the second element reads below the car's r
     second_speed: float = math.nan  # RedundantSensors_Speed2 (NaN: SNA, a car without it)
     second_speed_drift: float = 0.0  # m/s per s it drifts by from STUCK_T
+    second_speed_lost: float = math.inf  # s from which it is SNA (the source failed)
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -97,7 +98,8 @@ class Drive:
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
                       names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta,
                                             names.SIG_SPEED_2: self.second_speed
-                                            + self.second_speed_drift * max(0.0, t - STUCK_T)},
+                                            + self.second_speed_drift * max(0.0, t - STUCK_T)
+                                            if t < self.second_speed_lost else math.nan},
                       names.MSG_YAW: {names.SIG_YAW_RATE: r_meas,
                                       names.SIG_YAW_RATE_2: r - self.second_yaw_offset
                                       if self.second_yaw and t < self.second_yaw_lost else math.nan}}
@@ -235,6 +237,18 @@ def test_the_speed_pair_finds_a_drifting_second_speed_and_cuts_the_command_as_in
     late = [s for s in statuses if int(s[names.SIG_STATUS_STATE]) == mr.STATUS_FAULT]
     assert late and all(int(s[names.SIG_STATUS_PLAUS]) & pl.PLAUS_YAW for s in late)
     assert all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[-50:])  # removed, latched
+
+
+def test_a_second_speed_lost_on_the_bus_is_degraded_as_in_python(secoc_check: Path) -> None:
+    # Sent, then SNA from 0.8 s: the speed pair pauses and both nodes report DEGRADED, no fault.
+    lost = 0.8
+    cmds, statuses = _run(secoc_check, Drive(seconds=1.4, second_speed=V, second_speed_lost=lost))
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    per_status = round(len(cmds) / len(statuses))
+    k_lost = int(lost * RATE_HZ) // per_status
+    # the first SNA frame comes at the redundant frame's next 50 ms after the loss
+    assert set(plaus[:k_lost]) == {0} and set(plaus[k_lost + 1:]) == {pl.PLAUS_DEGRADED}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
 
 
 def test_a_second_yaw_rate_element_lost_on_the_bus_is_degraded_as_in_python(secoc_check: Path) -> None:

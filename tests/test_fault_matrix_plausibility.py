@@ -206,8 +206,9 @@ def test_sensor_rows_are_the_issues_kinds() -> None:
 
 
 def test_a_speed_row_is_judged_against_the_speed_checks_jump() -> None:
-    # The speed has no error bound but the jump its check lets pass (speed_step 1.5 m/s): a
-    # step fault's error leaves it at the onset, so detection counts from there.
+    # On a car without the second speed (none in this traffic) the speed has no error bound but
+    # the jump its check lets pass (speed_step 1.5 m/s): a step fault's error leaves it at the
+    # onset, so detection counts from there.
     row = _row("curve: speed gain 0.5")
     assert (row.fault.target, row.fault.kind, row.plausibility) == (names.MSG_SPEED, "sensor_scale", names.PLAUS_YAW)
     halved = dict(error=lambda t: 0.0, speed_error=lambda t: -10.0)
@@ -224,18 +225,18 @@ def test_a_speed_row_is_judged_against_the_speed_checks_jump() -> None:
 
 
 def test_a_speed_drift_is_judged_against_the_speed_pair_on_a_car_with_the_second_speed() -> None:
-    # The pair bounds the speed's error: 1.0 m/s + 5 % of the true 20 m/s = 2.0 m/s, which a
-    # drift of -2 m/s per s passes 1 s after its onset; without the second speed in the traffic
-    # the bound is the jump check's 1.5 m/s.
+    # The pair bounds the speed's error: 1.0 m/s + 5 % of the true 20 m/s, + half the second
+    # speed's 0.3 m/s LSB with its 5 % = 2.1575 m/s, which a drift of -2 m/s per s passes 1.08 s
+    # after its onset; without the second speed in the traffic the bound is the jump check's 1.5.
     row = _row("curve: speed drift -2 m/s per s")
     assert (row.fault.target, row.fault.kind, row.fault.param) == (names.MSG_SPEED, "sensor_drift", -2.0)
     drift = dict(error=lambda t: 0.0, speed_error=lambda t: -2.0 * (t - ONSET))
     series = [s for s in error_series(evidence(row, speed_2=20.1, **drift)) if s[0] >= ONSET]
-    assert series and all(bound == pytest.approx(2.0) for _, _, bound in series)
+    assert series and all(bound == pytest.approx(2.1575) for _, _, bound in series)
     assert {bound for _, _, bound in error_series(evidence(row, **drift))} == {1.5}
-    fails, observed, _ = _judge(evidence(row, speed_2=20.1, detect=1.05, **drift))
+    fails, observed, _ = _judge(evidence(row, speed_2=20.1, detect=1.2, **drift))
     assert fails == [], fails
-    fails, _, _ = _judge(evidence(row, speed_2=20.1, detect=1.4, **drift))
+    fails, _, _ = _judge(evidence(row, speed_2=20.1, detect=1.42, **drift))
     assert any("reported late" in f for f in fails), fails
 
 

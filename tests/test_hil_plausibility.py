@@ -100,14 +100,15 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
         steps = _steps(400, lat_accel_measured_m_s2=lambda t, o=offset: 0.4 + (o if t >= 0.5 else 0.0))
         fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
         assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
-    # either speed: the speed pair's 1.0 m/s + 5 % of 20 m/s, on a car with the second speed;
-    # without it no check bounds the speed's error
+    # either speed: the speed pair's 1.0 m/s + 5 % of 20 m/s, and half the second speed's
+    # 0.3 m/s LSB with its 5 %, on a car with the second speed; without it no check bounds the
+    # speed's error
     for sensor, column in (("speed", "speed_measured_m_s"), ("speed_redundant", "speed_redundant_measured_m_s")):
         fault = SensorFault(sensor, "drift", 0.2, -2.0)
         steps = _steps(800, **{column: lambda t: 20.0 - 2.0 * max(0.0, t - 0.2)})
         fig = plausibility_figures(_traffic(fault_from=None, steps=800), scn.load("side-wind").with_sensor_faults(
             (fault,)), RATE, steps)
-        bound = cfg.speed_pair_bound + cfg.speed_pair_rel * 20.0
+        bound = cfg.speed_pair_bound + cfg.speed_pair_rel * 20.0 + 0.15 * (1.0 + cfg.speed_pair_rel)
         assert fig["error_over_bound_s"] == pytest.approx(0.2 + bound / 2.0, abs=2.5 / RATE)
         without = replace(scn.load("side-wind"), sensors=replace(scn.load("side-wind").sensors,
                                                                  speed_redundant_present=False))

@@ -12,7 +12,7 @@ import pytest
 
 from firmware_py import plausibility as pl
 from sim_plant.car.sensor_faults import SensorFault, parse_spec
-from sim_plant.car.sensors import ChannelConfig, SensorConfig, Sensors
+from sim_plant.car.sensors import CHANNELS, ChannelConfig, SensorConfig, Sensors, YawRateSensorConfig
 from sim_plant.offline import plausibility_runs as pr
 
 CFG = pl.PlausibilityConfig()
@@ -61,14 +61,20 @@ def test_a_second_speed_lost_after_it_was_received_is_degraded() -> None:
     assert not any(_run([(20.0, math.nan)] * 100)[1])
 
 
-def test_without_the_second_speed_every_result_is_as_before() -> None:
-    a, b = pl.PlausibilityMonitor(), pl.PlausibilityMonitor()
+def test_a_second_speed_that_agrees_or_is_absent_changes_no_other_result() -> None:
+    # Random inputs (speeds that jump: the jump check trips too): a monitor given no second
+    # speed, one given NaN and one given an agreeing second speed report the same bits and
+    # flags, and their other checks' state is the same.
+    monitors = [pl.PlausibilityMonitor() for _ in range(3)]
     rng = np.random.default_rng(5)
     for _ in range(3000):
         x = (rng.normal(0, 0.02), rng.normal(0, 0.02), rng.normal(0, 0.1), rng.normal(0, 2),
              float(rng.uniform(0.0, 40.0)), 0.0, rng.normal(0, 0.1))
-        assert a.step(*x) == b.step(*x, math.nan)
-        assert a.state.flags == b.state.flags and not a.state.flags & pl.CHECK_SPEED_PAIR
+        bits = [monitors[0].step(*x), monitors[1].step(*x, math.nan), monitors[2].step(*x, x[4] + 0.5)]
+        assert bits[0] == bits[1] == bits[2]
+        assert len({m.state.flags for m in monitors}) == 1 and not monitors[2].state.flags & pl.CHECK_SPEED_PAIR
+        assert len({(m.state.kin_err, m.state.model_err, m.state.turn_err) for m in monitors}) == 1
+    assert monitors[2].state.speed_pair_err > 0.0 and monitors[0].state.speed_pair_err == 0.0
 
 
 @pytest.mark.parametrize("field, value", [("speed_pair_bound", 0.0), ("speed_pair_time", -1.0),
@@ -89,10 +95,17 @@ def test_the_second_speed_sensor_reads_the_bus_resolution_and_nan_without_one() 
     # its own faults, from the command line's spec as from a scenario's table (0.3 m/s per LSB)
     stuck = SensorConfig(speed_redundant=ChannelConfig(noise=0.0), faults=(parse_spec("speed_redundant:stuck:5@0"),))
     assert Sensors(stuck, CFG.ts).speed_redundant(10.0) == pytest.approx(5.1)
-    # its noise stream is its own: the other channels read as they did without it
-    plain, other = Sensors(SensorConfig(seed=4), CFG.ts), Sensors(SensorConfig(seed=4), CFG.ts)
-    other.speed_redundant(10.0)
-    assert plain.yaw_rate(0.1) == other.yaw_rate(0.1) and plain.lat_accel(1.0) == other.lat_accel(1.0)
+    # its noise stream comes after every other: the yaw rate's second element keeps the seed's
+    # child it had before (the one after the channels' and the faults'), the second speed the next
+    raw = ChannelConfig(noise=1.0, quantise=False)
+    bare = SensorConfig(seed=4, yaw_rate=YawRateSensorConfig(lowpass_hz=0.0, quantise=False),
+                        yaw_rate_redundant=YawRateSensorConfig(lowpass_hz=0.0, quantise=False, noise_density=1.0),
+                        speed_redundant=raw)
+    s = Sensors(bare, CFG.ts)
+    children = np.random.SeedSequence(4).spawn(len(CHANNELS) + 2)
+    sigma = math.radians(1.0) * math.sqrt(0.5 / CFG.ts)
+    assert s.yaw_rate_redundant(0.0) == pytest.approx(sigma * np.random.default_rng(children[-2]).standard_normal())
+    assert s.speed_redundant(30.0) == pytest.approx(30.0 + np.random.default_rng(children[-1]).standard_normal())
 
 
 # The case the other speed checks leave open: a falling speed reading in a curve gentler than the

@@ -52,11 +52,11 @@ static int positive(double x)
     return isfinite(x) && x > 0.0;
 }
 
-/* Python's round() for the non-negative, non-tie values the calibration gives (half up). */
+/* A time in periods, rounded half up, at least 1, at most INT32_MAX (plausibility.steps_of). */
 static int32_t steps_of(double t, double ts)
 {
     double n = floor(t / ts + 0.5);
-    return n < 1.0 ? 1 : (int32_t)n;
+    return n < 1.0 ? 1 : (n > 2147483647.0 ? INT32_MAX : (int32_t)n);
 }
 
 int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c)

@@ -81,6 +81,12 @@ DBC_SIGNALS = {"yaw_rate": (names.MSG_YAW, names.SIG_YAW_RATE), "steer": (names.
 MAX_SEED = 2**63 - 1
 
 
+def dbc_range(quantity: str) -> tuple[float, float]:
+    """The DBC range [min, max] of the signal carrying ``quantity`` (a key of DBC_SIGNALS)."""
+    message, signal = DBC_SIGNALS[quantity]
+    return mrsteer_dbc.load().signal_range(message, signal)
+
+
 def dbc_resolution(quantity: str) -> float:
     """The DBC scale (one LSB) of the signal carrying ``quantity`` (a key of DBC_SIGNALS)."""
     message, signal = DBC_SIGNALS[quantity]
@@ -273,6 +279,10 @@ class Sensors:
         filtered = not config.exact  # exact sensors filter nothing
         self.lowpass = _Lowpass(yaw.lowpass_hz, fs).ba if filtered and yaw.lowpass_hz > 0.0 else None
         self._q = {name: _quantiser(getattr(config, name).quantise, name) for name in ALL_CHANNELS}
+        # A speed sensor reads no negative speed and none beyond what its signal carries: a
+        # fault's negative offset at low speed, or a gain at speed, saturates the reading (the
+        # frame could not carry it; the second speed's 8 bits end at 75 m/s).
+        self._speed_range = {name: dbc_range(name) for name in ("speed", SPEED_REDUNDANT)}
         for f in config.faults:
             if f.sensor not in ALL_CHANNELS:
                 raise ModelFileError(f"sensor fault: sensor must be one of {', '.join(ALL_CHANNELS)}, "
@@ -317,7 +327,8 @@ class Sensors:
         return self._measure("steer", delta)
 
     def speed(self, v: float) -> float:
-        return self._measure("speed", v)
+        lo, hi = self._speed_range["speed"]
+        return min(max(self._measure("speed", v), lo), hi)
 
     def lat_accel(self, a_y: float) -> float:
         return self._measure("lat_accel", a_y)
@@ -331,4 +342,7 @@ class Sensors:
 
     def speed_redundant(self, v: float) -> float:
         """The second speed's reading; NaN for a car without one."""
-        return self._measure(SPEED_REDUNDANT, v) if self.config.speed_redundant_present else math.nan
+        if not self.config.speed_redundant_present:
+            return math.nan
+        lo, hi = self._speed_range[SPEED_REDUNDANT]
+        return min(max(self._measure(SPEED_REDUNDANT, v), lo), hi)

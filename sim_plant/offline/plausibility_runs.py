@@ -45,7 +45,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
-from sim_plant.car.sensors import CHANNELS, SensorConfig, Sensors
+from sim_plant.car.sensors import CHANNELS, SensorConfig, Sensors, dbc_resolution
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 #: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
@@ -137,9 +137,12 @@ def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray,
 
 def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray) -> float | np.ndarray:
     """The bound a speed error (either speed's) is judged against on a car with the second
-    speed: the speed pair's ``speed_pair_bound + speed_pair_rel v`` at the true speed ``v`` (the
-    monitor takes the smaller of the two readings, so a reading that falls trips it no later)."""
-    return cfg.speed_pair_bound + cfg.speed_pair_rel * v
+    speed: the speed pair's ``speed_pair_bound + speed_pair_rel v`` at the true speed ``v``, plus
+    what the second speed's rounding (half its 0.3 m/s LSB) may add to the difference the
+    monitor sees, with its share of the relative term: the monitor compares with the reading,
+    not the truth, so a rising error may reach its bound that much later than the truth's."""
+    half_lsb = 0.5 * dbc_resolution("speed_redundant")
+    return cfg.speed_pair_bound + cfg.speed_pair_rel * v + half_lsb * (1.0 + cfg.speed_pair_rel)
 
 
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
@@ -161,6 +164,8 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
     second = Sensors(replace(second_yaw, faults=()), ts) if second_yaw is not None else None
     faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
+    if faulted == "speed_redundant" and not second_speed:
+        raise ValueError("a fault of the second speed needs second_speed=True (the monitor reads it only then)")
     reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
     mon = pl.PlausibilityMonitor(monitor if monitor is not None else pl.PlausibilityConfig(ts=ts))
     ac = au.configure_authority(authority if authority is not None else au.AuthorityConfig(ts=ts))
