@@ -660,8 +660,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                 e = -e if e < 0.0 else e
                 x = lat_accel - s.turn_a0
                 x = -x if x < 0.0 else x
-                rm = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
-                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * rm:
+                am = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
+                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * am:
                     s.turn_n = 0
                     s.turn_settled = False
             if s.turn_n == 0:

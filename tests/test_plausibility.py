@@ -299,8 +299,8 @@ def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays(
     """``sensor_bound`` is the bound the offline runs, the fault matrix, the HIL summary and the
     campaign judge a sensor's error against: the kinematic residual (yaw rate; a_y the same in
     m/s^2, plus the side force's allowance only while the pair runs), the steering channels' and
-    the second element's fixed bounds, none for the speed; an array per row gives each row's
-    float."""
+    the second element's fixed bounds, the speed pair's for either speed on a car with the second
+    speed and none without it; an array per row gives each row's float."""
     import numpy as np
 
     cfg = pl.PlausibilityConfig()
@@ -310,12 +310,18 @@ def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays(
     assert pr.sensor_bound("steer_redundant", cfg, 0.2, 20.0, True) == cfg.steer_bound == pr.sensor_bound(
         "steer", cfg, 0.0, 5.0, False)
     assert pr.sensor_bound("yaw_rate_redundant", cfg, 0.5, 40.0, False) == cfg.yaw_pair_bound
-    with pytest.raises(ValueError, match="speed"):
+    with pytest.raises(ValueError, match="without the second speed"):
         pr.sensor_bound("speed", cfg, 0.0, 20.0, True)
+    # with the second speed either speed's is the pair's at the true speed, plus half the
+    # second speed's 0.3 m/s LSB with its share of the relative term
+    for sensor in ("speed", "speed_redundant"):
+        assert pr.sensor_bound(sensor, cfg, 0.4, 20.0, False, speed_pair=True) == pytest.approx(
+            1.0 + 0.05 * 20.0 + 0.15 * 1.05)
     r, v, pair = np.array([-0.3, 0.0, 0.1]), np.array([10.0, 25.0, 40.0]), np.array([True, False, True])
-    for sensor in ("yaw_rate", "lat_accel"):
-        rows = pr.sensor_bound(sensor, cfg, r, v, pair)
-        assert rows.tolist() == [pr.sensor_bound(sensor, cfg, float(a), float(b), bool(c)) for a, b, c in zip(r, v, pair)]
+    for sensor in ("yaw_rate", "lat_accel", "speed"):
+        rows = pr.sensor_bound(sensor, cfg, r, v, pair, speed_pair=True)
+        assert rows.tolist() == [pr.sensor_bound(sensor, cfg, float(a), float(b), bool(c), True)
+                                 for a, b, c in zip(r, v, pair)]
 
 
 @pytest.mark.parametrize("kind, value", [("scale", 0.5), ("stuck", 5.5), ("bias", 3.0), ("stuck", 33.0)])

@@ -27,7 +27,7 @@ that table models a sensor without it: it reads NaN, which the frame carries as 
 
 The second speed (``speed_redundant``, RedundantSensors_Speed2: on a car the non-driven wheels'
 speeds, for the monitor's speed pair check) is a channel as the speed is: white noise
-(``noise_m_s``, default 0.02 m/s RMS) and quantisation to its signal's 0.3 m/s, its own noise
+(``noise``, default 0.02 m/s RMS) and quantisation to its signal's 0.3 m/s, its own noise
 stream (after the yaw rate's second element's) and its own faults; ``present = false`` in its
 ``[speed_redundant]`` table models a car without it (NaN, SNA).
 
@@ -37,7 +37,7 @@ in micro-g/sqrt(Hz) (default 180: Bosch BMI160's accelerometer, datasheet BST-BM
 Table 1, "output noise density"; 1 g = 9.80665 m/s^2), ``bias_m_s2`` and the same 30 Hz filter,
 quantised to RedundantSensors_LatAccel's scale.
 
-Steering angle and speed: optional white noise (``noise_deg``, ``noise_m_s``: RMS per sample)
+Steering angle and speed: optional white noise (``noise``: RMS per sample, deg and m/s)
 and quantisation to DriverSteer_Angle's and VehicleSpeed_Speed's scale.  The steering-angle
 sensor's second channel (``steer_redundant``) is its own channel: by default 0.01 deg RMS of
 front-wheel angle (0.16 deg at the steering wheel, about one LSB of a production sensor's

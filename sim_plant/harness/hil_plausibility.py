@@ -28,7 +28,7 @@ from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.harness.hil_steps import Step
-from sim_plant.offline.plausibility_runs import sensor_bound, speed_pair_bound
+from sim_plant.offline.plausibility_runs import sensor_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -82,13 +82,12 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
     sensor = min(sc.sensor_faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
         f.sensor == "yaw_rate_redundant" for f in sc.sensor_faults)
+    speed_pair = sc.sensor_config.speed_redundant_present
 
     def bound(s: Step) -> float:
-        if sensor in ("speed", "speed_redundant"):
-            return float(speed_pair_bound(cfg, s.v_m_s))
-        if sensor == "yaw_rate":
+        if sensor == "yaw_rate":  # the constant bounds of the module's docstring
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
-        return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair))
+        return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair))
 
     error = {"yaw_rate": lambda s: s.yaw_rate_measured_rad_s - s.yaw_rate_rad_s,
              "lat_accel": lambda s: s.lat_accel_measured_m_s2 - s.lat_accel_m_s2,
@@ -97,7 +96,7 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
              "yaw_rate_redundant": lambda s: s.yaw_rate_redundant_measured_rad_s - s.yaw_rate_rad_s,
              "speed": lambda s: s.speed_measured_m_s - s.v_m_s,
              "speed_redundant": lambda s: s.speed_redundant_measured_m_s - s.v_m_s}.get(sensor)
-    if sensor in ("speed", "speed_redundant") and not sc.sensor_config.speed_redundant_present:
+    if sensor in ("speed", "speed_redundant") and not speed_pair:
         error = None
     if error is None:
         return None

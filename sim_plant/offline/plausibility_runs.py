@@ -118,21 +118,30 @@ class MonitorRun:
 
 
 def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray, v: float | np.ndarray,
-                 pair: bool | np.ndarray) -> float | np.ndarray:
+                 pair: bool | np.ndarray, speed_pair: bool = False) -> float | np.ndarray:
     """The plausibility bound a sensor's error is judged against (floats, or arrays per period
     or per row): the yaw rate's ``yaw_bound + yaw_rel |r|`` (r the true yaw rate), the lateral
     acceleration's the same times v (the kinematic check's residual) plus ``side_accel`` while
     the yaw-rate pair runs (``pair``: the check allows a side force then), a steering channel's
     ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound`` (only the pair
-    check sees it).  The speed has none (its check bounds its jumps, not its error): ValueError."""
+    check sees it), and on a car with the second speed (``speed_pair``) either speed's
+    ``speed_pair_bound``.  Without the second speed a speed has none (its checks bound its
+    jumps, not its error): ValueError."""
     if sensor in ("steer", "steer_redundant"):
         return cfg.steer_bound
     if sensor == "yaw_rate_redundant":
         return cfg.yaw_pair_bound
+    if sensor in ("speed", "speed_redundant") and speed_pair:
+        return speed_pair_bound(cfg, v)
     if sensor not in ("yaw_rate", "lat_accel"):
-        raise ValueError(f"no plausibility bound for the sensor {sensor!r}")
+        raise ValueError(f"no plausibility bound for the sensor {sensor!r}"
+                         + (" on a car without the second speed" if sensor.startswith("speed") else ""))
     yaw = cfg.yaw_bound + cfg.yaw_rel * abs(r)
     return yaw if sensor == "yaw_rate" else yaw * v + cfg.side_accel * pair
+
+
+#: What the second speed's rounding (half its LSB) may add to the speed pair's difference.
+_SPEED2_HALF_LSB = 0.5 * dbc_resolution("speed_redundant")
 
 
 def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray) -> float | np.ndarray:
@@ -141,8 +150,7 @@ def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray) -> float
     what the second speed's rounding (half its 0.3 m/s LSB) may add to the difference the
     monitor sees, with its share of the relative term: the monitor compares with the reading,
     not the truth, so a rising error may reach its bound that much later than the truth's."""
-    half_lsb = 0.5 * dbc_resolution("speed_redundant")
-    return cfg.speed_pair_bound + cfg.speed_pair_rel * v + half_lsb * (1.0 + cfg.speed_pair_rel)
+    return cfg.speed_pair_bound + cfg.speed_pair_rel * v + _SPEED2_HALF_LSB * (1.0 + cfg.speed_pair_rel)
 
 
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:

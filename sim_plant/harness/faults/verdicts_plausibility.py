@@ -26,9 +26,9 @@ the bound ``offline.plausibility_runs.sensor_bound`` states: the yaw rate's ``ya
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
 plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
-(``PlausibilityConfig``'s defaults, as the controller runs); either speed's, which
-``sensor_bound`` does not state, the speed pair's ``speed_pair_bound`` at the true speed when the
-car has the second speed, else the jump check's ``speed_step`` (``row_bound``).
+(``PlausibilityConfig``'s defaults, as the controller runs), either speed's the speed pair's
+``speed_pair_bound`` at the true speed when the car has the second speed; else the jump check's
+``speed_step`` (``row_bound``).
 It counts as left the bound when it stays over it for 300 ms or until the fault is reported.
 """
 
@@ -46,7 +46,7 @@ from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.car.sensors import DBC_SIGNALS
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, RATE_HZ, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
-from sim_plant.offline.plausibility_runs import sensor_bound, speed_pair_bound
+from sim_plant.offline.plausibility_runs import sensor_bound
 
 #: A sample of the falsified signal as the controller got it: (t, error, bound).
 ErrorSample = tuple[float, float, float]
@@ -98,13 +98,13 @@ def onset(e: Evidence) -> float | None:
 
 def row_bound(sensor: str, cfg: PlausibilityConfig, r: float, v: float, pair: bool,
               speed_pair: bool = False) -> float:
-    """``sensor_bound``, and for a speed: on a car with the second speed (``speed_pair``) the
-    speed pair's bound (``speed_pair_bound``), else the largest change the jump check lets pass
-    between two samples (``speed_step``), which bounds only a step fault's error (without the
-    pair a drifting speed has no error bound outside a steady turn: docs/controller.md)."""
-    if sensor in ("speed", "speed_redundant"):
-        return float(speed_pair_bound(cfg, v)) if speed_pair else cfg.speed_step
-    return float(sensor_bound(sensor, cfg, r, v, pair))
+    """``sensor_bound``; for a speed on a car without the second speed (``speed_pair`` False),
+    which has no bound on its error, the largest change the jump check lets pass between two
+    samples (``speed_step``), which bounds only a step fault's error (without the pair a
+    drifting speed has no error bound outside a steady turn: docs/controller.md)."""
+    if sensor in ("speed", "speed_redundant") and not speed_pair:
+        return cfg.speed_step
+    return float(sensor_bound(sensor, cfg, r, v, pair, speed_pair))
 
 
 def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) -> list[ErrorSample]:
