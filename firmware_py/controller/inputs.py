@@ -8,22 +8,21 @@ import math
 
 class Input:
     """Receive state of one sensor message: newest accepted value (and, for a message that
-    carries more measurements, such as ``MRS_RedundantSensors``, the second and third), its age in
-    cycles, the rejections in a row and the cause of the last one."""
+    carries more measurements, ``extra_signals``' values in ``extra``: the yaw-rate sensor's
+    second element; ``MRS_RedundantSensors``' second steering channel and second speed), its age
+    in cycles, the rejections in a row and the cause of the last one."""
 
-    __slots__ = ("name", "signal", "second_signal", "third_signal", "missing_cause", "value", "second_value",
-                 "third_value", "age", "limit", "rejects", "last_counter", "bad_cause")
+    __slots__ = ("name", "signal", "extra_signals", "missing_cause", "value", "extra", "age", "limit", "rejects",
+                 "last_counter", "bad_cause")
 
     def __init__(self, name: str, signal_name: str, missing_cause: int, limit_cycles: int,
-                 second_signal: str | None = None, third_signal: str | None = None) -> None:
+                 extra_signals: tuple[str, ...] = ()) -> None:
         self.name = name
         self.signal = signal_name
-        self.second_signal = second_signal
-        self.third_signal = third_signal
+        self.extra_signals = extra_signals
         self.missing_cause = missing_cause
         self.value = math.nan
-        self.second_value = math.nan
-        self.third_value = math.nan
+        self.extra = [math.nan] * len(extra_signals)  # preallocated, as the C record's array
         self.age = limit_cycles + 1  # never received: invalid until the first good frame
         self.limit = limit_cycles
         self.rejects = 0

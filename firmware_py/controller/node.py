@@ -129,11 +129,12 @@ class ControllerNode:
 
         self.inputs = {  # by frame ID
             c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, limit(MSG_STEER)),
-            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW), SIG_YAW_RATE_2),
+            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW),
+                                       (SIG_YAW_RATE_2,)),
             c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
             # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
-            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT), SIG_STEER_ANGLE_2,
-                                             SIG_SPEED_2),
+            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT),
+                                             (SIG_STEER_ANGLE_2, SIG_SPEED_2)),
         }
         self._by_name = {inp.name: inp for inp in self.inputs.values()}
         self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
@@ -199,10 +200,8 @@ class ControllerNode:
         inp = self.inputs[frame_id]
         inp.rejects = 0
         inp.value = got.signals[inp.signal]
-        if inp.second_signal is not None:
-            inp.second_value = got.signals[inp.second_signal]
-        if inp.third_signal is not None:
-            inp.third_value = got.signals[inp.third_signal]
+        for i, name in enumerate(inp.extra_signals):
+            inp.extra[i] = got.signals[name]
         if frame_id == self.redundant_id:
             self.clock.redundant_frame(got.counter)
         inp.last_counter = got.counter
@@ -220,7 +219,7 @@ class ControllerNode:
         time (``SampleClock.redundant_in_time``, kept for the sample's hold).  Pure."""
         red = self._redundant
         if self.clock.redundant_in_time and red.valid(self.cfg.e2e_fail_max):
-            return red.value, red.second_value, red.third_value
+            return red.value, red.extra[0], red.extra[1]
         return math.nan, math.nan, math.nan
 
     def monitor_steps(self) -> int:
@@ -261,7 +260,7 @@ class ControllerNode:
             inp.age += 1
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
-        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.second_value  # NaN: SNA, no element
+        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.extra[0]  # NaN: SNA, no element
         bits = self.plausibility  # held between yaw-rate samples
         for _ in range(steps):  # a sample lost on the way is held at the newest values
             bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,

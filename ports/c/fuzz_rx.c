@@ -70,14 +70,15 @@ static size_t build(const mrs_node_t *n, int k, unsigned alive, int sign, uint64
     const mrs_input_t *in = &n->in[k];
     double phys[MRS_MAX_SIGNALS] = {0.0};
     ref_t r;
+    int j;
     phys[m->counter] = (double)alive;
     phys[in->sig] = draw(m, in->sig);
-    if (in->sig2 >= 0) {
-        /* a signal with an SNA value: sometimes that (NaN packs as it) */
-        phys[in->sig2] = (m->sna[in->sig2] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, in->sig2);
-    }
-    if (in->sig3 >= 0) {
-        phys[in->sig3] = (m->sna[in->sig3] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, in->sig3);
+    for (j = 0; j < MRS_INPUT_EXTRA; ++j) {
+        const int s = in->extra_sig[j];
+        if (s >= 0) {
+            /* a signal with an SNA value: sometimes that (NaN packs as it) */
+            phys[s] = (m->sna[s] != 0u && rnd() % 8u == 0u) ? (double)NAN : draw(m, s);
+        }
     }
     if (sign) {
         phys[m->fv_epoch] = (double)(epoch & 1u);

@@ -20,8 +20,8 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
 {
     static const int msgs[MRS_N_INPUTS] = {MRS_MSG_STEER, MRS_MSG_YAW, MRS_MSG_SPEED, MRS_MSG_REDUNDANT};
     static const int sigs[MRS_N_INPUTS] = {MRS_SIG_STEER_ANGLE, MRS_SIG_YAW_RATE, MRS_SIG_SPEED, MRS_SIG_LAT_ACCEL};
-    static const int sigs2[MRS_N_INPUTS] = {-1, MRS_SIG_YAW_RATE_2, -1, MRS_SIG_STEER_ANGLE_2};
-    static const int sigs3[MRS_N_INPUTS] = {-1, -1, -1, MRS_SIG_SPEED_2};
+    static const int extras[MRS_N_INPUTS][MRS_INPUT_EXTRA] = {
+        {-1, -1}, {MRS_SIG_YAW_RATE_2, -1}, {-1, -1}, {MRS_SIG_STEER_ANGLE_2, MRS_SIG_SPEED_2}};
     /* A missing redundant input is no cause: the monitor reports it (PLAUS_DEGRADED). */
     static const unsigned causes[MRS_N_INPUTS] = {MRS_CAUSE_STEER_MISSING, MRS_CAUSE_YAW_MISSING,
                                                   MRS_CAUSE_SPEED_MISSING, 0u};
@@ -30,7 +30,7 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     mrs_monitor_config_t mon;
     mrs_authority_config_t auth;
     double status_cycle, every;
-    int i;
+    int i, j;
     memset(n, 0, sizeof *n);
     n->bus = bus;
     n->period = 1.0 / cfg->rate_hz;
@@ -67,12 +67,12 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         mrs_input_t *in = &n->in[i];
         in->msg = msgs[i];
         in->sig = sigs[i];
-        in->sig2 = sigs2[i];
-        in->sig3 = sigs3[i];
         in->missing_cause = causes[i];
         in->value = NAN;
-        in->value2 = NAN;
-        in->value3 = NAN;
+        for (j = 0; j < MRS_INPUT_EXTRA; ++j) {
+            in->extra_sig[j] = extras[i][j];
+            in->extra[j] = NAN;
+        }
         in->limit = limit_cycles(&mrs_messages[msgs[i]], n->period, cfg->timeout_cycles);
         in->age = in->limit + 1; /* never received: invalid until the first good frame */
         mrs_e2e_receiver_init(&in->seq, (uint8_t)cfg->max_counter_delta);
@@ -239,8 +239,8 @@ int mrs_node_control(mrs_node_t *n)
     long k;
     if (fresh(n, red) && n->red_usable) {
         lat = red->value;
-        steer2 = red->value2;
-        speed2 = red->value3; /* NaN also when the sender has none (SNA) */
+        steer2 = red->extra[0];
+        speed2 = red->extra[1]; /* NaN also when the sender has none (SNA) */
     }
     n->red_cycles += samples;
     n->yaw_samples = 0;
@@ -259,7 +259,7 @@ int mrs_node_control(mrs_node_t *n)
      * the first).  Before the law: its suspicion of the yaw rate holds the law's command. */
     /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
      * pauses the pair check. */
-    yaw2 = isnan(values[1]) ? (double)NAN : yaw->value2;
+    yaw2 = isnan(values[1]) ? (double)NAN : yaw->extra[0];
     for (k = 0; k < steps; ++k) {
         n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
                                     (double)values[2], n->command, yaw2, speed2);

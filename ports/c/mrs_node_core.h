@@ -27,14 +27,18 @@
  * (firmware_py/controller/sample_clock.py's REDUNDANT_JITTER_CYCLES). */
 #define MRS_REDUNDANT_JITTER_CYCLES 2
 
+/* The most further measurements one sensor message carries (MRS_RedundantSensors: two). */
+#define MRS_INPUT_EXTRA 2
+
 /* Receive state of one sensor input (firmware_py/controller/inputs.py). */
 typedef struct {
     int msg; /* MRS_MSG_* */
     int sig; /* its measurement signal */
-    int sig2; /* a second measurement signal of the same frame, -1 if none */
-    int sig3; /* a third (the redundant frame's second speed), -1 if none */
+    /* further measurement signals of the same frame, -1 if none: the yaw rate's second element;
+     * the redundant frame's second steering channel and second speed */
+    int extra_sig[MRS_INPUT_EXTRA];
     unsigned missing_cause; /* 0: an invalid input adds no cause bit (the redundant sensors) */
-    double value, value2, value3;
+    double value, extra[MRS_INPUT_EXTRA]; /* NaN until received */
     long age, limit;
     int rejects;
     unsigned last_counter, bad_cause;

@@ -134,13 +134,13 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
         ++in->rejects;
         in->bad_cause = cause_of(v);
     } else {
+        int j;
         in->rejects = 0;
         in->value = phys[in->sig];
-        if (in->sig2 >= 0) {
-            in->value2 = phys[in->sig2];
-        }
-        if (in->sig3 >= 0) {
-            in->value3 = phys[in->sig3];
+        for (j = 0; j < MRS_INPUT_EXTRA; ++j) {
+            if (in->extra_sig[j] >= 0) {
+                in->extra[j] = phys[in->extra_sig[j]];
+            }
         }
         in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
         in->age = 0;

@@ -218,7 +218,7 @@ class _Replayer:
             inp = self.node.input(name)
             vals.append(inp.value if inp.valid(e2e_max) else math.nan)
         lat, steer_2, speed_2 = self.node.redundant_inputs()
-        yaw_2 = math.nan if math.isnan(vals[1]) else self.node.input(MSG_YAW).second_value
+        yaw_2 = math.nan if math.isnan(vals[1]) else self.node.input(MSG_YAW).extra[0]
         return vals[0], vals[1], vals[2], lat, steer_2, yaw_2, speed_2
 
     def _shadow(self, inputs: tuple[float, float, float, float, float, float, float], monitor_steps: int) -> float:
