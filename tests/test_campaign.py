@@ -13,6 +13,7 @@ import pytest
 from firmware_py import model_regulator as mr
 from sim_plant.campaign import engine, params, reference, results, runner, sampling, spec
 from sim_plant.car import scenario as scn
+from sim_plant.car.sensors import ChannelConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = """
@@ -216,22 +217,27 @@ calibrations = ["shipped"]
 v = 20.0
 mu = 0.8
 yaw_moment = 0.0
-fault_sensor = "yaw_rate"
+fault_sensor = "{sensor}"
 fault_kind = "offset"
 fault_onset = 0.6
-fault_size = {{ uniform = [2.8, 3.0] }}
+fault_size = {{ uniform = [{size}] }}
 [criteria]
 detection_time = 0.3
 """
 
 
-def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monitor_fault(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sensor,size", [("yaw_rate", "2.8, 3.0"), ("speed_redundant", "-3.0, -2.8")],
+                         ids=["yaw-rate-offset", "second-speed-offset"])
+def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monitor_fault(tmp_path: Path, sensor: str,
+                                                                                        size: str) -> None:
     # Issue 19's "exported and replayed on the bus reproducing the campaign's figure", with the
     # monitor in the loop: the lockstep HIL run of the sample (plant and controller processes)
-    # against the engine's row, the car's peak and the period the monitor's fault began.
+    # against the engine's row, the car's peak and the period the monitor's fault began.  The
+    # second speed's offset is found by the speed pair alone: the bus's car has the second speed
+    # exactly as the campaign's (its noise stream, its 50 ms frame).
     import json
 
-    c = spec.parse(FAULTY.format(), "f.toml")
+    c = spec.parse(FAULTY.format(sensor=sensor, size=size), "f.toml")
     out = tmp_path / "out"
     runner.run(c, tmp_path, out, workers=0)
     cols = results.read_all(out).to_pydict()
@@ -249,3 +255,22 @@ def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monit
     steps = round(c.duration / spec.TS) + 1
     fault_from = (steps - cols["fault_steps"][row]) * spec.TS
     assert s["plausibility"]["fault_detected_s"] == pytest.approx(fault_from, abs=1.5 * spec.TS)
+
+
+@pytest.mark.parametrize("second_speed", [{"speed_redundant_present": False},
+                                          {"speed_redundant": ChannelConfig(noise=0.05, quantise=False)}],
+                         ids=["without", "other-noise"])
+def test_export_writes_a_scenario_whose_second_speed_is_not_the_campaigns(tmp_path: Path, second_speed: dict) -> None:
+    """A campaign's car has the default second speed (nothing to write); a scenario whose second
+    speed is absent or modelled otherwise still reads back as itself."""
+    from dataclasses import replace
+
+    from sim_plant.campaign import export
+
+    c = spec.parse(FAULTY.format(sensor="speed", size="1.0, 2.0"), "f.toml")
+    sc = params.scenario_for(sampling.samples(c, np.array([1])).row(0), c.duration)
+    assert "speed_redundant" not in export.to_toml(sc)
+    other = replace(sc, sensors=replace(sc.sensors, **second_speed))
+    file = tmp_path / "s.toml"
+    file.write_text(export.to_toml(other))
+    assert scn.load(str(file)) == other != sc

@@ -110,7 +110,7 @@ def test_batch_equals_scalar_where_the_monitor_faults_and_the_limiter_fades() ->
 
 
 FAULTS = WIDE + """fault_sensor = {{ choice = ["none", "yaw_rate", "lat_accel", "steer", "steer_redundant", "speed",
-                             "yaw_rate_redundant"] }}
+                             "yaw_rate_redundant", "speed_redundant"] }}
 fault_kind = {{ choice = ["stuck", "offset", "gain", "drift"] }}
 fault_onset = {{ uniform = [0.2, 1.0] }}
 fault_size = {{ uniform = [0.5, 4.0] }}
@@ -133,25 +133,28 @@ def test_batch_equals_scalar_with_sampled_sensor_faults(seed: int) -> None:
     assert (res["detection_time"][faulted] > 0).any() or (res["fault_steps"][faulted] > 0).any()
 
 
-def test_batch_equals_scalar_with_faults_of_the_speed_and_the_second_yaw_element() -> None:
-    """The speed (its reading follows the fault even where the car's speed is constant) and the
-    yaw-rate sensor's second element, each kind: traces, bits and figures against the reference
-    (the speed's detection_time 0: no bound judges its error; the element's from yaw_pair_bound)."""
+def test_batch_equals_scalar_with_faults_of_either_speed_and_the_second_yaw_element() -> None:
+    """The speed (its reading follows the fault even where the car's speed is constant), the
+    second speed (``RedundantSensors_Speed2``, the speed pair's other half) and the yaw-rate
+    sensor's second element, each kind: traces, bits and figures against the reference.  Either
+    speed's error is judged against the speed pair's bound at the true speed
+    (``plausibility_runs.speed_pair_bound``): each of these leaves it and is reported."""
     from sim_plant.campaign.params import FAULT_CHANNELS, FAULT_KINDS
 
     c = spec.parse(FAULTS.format(seed=5), "faults.toml")
-    s = sampling.samples(c, np.arange(8))
-    s["v"][:] = np.linspace(12.0, 38.0, 8)
-    s["fault_sensor"][:] = [FAULT_CHANNELS.index(ch) for ch in ("speed", "yaw_rate_redundant") * 4]
-    s["fault_kind"][:] = np.repeat([FAULT_KINDS.index(k) for k in ("stuck", "offset", "gain", "drift")], 2)
-    s["fault_size"][:] = [20.0, 3.0, 2.5, -2.0, 1.3, 0.6, 1.0, 2.0]
+    s = sampling.samples(c, np.arange(12))
+    s["v"][:] = np.linspace(12.0, 38.0, 12)
+    s["fault_onset"][:] = np.linspace(0.2, 0.6, 12)
+    s["fault_sensor"][:] = [FAULT_CHANNELS.index(ch) for ch in ("speed", "speed_redundant", "yaw_rate_redundant") * 4]
+    s["fault_kind"][:] = np.repeat([FAULT_KINDS.index(k) for k in ("stuck", "offset", "gain", "drift")], 3)
+    s["fault_size"][:] = [45.0, 2.0, 3.0, -4.0, 3.5, -6.0, 1.3, 0.8, 0.6, 8.0, -8.0, 2.0]
     res = _compare(s, mr.ControllerConfig())
-    speed = np.arange(8) % 2 == 0
-    assert (res["detection_time"][speed] == 0.0).all()
-    # the jumps (stuck, offset, gain) are found; a drift of 1 m/s per s is not (docs/faults.md)
-    assert (res["fault_steps"][[0, 2, 4]] > 0).all() and res["fault_steps"][6] == 0
+    speeds = np.arange(12) % 3 != 2
+    # every speed fault here leaves its bound and is found (the pair's 0.1 s count after it)
+    assert (res["fault_steps"][speeds] > 0).all(), res["fault_steps"]
+    assert (res["detection_time"][speeds] <= 0.3).all(), res["detection_time"]
     # the element's stuck, offset and drift are found (a gain of 0.6 near r = 0 may stay within 0.03 rad/s)
-    assert (res["fault_steps"][[1, 3, 7]] > 0).all() and np.isfinite(res["detection_time"][~speed]).all()
+    assert (res["fault_steps"][[2, 5, 11]] > 0).all() and np.isfinite(res["detection_time"][~speeds]).all()
 
 
 @pytest.mark.parametrize("name", ["previous", "paper", "../tests/vectors/previous_500hz.cfg"])
@@ -242,10 +245,14 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     stuck driver's angle, a large yaw-rate offset; the second yaw-rate element also missing in
     every period divisible by 7 of the even rows, its window restarting there (below the
     minimum speed too: the lost element's rule there).  Rows from the 50th on hold a steady
-    turn whose speed reads 25 % high from the onset (the steady-turn check)."""
+    turn whose speed reads 25 % high from the onset (the steady-turn check).  The second speed
+    (``v2``, in the redundant frame) reads the true speed to its 0.3 m/s: the speed pair trips
+    where the speed reads high or low (kind 6's 3 m/s, below the pause), kind 3 loses it 200
+    periods after the onset (DEGRADED), kind 8's car has none (NaN throughout)."""
     rng = np.random.default_rng(seed)
     k = np.arange(steps)[:, None]
     v = np.repeat(rng.uniform(8.0, 40.0, rows)[None], steps, axis=0)
+    v2 = np.round((v + rng.normal(0, 0.02, (steps, rows))) / 0.3) * 0.3
     d = 0.02 * np.sin(2 * np.pi * k * 0.002 * rng.uniform(0.2, 1.5, rows)) + rng.normal(0, 1e-4, (steps, rows))
     r_true = d * v / (2.5 + 0.0025 * v * v)
     r = r_true + rng.normal(0, 2e-3, (steps, rows))
@@ -281,9 +288,11 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     then = (kind == 6) & (k >= onset + 100) & (k < onset + 160)
     r = np.where(then & (k % 3 == 0), np.nan, r)
     r2 = np.where(then & (k % 2 == 0), np.nan, r2)
+    v2 = np.where((kind == 3) & (k >= onset + 200), np.nan, v2)
+    v2 = np.where(kind == 8, np.nan, v2)
     held = (k // 25) * 25  # the 50 ms frame, sampled at the period it is sent in
-    lat, d2 = lat[held[:, 0]], d2[held[:, 0]]
-    return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux, "r2": r2}
+    lat, d2, v2 = lat[held[:, 0]], d2[held[:, 0]], v2[held[:, 0]]
+    return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux, "r2": r2, "v2": v2}
 
 
 @pytest.mark.parametrize("held", [False, True], ids=["every-period", "held-pair"])
@@ -301,26 +310,27 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
     batch = BatchMonitor(cfg, rows)
     c = pl.configure(cfg)
     states = [pl.MonitorState() for _ in range(rows)]
-    seen = 0
-    pair = (x["lat"][0], x["d2"][0])
+    seen, lost_speed2, kind = 0, False, np.where(np.arange(rows) >= 50, -1, np.arange(rows) % 10)
+    pair = (x["lat"][0], x["d2"][0], x["v2"][0])
     healthy = (np.arange(rows) % 10 == 0) & (np.arange(rows) < 50)  # rows without faults, gaps or pauses
     if held:  # a second monitor of the healthy rows alone: with no row paused, the shortcut runs
         quiet = BatchMonitor(cfg, int(healthy.sum()))
-        quiet_pair = (x["lat"][0][healthy], x["d2"][0][healthy])
+        quiet_pair = (x["lat"][0][healthy], x["d2"][0][healthy], x["v2"][0][healthy])
     for k in range(steps):
         if not held or k % 25 == 0:
-            pair = (x["lat"][k], x["d2"][k])
-        bits = batch.step(x["d"][k], pair[1], x["r"][k], pair[0], x["v"][k], x["aux"][k], x["r2"][k])
+            pair = (x["lat"][k], x["d2"][k], x["v2"][k])
+        bits = batch.step(x["d"][k], pair[1], x["r"][k], pair[0], x["v"][k], x["aux"][k], x["r2"][k], pair[2])
         if held:
             if k % 25 == 0:
-                quiet_pair = (pair[0][healthy], pair[1][healthy])
+                quiet_pair = (pair[0][healthy], pair[1][healthy], pair[2][healthy])
             q = quiet.step(x["d"][k][healthy], quiet_pair[1], x["r"][k][healthy], quiet_pair[0],
-                           x["v"][k][healthy], x["aux"][k][healthy], x["r2"][k][healthy])
+                           x["v"][k][healthy], x["aux"][k][healthy], x["r2"][k][healthy], quiet_pair[2])
             assert np.array_equal(q, bits[healthy]), k
             for name in ("yaw_same", "lat_same", "st_same", "st2_same", "model_count", "since", "yaw_pair_n"):
                 assert np.array_equal(getattr(quiet, name), getattr(batch, name)[healthy]), (k, name)
         for i, s in enumerate(states):
-            expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux", "r2")))
+            expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in ("d", "d2", "r", "lat", "v", "aux", "r2",
+                                                                             "v2")))
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
                          "kin_n", "since", "yaw_pair_n", "yaw_pair_idx", "turn_n", "turn_settled", "yaw_hold_n",
@@ -329,10 +339,16 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err", "turn_res", "turn_r",
                          "turn_err"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
+            for name in ("speed_seen", "speed_last", "speed2_seen", "speed_pair_count", "speed_pair_err"):
+                assert getattr(batch.speeds, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
+            lost_speed2 |= (s.flags & pl.MISSING != 0) & (kind[i] == 3) & (k > steps // 2 + 200)
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    # every check tripped somewhere, MISSING and the yaw-rate pair's suspicion (the highest bit)
-    assert seen == 2 * pl.SUSPECT_YAW_PAIR - 1, f"flags seen {seen:#x}"
+    # every check tripped somewhere (the speed pair's is the highest bit), MISSING and the
+    # yaw-rate pair's suspicion; a lost second speed is DEGRADED
+    assert seen == 2 * pl.CHECK_SPEED_PAIR - 1, f"flags seen {seen:#x}"
+    assert lost_speed2
+    assert not (batch.flags[healthy] & pl.CHECK_SPEED_PAIR).any()  # the two speeds agree
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'
         assert quiet.steady_periods > steps // 2 and batch.steady_periods > 0, (quiet.steady_periods,
@@ -387,10 +403,12 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     assert moved > 1.0  # the cars did turn
 
 
-def test_the_second_yaw_rate_element_reads_as_the_samples_scalar_sensor_with_and_without_a_fault() -> None:
-    """``BatchSensors.yaw_rate_redundant`` against the ``sensors.Sensors`` of each sample's
-    scenario (``scenario_for``): its stream is the seed's child after the faults', so a row
-    with a fault draws another one than a row without; the first element's fault leaves it."""
+def test_the_second_yaw_element_and_both_speeds_read_as_the_samples_scalar_sensors_with_and_without_a_fault() -> None:
+    """``BatchSensors.yaw_rate_redundant``, ``speed`` and ``speed_redundant`` against the
+    ``sensors.Sensors`` of each sample's scenario (``scenario_for``): the element's stream is the
+    seed's child after the faults', the second speed's the one after it, so a row with a fault
+    draws other ones than a row without; each sensor's own fault (a speed stuck below 0 reads 0,
+    clamped to its field) and no other's acts on it."""
     from sim_plant.campaign.batch_faults import BatchFaults
     from sim_plant.campaign.batch_sensors import BatchSensors
     from sim_plant.campaign.params import FAULT_CHANNELS, NOISE_SEED
@@ -401,18 +419,24 @@ def test_the_second_yaw_rate_element_reads_as_the_samples_scalar_sensor_with_and
     s["fault_onset"][:] = 0.0
     faulted = s["fault_sensor"] != FAULT_CHANNELS.index("none")
     assert faulted.any() and (~faulted).any()
+    assert {FAULT_CHANNELS.index("speed"), FAULT_CHANNELS.index("speed_redundant")} <= set(s["fault_sensor"].tolist())
     ts, steps = 0.002, 300
     batch = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=BatchFaults(s), steps=steps)
     scalar = [Sensors(scenario_for(s.row(i), 1.0).sensor_config, ts) for i in range(len(s))]
     r = 0.2 * np.sin(np.linspace(0.0, 3.0, steps))
+    v = 20.0 + 5.0 * np.sin(np.linspace(0.0, 3.0, steps))
     for k in range(steps):
         batch.at(k)
         first, got = batch.yaw_rate(np.full(len(s), r[k])), batch.yaw_rate_redundant(np.full(len(s), r[k]))
+        speed, speed2 = batch.speed(np.full(len(s), v[k])), batch.speed_redundant(np.full(len(s), v[k]))
         for i, sensor in enumerate(scalar):
             sensor.at(k * ts)
             assert sensor.yaw_rate(float(r[k])) == pytest.approx(first[i], abs=TOL)
             assert sensor.yaw_rate_redundant(float(r[k])) == pytest.approx(got[i], abs=TOL), (k, i)
+            assert sensor.speed(float(v[k])) == speed[i], (k, i)
+            assert sensor.speed_redundant(float(v[k])) == speed2[i], (k, i)
     assert np.any(got != first)  # its own noise
+    assert np.any(speed2 != np.round(v[-1] / 0.3) * 0.3)  # the second speed's faults and noise act
 
 
 def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light_grippy_cars() -> None:
@@ -435,9 +459,10 @@ def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light
     assert fast.one_substep(np.ones(2))
 
 
-def test_batch_sensors_refuse_a_second_yaw_element_they_do_not_model() -> None:
-    """The batch models the yaw-rate sensor's second element as ``params.scenario_for`` builds
-    it (present, the first element's filter, no bias); any other is refused, not ignored."""
+def test_batch_sensors_refuse_a_second_yaw_element_or_speed_they_do_not_model() -> None:
+    """The batch models the yaw-rate sensor's second element and the second speed as
+    ``params.scenario_for`` builds them (present; the element with the first element's filter
+    and no bias, the speed quantised); any other is refused, not ignored."""
     from sim_plant.campaign.batch_sensors import BatchSensors
     from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
 
@@ -448,6 +473,13 @@ def test_batch_sensors_refuse_a_second_yaw_element_they_do_not_model() -> None:
                   SensorConfig(yaw_rate_redundant=YawRateSensorConfig(bias_deg_s=0.2)),
                   SensorConfig(yaw_rate_redundant=YawRateSensorConfig(lowpass_hz=20.0))):
         with pytest.raises(ValueError, match="second element"):
+            BatchSensors(*args, config=other)
+    from sim_plant.car.sensors import ChannelConfig
+
+    BatchSensors(*args, config=SensorConfig(speed_redundant=ChannelConfig(noise=0.1)))  # its noise is the config's
+    for other in (SensorConfig(speed_redundant_present=False),
+                  SensorConfig(speed_redundant=ChannelConfig(noise=0.02, quantise=False))):
+        with pytest.raises(ValueError, match="second speed"):
             BatchSensors(*args, config=other)
 
 

@@ -7,7 +7,8 @@
   disturbances vectorised; ``noise``: the sensors' per-row noise streams, seeded and drawn as
   the scalar sensors draw them;
 * ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
-* ``batch_monitor``: issue 18's plausibility monitor and authority limiter vectorised;
+* ``batch_monitor``: issue 18's plausibility monitor vectorised (``batch_speed_checks``: its two
+  checks on the speed, the speed pair among them; ``batch_authority``: the authority limiter);
   ``batch_faults``: the sampled sensor faults and their figures;
 * ``reference``: the same closed loop from the product's scalar classes, as the controller node
   runs them (the engine's oracle);

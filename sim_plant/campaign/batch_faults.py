@@ -89,31 +89,24 @@ class FaultFigures:
         self.faults, self.ts = faults, ts
         self.cfg = pl.PlausibilityConfig(ts=ts)
         self.faulted = faults.sensor != 0
-        none = np.zeros(rows, dtype=bool)
-        self.lat, self.yaw = faults.rows.get("lat_accel", none), faults.rows.get("yaw_rate", none)
-        # the bounds that do not move: the steering channels', the second yaw-rate element's, and
-        # none for the speed (its check bounds its jumps: its detection_time is 0)
-        self.fixed = np.full(rows, np.inf)
-        for channel in ("steer", "steer_redundant", "yaw_rate_redundant"):
-            self.fixed[faults.rows.get(channel, none)] = sensor_bound(channel, self.cfg, 0.0, 0.0, True)
         self.tracker = ExceededTracker(rows, max(1, int(round(HOLD / ts))), n - 1)
         self.reported = np.zeros(rows, dtype=bool)
         self.report_step = np.full(rows, -1, dtype=np.int64)
         self.alarms = np.zeros(rows, dtype=np.int64)
 
-    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, speed: np.ndarray) -> None:
-        """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate, the speed
-        the controller saw."""
+    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray) -> None:
+        """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed."""
         after = self.faulted & (self.faults.onset <= k * self.ts)
         self.alarms += (bits != 0) & ~after
         fault = (bits & pl.PLAUS_FAULT) != 0
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        # a campaign's car has the yaw-rate sensor's second element: the pair runs
-        cfg = self.cfg
-        bound = np.where(self.lat, sensor_bound("lat_accel", cfg, r_true, speed, True),
-                         np.where(self.yaw, sensor_bound("yaw_rate", cfg, r_true, speed, True), self.fixed))
+        # each faulted channel's bound (only those some row faults, each once): a campaign's car
+        # has the yaw-rate sensor's second element (the pair runs) and the second speed
+        bound = np.full(error.size, np.inf)
+        for channel, rows in self.faults.rows.items():
+            bound = np.where(rows, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True), bound)
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

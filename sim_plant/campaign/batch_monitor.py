@@ -10,8 +10,10 @@ code row by row and period by period: the bits, the flags, the counters, the res
 
 ``engine`` runs it before the law, as the controller node does (its suspicion of the yaw rate
 holds the law), with the yaw-rate sensor's second element (``yaw_rate_redundant``) every
-period.  ``step`` has a shortcut for the periods between redundant samples (the scalar's
-branches for such a period, checked by the same tests).
+period and the second speed held at the redundant frame.  The two checks on the speed, which
+run before the pause in every row (6 and 8, the speed pair), are ``batch_speed_checks``'.
+``step`` has a shortcut for the periods between redundant samples (the scalar's branches for
+such a period, checked by the same tests).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_authority import within
+from sim_plant.campaign.batch_speed_checks import SpeedChecks
 
 
 def _count(count: np.ndarray, over: np.ndarray, runs: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -40,14 +43,14 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
-           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "speed_last", "turn_r0", "turn_a0",
+           "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "turn_r0", "turn_a0",
            "turn_res", "turn_r", "turn_err")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n", "yaw_hold_n",
          "yaw_clear_n")
-_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "speed_seen", "turn_settled")
-#: every value the detailed flags can take (the highest bit is SUSPECT_YAW_PAIR)
-_FLAG_VALUES = 2 * pl.SUSPECT_YAW_PAIR
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "turn_settled")
+#: every value the detailed flags can take (up to their highest bit, whichever check has it)
+_FLAG_VALUES = 2 * max(pl.SUSPECT_YAW_PAIR, pl.CHECK_SPEED_PAIR)
 
 
 class BatchMonitor:
@@ -69,12 +72,14 @@ class BatchMonitor:
         self.kin_sensor = np.zeros((pl.KIN_WINDOW, n))
         self.yaw_pair = np.zeros((pl.YAW_PAIR_WINDOW, n))
         self._cols = np.arange(n)
+        #: checks 6 and 8 (the speed's jump and the speed pair) and their state slots
+        self.speeds = SpeedChecks(self.c, n)
+        self._speed2_lost: np.ndarray | bool = False  # this period's rows with the second speed lost
         self._pair: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the last period's lat, d2
         self._pair_ok = False  # the pair present in every row at the last full period
         self._all_started = False  # every row started after it
         self.steady_periods = 0  # periods that took the shortcut (``step``)
         self._v_seen: np.ndarray | None = None  # the speed array the shortcut's model denominator is of
-        self._v_checked: np.ndarray | None = None  # the speed array the speed check last saw
         self._den = np.zeros(n)
         self._lat_max = self._st2_max = self._run = 0  # the counters' largest values at the last full period
         #: the CtrlStatus_Plausibility bits of each value of the detailed flags
@@ -87,11 +92,11 @@ class BatchMonitor:
         setattr(self, name, np.where(rows, value, getattr(self, name)))
 
     def step(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
-             aux: np.ndarray, r2: np.ndarray | None = None) -> np.ndarray:
+             aux: np.ndarray, r2: np.ndarray | None = None, v2: np.ndarray | None = None) -> np.ndarray:
         """``monitor_step(c, s, delta_driver=d, delta_driver_redundant=d2, yaw_rate=r,
-        lat_accel=lat, speed=v, aux_cmd_applied=aux, yaw_rate_redundant=r2)`` per row (``r2``
-        None: NaN in every row, the car without the second element); the
-        CtrlStatus_Plausibility bits.
+        lat_accel=lat, speed=v, aux_cmd_applied=aux, yaw_rate_redundant=r2,
+        speed_redundant=v2)`` per row (``r2``, ``v2`` None: NaN in every row, the car without
+        the second element, the second speed); the CtrlStatus_Plausibility bits.
 
         A caller that holds the redundant pair between its samples (the node's 50 ms frame)
         passes the very same two arrays, unmodified, until the next sample.  A period in which
@@ -99,7 +104,7 @@ class BatchMonitor:
         inputs are in range and no row starts its checks afresh takes ``_steady``: the scalar's
         branches for a period without a new sample, and nothing else (``_steady_pausing`` when
         some rows are below ``speed_min``)."""
-        self._speed(v)
+        self._speed2_lost = self.speeds.step(v, v2, self.latched)  # (before the pause, in every path)
         if (lat is self._pair[0] and d2 is self._pair[1] and self._pair_ok and within(d) and within(r)
                 and within(aux) and within(v, -1e3)):
             # every primary input in range but perhaps the speed: the rows below speed_min pause
@@ -116,19 +121,6 @@ class BatchMonitor:
         self._lat_max, self._st2_max, self._run = int(self.lat_same.max()), int(self.st2_same.max()), 0
         return bits
 
-    def _speed(self, v: np.ndarray) -> None:
-        """Check 6, the speed's jump, in every row and before the rest (``monitor_step`` runs it
-        before its pause); nothing to do for the very array it last saw (the speed held)."""
-        if v is self._v_checked:
-            return
-        self._v_checked = v
-        with np.errstate(invalid="ignore"):
-            ok = (0.0 <= v) & (v < 1e3)
-            jump = ok & self.speed_seen & (v != self.speed_last) & (np.abs(v - self.speed_last) > self.c.speed_step)
-        np.bitwise_or(self.latched, pl.CHECK_SPEED, out=self.latched, where=jump)
-        self.speed_last = np.where(ok, v, self.speed_last)
-        self.speed_seen = ok
-
     def _full(self, d: np.ndarray, d2: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray,
               aux: np.ndarray, r2: np.ndarray | None) -> np.ndarray:
         """Every branch of ``monitor_step`` as a mask, in its order."""
@@ -140,7 +132,7 @@ class BatchMonitor:
             lat_ok = (-1e3 < lat) & (lat < 1e3)
             st2_ok = (-1e3 < d2) & (d2 < 1e3)
             missing = ~(lat_ok & st2_ok)
-            flags |= np.where(missing | self._lost(r, r2), pl.MISSING, 0)
+            flags |= np.where(missing | self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0)
             self._set("turn_n", missing, 0)  # the steady-turn check starts afresh when the frame is back
             self._set("turn_settled", missing, False)
             gap = missing & (self.since >= c.kin_gap_steps)  # a shorter gap is bridged (the scalar's comment)
@@ -369,7 +361,8 @@ class BatchMonitor:
         self.turn_settled = self.turn_settled & act
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
-        self.flags = self.latched | np.where(self._lost(r, r2), pl.MISSING, 0) | (self.flags & pl.SUSPECT_YAW_PAIR)
+        self.flags = (self.latched | np.where(self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0)
+                      | (self.flags & pl.SUSPECT_YAW_PAIR))
         self.bits = self._bits_of[self.flags]
         return self.bits
 
@@ -427,7 +420,7 @@ class BatchMonitor:
         else:
             _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
         suspect = self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
-        self.flags = latched | np.where(self._lost(r, r2), pl.MISSING, 0) | suspect
+        self.flags = latched | np.where(self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0) | suspect
         self.bits = self._bits_of[self.flags]
         return self.bits
 

@@ -7,7 +7,9 @@ sample's own seeded streams, drawn as the scalar draws them: ``noise``), bias, 2
 Butterworth and DBC quantisation; the yaw-rate sensor's second element (the first's noise
 density and filter, no bias, its own stream); the second steering channel's noise and
 quantisation; the steering angle and the speed quantised (their noise is 0 in a campaign);
-the sampled sensor faults on their inputs (``batch_faults``) and the error each makes.
+the second speed (``speed_redundant``: its noise, its own stream, quantised and clamped to its
+DBC field as the scalar's); the sampled sensor faults on their inputs (``batch_faults``) and the
+error each makes.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ import numpy as np
 
 from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.campaign.noise import NoiseStream
-from sim_plant.car.sensors import CHANNELS, YAW_RATE_REDUNDANT, SensorConfig, dbc_resolution
+from sim_plant.car.sensors import (CHANNELS, SPEED_REDUNDANT, YAW_RATE_REDUNDANT, SensorConfig, dbc_range,
+                                   dbc_resolution)
 from sim_plant.car.sensors import G as G_SENSOR
 
 
@@ -58,7 +61,8 @@ class BatchSensors:
     and its second element (the same noise density and filter, no bias: ``params.scenario_for``'s
     ``[yaw_rate_redundant]``), the lateral acceleration and the steering angle's second channel
     (``config``'s noise, bias, filter, each row on its own streams), the steering angle and the
-    speed (quantised; their noise is 0 in a campaign).  ``at(k)`` before a step's readings: the step, for the streams."""
+    speed (quantised; their noise is 0 in a campaign), and the second speed (``config``'s noise,
+    quantised and clamped).  ``at(k)`` before a step's readings: the step, for the streams."""
 
     def __init__(self, noise_density: np.ndarray, bias_deg_s: np.ndarray, seeds: np.ndarray, ts: float,
                  config: SensorConfig = SensorConfig(), faults: BatchFaults | None = None,
@@ -92,6 +96,8 @@ class BatchSensors:
         self.q_yaw, self.q_steer, self.q_speed, self.q_lat, self.q_steer2, self.q_yaw2 = (
             dbc_resolution(q) for q in ("yaw_rate", "steer", "speed", "lat_accel", "steer_redundant",
                                         YAW_RATE_REDUNDANT))
+        self.q_speed2 = dbc_resolution(SPEED_REDUNDANT)
+        self.speed_range, self.speed2_range = dbc_range("speed"), dbc_range(SPEED_REDUNDANT)
         # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
         # the second steering channel is read every 25 steps, unless a row faults it
         self._yaw_noise, self._lat_noise, self._steer2_noise = (
@@ -101,6 +107,14 @@ class BatchSensors:
         # the second yaw-rate element's child follows the faults' (one in a row with a fault)
         faulted = faults.sensor != 0 if faults is not None else np.zeros(seeds.size, dtype=bool)
         self._yaw2_noise = NoiseStream(seeds, len(CHANNELS) + faulted.astype(np.int64), self.sigma, steps)
+        # the second speed's is the last child (Sensors.reset: children[-1]), after the element's;
+        # its reading matters only every 25 steps, unless a row faults it (its error every step)
+        if not (config.speed_redundant_present and config.speed_redundant.quantise):
+            raise ValueError("BatchSensors models the second speed as params.scenario_for builds it (present, "
+                             f"quantised); the config has present={config.speed_redundant_present}, "
+                             f"{config.speed_redundant}")
+        self._speed2_noise = NoiseStream(seeds, len(CHANNELS) + faulted.astype(np.int64) + 1,
+                                         config.speed_redundant.noise, steps, "speed_redundant" in tracked)
         self._k = 0
 
     def at(self, k: int) -> None:
@@ -168,5 +182,21 @@ class BatchSensors:
         return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:
-        """The speed (no error kept for a faulted one: no bound judges it, ``batch_faults``)."""
-        return np.round(self._input("speed", v) / self.q_speed) * self.q_speed
+        """The speed (its noise 0 in a campaign), quantised and clamped to its DBC field as
+        ``Sensors.speed`` (a speed stuck below 0 reads 0)."""
+        lo, hi = self.speed_range
+        y = np.clip(np.round(self._input("speed", v) / self.q_speed) * self.q_speed, lo, hi)
+        if "speed" in self.tracked:
+            self._error("speed", y, np.clip(np.round(v / self.q_speed) * self.q_speed, lo, hi))
+        return y
+
+    def speed_redundant(self, v: np.ndarray) -> np.ndarray:
+        """The second speed (``Sensors.speed_redundant``): its noise, quantised to 0.3 m/s,
+        clamped to its DBC field.  Its stream advances every step whether or not it is read (so
+        call it only at the steps the bus sends it, or every step for a row that faults it)."""
+        noise = self._speed2_noise.at(self._k)
+        q, (lo, hi) = self.q_speed2, self.speed2_range
+        y = np.clip(np.round((self._input("speed_redundant", v) + 0.0 + noise) / q) * q, lo, hi)
+        if "speed_redundant" in self.tracked:
+            self._error("speed_redundant", y, np.clip(np.round((v + 0.0 + noise) / q) * q, lo, hi))
+        return y

@@ -14,6 +14,7 @@ import math
 
 from sim_plant.car import scenario as scn
 from sim_plant.car.disturbances import parameter_names
+from sim_plant.car.sensors import SensorConfig
 
 
 def _num(x: float) -> str:
@@ -38,8 +39,11 @@ def to_toml(sc: scn.Scenario, comments: list[str] | None = None) -> str:
               f"lowpass_hz = {_num(s.yaw_rate.lowpass_hz)}", f"quantise = {str(s.yaw_rate.quantise).lower()}", ""]
     if not s.yaw_rate_redundant_present:
         lines += ["[sensors.yaw_rate_redundant]", "present = false", ""]
-    if not s.speed_redundant_present:  # the campaign engine's car (docs/campaigns.md)
+    if not s.speed_redundant_present:  # a car without the second speed (a campaign's has it)
         lines += ["[sensors.speed_redundant]", "present = false", ""]
+    elif s.speed_redundant != SensorConfig().speed_redundant:  # (a campaign's is the default)
+        lines += ["[sensors.speed_redundant]", f"noise = {_num(s.speed_redundant.noise)}",
+                  f"quantise = {str(s.speed_redundant.quantise).lower()}", ""]
     for f in sc.sensor_faults:
         lines += ["[[sensor_fault]]", f'sensor = "{f.sensor}"', f'kind = "{f.kind}"', f"start = {_num(f.start)}"]
         lines += [f"value = {_num(f.value)}"] if f.value is not None else []

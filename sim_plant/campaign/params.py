@@ -3,7 +3,8 @@
 A sample is one row of a ``SampleSet``: a value for every name of ``PARAMETERS`` (a column of
 numpy arrays, one entry per sample).  ``scenario_for`` turns a row into the ``car.scenario``
 ``Scenario`` it stands for: the realistic car (nonlinear tyres, a first-order actuator with
-range and rate limit, the yaw-rate sensor's noise, bias, 30 Hz filter and DBC quantisation), the
+range and rate limit, the yaw-rate sensor's noise, bias, 30 Hz filter and DBC quantisation, its
+second element, the second speed), the
 driver model with the sample's panic time, and one disturbance at the sample's onset.  That
 scenario is what ``campaign export`` writes, what ``hil run --scenario`` plays on the bus, and
 what the scalar reference (``reference``) runs; the batch engine (``engine``) runs the same
@@ -43,10 +44,10 @@ from sim_plant.car.vehicle import MAX_MU
 
 KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
-#: fault_sensor codes: none, then every sensor of sensor_faults.FAULT_SENSORS (the speed and the
-#: yaw-rate sensor's second element last, as they were added: stored codes keep their meaning)
-#: but the second speed, which the engine's car does not have (docs/campaigns.md)
-FAULT_CHANNELS = ("none", *(s for s in FAULT_SENSORS if s != "speed_redundant"))
+#: fault_sensor codes: none, then every sensor of sensor_faults.FAULT_SENSORS (the speed, the
+#: yaw-rate sensor's second element and the second speed last, as they were added: stored codes
+#: keep their meaning)
+FAULT_CHANNELS = ("none", *FAULT_SENSORS)
 #: fault_kind codes and the sensor_faults kind each one is
 FAULT_KINDS = ("stuck", "offset", "gain", "drift")
 SCALAR_FAULT_KINDS = ("stuck", "bias", "scale", "drift")
@@ -88,7 +89,7 @@ PARAMETERS: dict[str, Parameter] = {
     "fault_kind": Parameter("", 0, len(FAULT_KINDS) - 1, 1, "the sensor fault's kind", FAULT_KINDS),
     "fault_onset": Parameter("s", 0.0, 60.0, 1.0, "when the sensor fault starts"),
     "fault_size": Parameter("", -1000.0, 1000.0, 1.0, "stuck at, offset or drift per s in deg/s (either yaw-rate "
-                            "element), m/s^2 (a_y), deg (steering angles) or m/s (speed); gain: the factor"),
+                            "element), m/s^2 (a_y), deg (steering angles) or m/s (either speed); gain: the factor"),
 }
 #: Columns every SampleSet has besides PARAMETERS: the sample's index and its sensors' noise seed.
 INDEX, NOISE_SEED = "index", "noise_seed"
@@ -143,10 +144,9 @@ def scenario_for(row: dict[str, float], duration: float) -> Scenario:
                                    rate_limit_deg_s=float(row["actuator_rate"]))
     # The yaw-rate sensor's second element: what a scenario file's [yaw_rate_redundant] defaults
     # to (the first's noise and filter, no bias), so that an exported sample reads back equal.
-    # No second speed: the engine does not model it (docs/campaigns.md), and the exported file says so.
+    # The second speed: SensorConfig's default (present, 0.02 m/s of noise), as the bus's car has it.
     yaw = YawRateSensorConfig(noise_density=float(row["noise_density"]), bias_deg_s=float(row["bias"]))
-    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0),
-                           speed_redundant_present=False)
+    sensors = SensorConfig(yaw, seed=int(row[NOISE_SEED]), yaw_rate_redundant=replace(yaw, bias_deg_s=0.0))
     return Scenario(name=f"campaign-sample-{int(row[INDEX])}", duration=duration, v=float(row["v"]),
                     mu=float(row["mu"]), mass=mass, events=(event,),
                     driver=DriverModel("model", float(row["reaction_time"]), float(row["driver_time_constant"])),

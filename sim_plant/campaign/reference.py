@@ -9,13 +9,14 @@ with the bus taken out:
   nonlinear car; its a_y from ``Car.outputs`` at the actuator's position as the step begins),
   ``actuator.Actuator`` (the command handling and its authority limit) and
   ``actuator_dynamics.PositionActuator``, ``sensors.Sensors`` (every channel read every step,
-  each on its own stream, and the yaw-rate sensor's second element);
+  each on its own stream, and the yaw-rate sensor's second element and the second speed);
 * the bus: each channel held at its DBC cycle (``plausibility_runs.cycles``: driver angle and
-  yaw rate every period, the speed every 5, ``MRS_RedundantSensors`` every 25), the command one
+  yaw rate every period, the speed every 10, ``MRS_RedundantSensors`` (a_y, the second steering
+  channel and the second speed) every 25), the command one
   period late, ``MRS_CtrlStatus`` every 50 periods, its plausibility bits reaching the actuator
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
-* the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2)``,
+* the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2, v_2)``,
   ``u = step(d, r, v, ms.flags & SUSPECT_YAW_PAIR)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
   ``bits & PLAUS_FAULT``.
 
@@ -41,9 +42,9 @@ from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator import Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
-from sim_plant.car.sensors import CHANNELS, Sensors
+from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
-from sim_plant.offline.plausibility_runs import MonitorRun, cycles, error_bound
+from sim_plant.offline.plausibility_runs import MonitorRun, cycles, sensor_bound
 
 
 @dataclass(frozen=True)
@@ -96,7 +97,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     n = int(round(sc.duration / ts)) + 1
     r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
     status, bits_hist, auth = (np.zeros(n, dtype=np.int64) for _ in range(3))
-    error, speed_seen, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
+    error, speed_true, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
     command = 0.0  # the command sent the period before: what acts on the car now
     in_flight: int | None = None  # a status frame's plausibility bits, not yet read by the plant
@@ -118,18 +119,20 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         sensors.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
         yaw_rate_2 = read["yaw_rate_redundant"] = sensors.yaw_rate_redundant(truth["yaw_rate"])  # every period
-        truth["yaw_rate_redundant"] = truth["yaw_rate"]
+        # the second speed: read every step (the plant's sensor), sent in MRS_RedundantSensors
+        read[SPEED_REDUNDANT] = sensors.speed_redundant(scene.v)
+        truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], scene.v
         if fault is not None and clean is not None:
             clean.at(t)
             error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
-        for ch in CHANNELS:
+        for ch in (*CHANNELS, SPEED_REDUNDANT):
             if k % every[ch] == 0:
                 held[ch] = read[ch]
-        speed_seen[k], yaw_2_seen[k] = held["speed"], yaw_rate_2
+        speed_true[k], yaw_2_seen[k] = scene.v, yaw_rate_2
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
         if ctrl is not None and ac is not None:
             bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
-                            held["speed"], command, yaw_rate_2)
+                            held["speed"], command, yaw_rate_2, held[SPEED_REDUNDANT])
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"],
                           (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS)
@@ -150,27 +153,26 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     if fault is not None and ctrl is not None:
         r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
-                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_seen, r_clean, yaw_2_seen))
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true, r_clean, yaw_2_seen))
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
-                  error: np.ndarray, speed: np.ndarray, r_clean: np.ndarray | None,
+                  error: np.ndarray, v: np.ndarray, r_clean: np.ndarray | None,
                   yaw_rate_2: np.ndarray) -> tuple[int, float, float]:
     """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
-    ``MonitorRun.exceeded_time`` and ``error_bound`` for the detection (none for a speed
-    fault; ``speed`` and ``yaw_rate_2``: what the monitor saw)."""
+    ``MonitorRun.exceeded_time`` against ``sensor_bound`` at the true yaw rate ``r`` and the
+    true speed ``v`` (the car has the second speed: ``speed_pair``), the yaw-rate pair running
+    while ``yaw_rate_2`` (what the monitor saw) is there."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
     false_alarms = int(np.count_nonzero((bits != 0) & ~after))
     if fault is None:
         return false_alarms, 0.0, 0.0
     cfg = pl.PlausibilityConfig(ts=ts)
-    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"speed": speed, "yaw_rate_redundant": yaw_rate_2},
+    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"yaw_rate_redundant": yaw_rate_2},
                      np.zeros(bits.size))
-    # the speed's error has no bound (its check bounds its jumps): its detection_time is 0
-    bound = np.inf if fault.sensor == "speed" else error_bound(fault.sensor, cfg, run)
+    bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True)
     exceeded, reported = run.exceeded_time(bound), run.fault_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
     caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
     return false_alarms, detection, caused
-
