@@ -37,9 +37,6 @@ class BatchFaults:
                      if ch != "none" and bool((sensor == code).any())}
         self.kinds = {name: kind == code for code, name in enumerate(FAULT_KINDS)}
 
-    def faulted(self, channel: str) -> bool:
-        return channel in self.rows
-
     def input(self, channel: str, t: float, x: np.ndarray) -> np.ndarray:
         rows = self.rows.get(channel)
         if rows is None:
@@ -93,6 +90,19 @@ class FaultFigures:
         self.reported = np.zeros(rows, dtype=bool)
         self.report_step = np.full(rows, -1, dtype=np.int64)
         self.alarms = np.zeros(rows, dtype=np.int64)
+        # Each faulted channel's bound (a campaign's car has the yaw-rate sensor's second element,
+        # so the pair runs, and the second speed): those that do not move with the state (both
+        # steering channels, the yaw element: a float for any r and v) once here, the others (yaw
+        # rate, a_y, either speed) each step at the true r and v.
+        probe = np.zeros(rows)
+        self.fixed_bound = np.full(rows, np.inf)
+        self.moving: dict[str, np.ndarray] = {}
+        for channel, on in faults.rows.items():
+            b = sensor_bound(channel, self.cfg, probe, probe, True, speed_pair=True)
+            if np.ndim(b) == 0:
+                self.fixed_bound[on] = b
+            else:
+                self.moving[channel] = on
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray) -> None:
         """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed."""
@@ -102,11 +112,9 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        # each faulted channel's bound (only those some row faults, each once): a campaign's car
-        # has the yaw-rate sensor's second element (the pair runs) and the second speed
-        bound = np.full(error.size, np.inf)
-        for channel, rows in self.faults.rows.items():
-            bound = np.where(rows, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True), bound)
+        bound = self.fixed_bound
+        for channel, on in self.moving.items():
+            bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True), bound)
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

@@ -187,12 +187,13 @@ class _Group:
         term = np.empty(rows)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
-        speed_faulted = self.faults is not None and self.faults.faulted("speed")
-        # the rows' errors of a faulted speed or second speed are followed every step
-        figures_on = self.faults is not None and self.monitor is not None
-        track_speed = figures_on and speed_faulted
-        track_speed2 = figures_on and "speed_redundant" in sensors.tracked
-        figures = FaultFigures(self.faults, n, ts) if figures_on and self.faults is not None else None
+        # the channels some row faults: with the monitor on, their errors are followed every step
+        tracked = sensors.tracked
+        speed_faulted = "speed" in tracked
+        figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
+        track_speed = figures is not None and speed_faulted
+        track_speed2 = figures is not None and "speed_redundant" in tracked
+        track_steer2 = figures is not None and "steer_redundant" in tracked
         fault_yaw = np.zeros(self.pairs.size)
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
@@ -231,7 +232,7 @@ class _Group:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
                     held["speed2"] = sensors.speed_redundant(car.v)
                 else:
-                    if figures_on and "steer_redundant" in sensors.tracked:
+                    if track_steer2:
                         sensors.steer_redundant(driver)  # its error, every step
                     if track_speed2:
                         sensors.speed_redundant(car.v)
