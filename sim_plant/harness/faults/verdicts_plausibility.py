@@ -186,7 +186,7 @@ def _first_fault(e: Evidence, start: float) -> tuple[float | None, float | None,
 
 def check_plausibility(e: Evidence, fails: list[str], observed: list[str]) -> int | None:
     """A sensor row: detection, report, fade and latch (the module's docstring), then the yaw
-    rate its command caused, detected or not (judged on the yaw-rate rows).  Returns the detection in
+    rate its command caused, detected or not (``judge_caused_yaw``).  Returns the detection in
     controller cycles from the error leaving its bound (``None``: not a sensor row, or not
     detected)."""
     if not e.row.plausibility:
