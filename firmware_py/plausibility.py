@@ -45,6 +45,11 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    samples until ``YAW_PAIR_WINDOW`` samples in a row within it re-arm it: the law's answer
    to a sensor error that reaches it through the sensor's filter builds up while the
    window's mean is still confirming it.
+   The steering pair has a suspicion too (``SUSPECT_STEER_JUMP``, not latched): the driver's
+   angle moving by more than ``steer_jump`` in one sample, faster than any hand, between two
+   redundant samples holds the law's command the same way until the next redundant sample lets
+   the pair judge it (at most ``kin_gap``): a channel that sticks or jumps is answered by the
+   law at full speed, and the pair sees it only at the 50 ms frame.
 5. **Frozen**: a value that does not change at all (bit for bit) for ``frozen_time`` while its
    partner (yaw rate <-> a_y / v, one steering channel <-> the other) moves by more than
    ``frozen_move_*``: a real sensor's noise toggles its LSB, so an unchanging value while the
@@ -110,9 +115,15 @@ FROZEN_STEER = 0x20
 FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
 #: The yaw-rate pair's latest sample is over ``yaw_pair_hold``, which its window has not
-#: confirmed (not latched): the node passes it to ``step()``'s ``hold``, on which the law's
-#: command may shrink but not grow (docs/controller.md, "The pair's suspicion").
+#: confirmed (not latched): the node passes it (``SUSPECT_CHECKS``) to ``step()``'s ``hold``, on
+#: which the law's command may shrink but not grow (docs/controller.md, "The pair's suspicion").
 SUSPECT_YAW_PAIR = 0x800
+#: The driver's angle moved by more than ``steer_jump`` in one sample since the last redundant
+#: sample (not latched): held as ``SUSPECT_YAW_PAIR`` until the steering pair judges it at the
+#: next one (docs/controller.md, "The steering pair's suspicion").
+SUSPECT_STEER_JUMP = 0x2000
+#: The suspicions: the node passes ``flags & SUSPECT_CHECKS != 0`` as ``step()``'s ``hold``.
+SUSPECT_CHECKS = SUSPECT_YAW_PAIR | SUSPECT_STEER_JUMP
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
 #: rate's (CtrlStatus_Plausibility 1).
 YAW_CHECKS = (CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
@@ -205,6 +216,11 @@ class PlausibilityConfig:
     speed_pair_bound: float = 1.0
     speed_pair_rel: float = 0.05
     speed_pair_time: float = 0.1
+    # rad of wheel angle the driver's angle may move in one sample before the steering pair
+    # suspects it (0.86 deg): 7.5 rad/s at 500 Hz, 1.5 rad/s at 100 Hz, above the fastest hand
+    # (about 1 rad/s); a burst of seven samples at that hand reaches it (docs/controller.md,
+    # "The steering pair's suspicion")
+    steer_jump: float = 0.015
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,6 +266,7 @@ class MonitorCoefficients:
     speed_pair_bound: float
     speed_pair_rel: float
     speed_pair_steps: int
+    steer_jump: float
 
 
 class MonitorState:
@@ -264,7 +281,8 @@ class MonitorState:
                  "yaw_hold_n", "yaw_clear_n",
                  "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen",
                  "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err",
-                 "speed2_seen", "speed_pair_count", "speed_pair_err")
+                 "speed2_seen", "speed_pair_count", "speed_pair_err",
+                 "jump_prev", "jump_ok", "steer_hold_n")
 
     def __init__(self) -> None:
         reset_monitor(self)
@@ -306,6 +324,9 @@ def reset_monitor(s: MonitorState) -> None:
     s.yaw_hold_n = 0  # samples of this suspicion the command was held on (at most YAW_PAIR_WINDOW)
     s.yaw_clear_n = 0  # samples in a row within yaw_pair_hold (YAW_PAIR_WINDOW of them re-arm the hold)
     s.yaw2_seen = False  # the yaw-rate sensor's second element has been received this cycle
+    s.jump_prev = 0.0  # the driver's angle the sample before (for steer_jump)
+    s.jump_ok = False  # jump_prev holds one
+    s.steer_hold_n = 0  # samples the steering pair's suspicion still holds the command
     s.delta_lag = 0.0  # the wheel angle through the sensors' lag (sensor_tau)
     s.kin_sensor = [0.0] * KIN_WINDOW  # how much that lag moves the nominal car's beta' (C: double[4])
     s.lag_beta_prev = 0.0
@@ -326,7 +347,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
                           "frozen_time", "frozen_move_yaw", "frozen_move_steer", "nominal_l_f", "nominal_l_r",
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
                           "yaw_pair_bound", "yaw_pair_hold", "sensor_tau", "speed_step", "turn_yaw_min",
-                          "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel", "speed_pair_bound", "speed_pair_time"))
+                          "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel", "speed_pair_bound", "speed_pair_time",
+                          "steer_jump"))
     if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
         raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
     for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias",
@@ -368,7 +390,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
         turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias,
         speed_pair_bound=cfg.speed_pair_bound, speed_pair_rel=cfg.speed_pair_rel,
-        speed_pair_steps=steps_of(cfg.speed_pair_time, cfg.ts))
+        speed_pair_steps=steps_of(cfg.speed_pair_time, cfg.ts), steer_jump=cfg.steer_jump)
 
 
 def steps_of(t: float, ts: float) -> int:
@@ -463,6 +485,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.kin_count = s.pair_count = s.model_count = 0
         s.yaw_pair_n = 0
         s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
+        s.jump_ok = False
+        s.steer_hold_n = 0
         s.kin_n = 0
         s.turn_n = 0
         s.turn_settled = False
@@ -558,6 +582,19 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
 
     # --- 1. and 3. at each new redundant sample (either of its values changed)
     new_sample = lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev)
+    # --- 3'. the steering pair's suspicion: a jump of the driver's angle no hand makes between
+    #     two redundant samples holds the command until the next one, where the pair judges it
+    if new_sample or not st2_ok:
+        s.steer_hold_n = 0  # the pair judges now, or cannot
+    else:
+        e = delta_driver - s.jump_prev
+        if s.jump_ok and (e > c.steer_jump or e < -c.steer_jump):
+            s.steer_hold_n = c.kin_gap_steps
+        if s.steer_hold_n > 0:
+            s.steer_hold_n -= 1
+            flags |= SUSPECT_STEER_JUMP
+    s.jump_prev = delta_driver
+    s.jump_ok = True
     if new_sample:
         # a_y / v - r = beta', midway between this sample and the last, as measured ("raw") and
         # less the nominal car's beta' (the difference of its beta over the interval: "comp");

@@ -49,7 +49,7 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
                     ms.turn_err, ms.turn_n, int(ms.turn_settled), ms.yaw_hold_n, ms.yaw_clear_n, ms.speed_pair_err,
-                    ms.speed_pair_count, int(ms.speed2_seen)))
+                    ms.speed_pair_count, int(ms.speed2_seen), ms.steer_hold_n))
     return out
 
 
@@ -63,7 +63,8 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
     for line in lines[1:]:
         f = line.split()
         out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
-                    float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12]), float(f[13]), int(f[14]), int(f[15])))
+                    float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12]), float(f[13]), int(f[14]), int(f[15]),
+                    int(f[16])))
     return out
 
 
@@ -358,7 +359,8 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                 mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, ac.window_steps, ac.rearm_steps,
                 mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
                 mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
-                mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, mc.speed_pair_steps]
+                mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, mc.speed_pair_steps,
+                mc.steer_jump]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
@@ -372,13 +374,14 @@ def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str,
     m, a = dataclasses.replace(pl.PlausibilityConfig(), **changed), au.AuthorityConfig()
     first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
                            check=True).stdout.split()
-    assert int(first[-1]) == pl.configure(m).speed_pair_steps == steps
+    assert int(first[-2]) == pl.configure(m).speed_pair_steps == steps
 
 
 @pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},
                                  {"yaw_pair_hold": 0.031}, {"yaw_pair_hold": 0.0}, {"speed_pair_bound": 0.0},
                                  {"speed_pair_time": -0.1}, {"speed_pair_time": math.inf},
-                                 {"speed_pair_rel": -0.01}, {"speed_pair_rel": 1e3}, {"speed_pair_rel": math.nan}])
+                                 {"speed_pair_rel": -0.01}, {"speed_pair_rel": 1e3}, {"speed_pair_rel": math.nan},
+                                 {"steer_jump": 0.0}, {"steer_jump": math.inf}])
 def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
     cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
     assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,

@@ -242,7 +242,8 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     channel, the redundant frame and the second yaw-rate element missing for a while, a speed
     below the monitor's minimum for a while and then the first yaw-rate element missing in every
     third period and the second in every other (both at once in every sixth), a stuck a_y, a
-    stuck driver's angle, a large yaw-rate offset; the second yaw-rate element also missing in
+    stuck driver's angle, a large yaw-rate offset (and the driver's angle jumping by 0.03 rad 13
+    periods later); the second yaw-rate element also missing in
     every period divisible by 7 of the even rows, its window restarting there (below the
     minimum speed too: the lost element's rule there).  Rows from the 50th on hold a steady
     turn whose speed reads 25 % high from the onset (the steady-turn check).  The second speed
@@ -280,6 +281,7 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     lat = np.where((kind == 7) & after, lat[onset, np.arange(rows)], lat)
     d = np.where((kind == 8) & after, d[onset, np.arange(rows)], d)
     r = np.where((kind == 9) & after, r + 0.5, r)
+    d = np.where((kind == 9) & (k >= onset + 13), d + 0.03, d)  # a jump no hand makes: the steering suspicion
     gap = after & (k < onset + 100)
     lat = np.where((kind == 5) & gap, np.nan, lat)
     d2 = np.where((kind == 5) & gap, np.nan, d2)
@@ -334,19 +336,19 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             assert bits[i] == expected and batch.flags[i] == s.flags, (k, i, bits[i], expected)
             for name in ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same",
                          "kin_n", "since", "yaw_pair_n", "yaw_pair_idx", "turn_n", "turn_settled", "yaw_hold_n",
-                         "yaw_clear_n"):
+                         "yaw_clear_n", "steer_hold_n", "jump_ok"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             for name in ("r_model", "aux_lag", "kin_err", "pair_err", "model_err", "yaw_pair_err", "turn_res", "turn_r",
-                         "turn_err"):
+                         "turn_err", "jump_prev"):
                 assert getattr(batch, name)[i] == getattr(s, name), (k, i, name)
             for name in ("speed_seen", "speed_last", "speed2_seen", "speed_pair_count", "speed_pair_err"):
                 assert getattr(batch.speeds, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
             lost_speed2 |= (s.flags & pl.MISSING != 0) & (kind[i] == 3) & (k > steps // 2 + 200)
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    # every check tripped somewhere (the speed pair's is the highest bit), MISSING and the
-    # yaw-rate pair's suspicion; a lost second speed is DEGRADED
-    assert seen == 2 * pl.CHECK_SPEED_PAIR - 1, f"flags seen {seen:#x}"
+    # every check tripped somewhere, MISSING and both suspicions (the steering one's is the
+    # highest bit); a lost second speed is DEGRADED
+    assert seen == 2 * pl.SUSPECT_STEER_JUMP - 1, f"flags seen {seen:#x}"
     assert lost_speed2
     assert not (batch.flags[healthy] & pl.CHECK_SPEED_PAIR).any()  # the two speeds agree
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree

@@ -267,7 +267,7 @@ class ControllerNode:
                                    values[2], self.command, yaw_2, speed_2)
         # before the law: the monitor's suspicion of the yaw rate holds the law's command
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2],
-                    (self.monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)
+                    (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)
         if self.state.fault_flags and not cause:
             cause |= CAUSE_RANGE
         if self.state.status == mr.STATUS_INACTIVE and not cause:

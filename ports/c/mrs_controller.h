@@ -90,7 +90,7 @@ void mrs_init_state(mrs_state_t *s);
 /* One control period: driver's front-wheel angle (rad), yaw rate (rad/s), speed (m/s) in;
  * auxiliary front-wheel angle command (rad) out. s->status and s->fault_flags say what happened.
  * Non-finite inputs are faults: they never reach the state or the output. hold nonzero (the
- * monitor's suspicion of the yaw rate, MRS_SUSPECT_YAW_PAIR): the command may move toward zero
+ * monitor's suspicions, MRS_SUSPECT_CHECKS): the command may move toward zero
  * but no further from it than it is, inside the law's clamp; 0 is the law without it. */
 mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
                     mrs_real_t speed, uint8_t hold);

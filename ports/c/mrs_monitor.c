@@ -45,6 +45,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->speed_pair_bound = 1.0;
     cfg->speed_pair_rel = 0.05;
     cfg->speed_pair_time = 0.1;
+    cfg->steer_jump = 0.015;
 }
 
 static int positive(double x)
@@ -66,7 +67,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
                         g->yaw_pair_bound, g->sensor_tau, g->speed_step, g->turn_yaw_min, g->turn_yaw_tol,
                         g->turn_lat_tol, g->turn_speed_rel, g->yaw_pair_hold, g->speed_pair_bound,
-                        g->speed_pair_time};
+                        g->speed_pair_time, g->steer_jump};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -124,6 +125,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->speed_pair_bound = g->speed_pair_bound;
     c->speed_pair_rel = g->speed_pair_rel;
     c->speed_pair_steps = steps_of(g->speed_pair_time, g->ts);
+    c->steer_jump = g->steer_jump;
     return 0;
 }
 
@@ -180,6 +182,9 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->speed2_seen = 0u;
     s->speed_pair_count = 0;
     s->speed_pair_err = 0.0;
+    s->jump_prev = 0.0;
+    s->jump_ok = 0u;
+    s->steer_hold_n = 0;
 }
 
 /* |x| without a call (x is a side-effect-free expression everywhere below). */
@@ -292,6 +297,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         s->kin_count = s->pair_count = s->model_count = 0;
         s->yaw_pair_n = 0;
         s->yaw_same = s->lat_same = s->st_same = s->st2_same = 0;
+        s->jump_ok = 0u;
+        s->steer_hold_n = 0;
         s->kin_n = 0;
         s->turn_n = 0;
         s->turn_settled = 0u;
@@ -384,6 +391,22 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     }
     /* 1. and 3. at each new redundant sample */
     new_sample = lat_ok && st2_ok && (lat_accel != s->lat_prev || delta_driver_redundant != s->steer2_prev);
+    /* 3'. the steering pair's suspicion: a jump of the driver's angle no hand makes between two
+     * redundant samples holds the command until the next one, where the pair judges it */
+    if (new_sample || !st2_ok) {
+        s->steer_hold_n = 0;
+    } else {
+        e = delta_driver - s->jump_prev;
+        if (s->jump_ok && (e > c->steer_jump || e < -c->steer_jump)) {
+            s->steer_hold_n = c->kin_gap_steps;
+        }
+        if (s->steer_hold_n > 0) {
+            s->steer_hold_n -= 1;
+            flags |= MRS_SUSPECT_STEER_JUMP;
+        }
+    }
+    s->jump_prev = delta_driver;
+    s->jump_ok = 1u;
     if (new_sample) {
         double raw = r_kin - yaw_rate;
         double comp, far, sens, lo, hi, x, beta, lat_beta, lag_beta;

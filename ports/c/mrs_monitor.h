@@ -32,9 +32,15 @@
 #define MRS_CHECK_SPEED 0x200u /* the speed jumped between two values by more than speed_step */
 #define MRS_CHECK_TURN 0x400u /* the speed disagrees with a_y / r in a steady turn */
 /* the yaw-rate pair's latest sample over yaw_pair_hold, not confirmed (not latched): the node
- * passes it as mrs_step's hold, on which the law's command may shrink but not grow */
+ * passes it (MRS_SUSPECT_CHECKS) as mrs_step's hold, on which the law's command may shrink but
+ * not grow */
 #define MRS_SUSPECT_YAW_PAIR 0x800u
 #define MRS_CHECK_SPEED_PAIR 0x1000u /* the speed disagrees with the second speed */
+/* the driver's angle moved by more than steer_jump in one sample since the last redundant
+ * sample (not latched): held as MRS_SUSPECT_YAW_PAIR until the steering pair judges it */
+#define MRS_SUSPECT_STEER_JUMP 0x2000u
+/* The suspicions: the node passes (flags & MRS_SUSPECT_CHECKS) != 0 as mrs_step's hold. */
+#define MRS_SUSPECT_CHECKS (MRS_SUSPECT_YAW_PAIR | MRS_SUSPECT_STEER_JUMP)
 /* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
 #define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED | MRS_CHECK_SPEED_PAIR)
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
@@ -74,6 +80,8 @@ typedef struct {
     /* the speed pair: |v - v_2| over speed_pair_bound + speed_pair_rel min(v, v_2) (m/s) for
      * speed_pair_time (s) trips */
     double speed_pair_bound, speed_pair_rel, speed_pair_time;
+    /* rad the driver's angle may move in one sample before the steering pair suspects it */
+    double steer_jump;
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -92,6 +100,7 @@ typedef struct {
     double yaw_pair_hold;
     double speed_pair_bound, speed_pair_rel;
     int32_t speed_pair_steps;
+    double steer_jump;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
@@ -117,6 +126,9 @@ typedef struct {
     double turn_r0, turn_a0, turn_res, turn_r, turn_err; /* the block's first r, a_y; sums of r v - a_y, r */
     int32_t speed_pair_count; /* the speed pair's up/down counter (trips at speed_pair_steps) */
     double speed_pair_err;
+    double jump_prev; /* the driver's angle the sample before (for steer_jump) */
+    uint8_t jump_ok; /* jump_prev holds one */
+    int32_t steer_hold_n; /* samples the steering pair's suspicion still holds the command */
 } mrs_monitor_state_t;
 
 typedef struct {

@@ -265,7 +265,7 @@ int mrs_node_control(mrs_node_t *n)
                                     (double)values[2], n->command, yaw2, speed2);
     }
     u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2],
-                             (uint8_t)((n->mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));
+                             (uint8_t)((n->mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));
     if (n->state.fault_flags && !cause) {
         cause |= MRS_CAUSE_RANGE;
     }

@@ -107,7 +107,7 @@ int main(int argc, char **argv)
             plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6], v[7]);
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
-                                 (uint8_t)((mon_s.flags & MRS_SUSPECT_YAW_PAIR) != 0u));
+                                 (uint8_t)((mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
                                     (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u));
         state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;

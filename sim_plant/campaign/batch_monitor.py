@@ -44,13 +44,13 @@ def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
            "st2_last", "st2_ref", "kin_err", "pair_err", "model_err", "raw_prev", "beta_prev",
            "lat_beta_prev", "aux_lag", "yaw_pair_err", "delta_lag", "lag_beta_prev", "turn_r0", "turn_a0",
-           "turn_res", "turn_r", "turn_err")
+           "turn_res", "turn_r", "turn_err", "jump_prev")
 _INTS = ("kin_count", "pair_count", "model_count", "yaw_same", "lat_same", "st_same", "st2_same", "latched",
          "flags", "bits", "kin_idx", "kin_n", "since", "yaw_pair_idx", "yaw_pair_n", "turn_n", "yaw_hold_n",
-         "yaw_clear_n")
-_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "turn_settled")
+         "yaw_clear_n", "steer_hold_n")
+_BOOLS = ("started", "have_sample", "yaw_ref_ok", "st_ref_ok", "yaw2_seen", "turn_settled", "jump_ok")
 #: every value the detailed flags can take (up to their highest bit, whichever check has it)
-_FLAG_VALUES = 2 * max(pl.SUSPECT_YAW_PAIR, pl.CHECK_SPEED_PAIR)
+_FLAG_VALUES = 2 * max(pl.SUSPECT_YAW_PAIR, pl.CHECK_SPEED_PAIR, pl.SUSPECT_STEER_JUMP)
 
 
 class BatchMonitor:
@@ -145,7 +145,7 @@ class BatchMonitor:
             self._set("turn_settled", paused, False)
             self._set("started", paused, False)
             flags |= self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
-            self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
+            flags |= self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
@@ -154,8 +154,9 @@ class BatchMonitor:
         return bits
 
     # The active rows' part of monitor_step, in its order (model, kinematic and pair at a new
-    # redundant sample, frozen); long because it is the scalar's four checks inline.
-    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux) -> None:
+    # redundant sample, frozen); long because it is the scalar's four checks inline.  Returns the
+    # steering pair's suspicion (flags, not latched).
+    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux) -> np.ndarray:
         c = self.c
         inv_v = 1.0 / v
         r_kin = np.where(lat_ok, lat * inv_v, 0.0)
@@ -180,6 +181,7 @@ class BatchMonitor:
         self._set("since", act & (self.since < 1000000), self.since + 1)
 
         new = act & lat_ok & st2_ok & ((lat != self.lat_prev) | (d2 != self.steer2_prev))
+        suspect = self._steer_jump(act, st2_ok, new, d)
         raw = r_kin - r
         beta = (c.moment_m * inv_v * inv_v * r + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * v
         lat_beta = lat * c.inv_cs_m
@@ -228,6 +230,27 @@ class BatchMonitor:
         self._set("lat_prev", act & lat_ok, lat)
         self._set("steer2_prev", act & st2_ok, d2)
         self._frozen_checks(act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin)
+        return suspect
+
+    def _steer_jump(self, act: np.ndarray | None, st2_ok: np.ndarray | bool, new: np.ndarray | bool,
+                    d: np.ndarray) -> np.ndarray:
+        """The steering pair's suspicion in the rows that ``act`` (None: every row), as
+        ``monitor_step`` has it: a jump of the driver's angle over ``steer_jump`` between two
+        redundant samples holds for up to ``kin_gap_steps``, ended by a new sample or a missing
+        second channel; a paused row forgets the angle before.  Returns the flags'
+        SUSPECT_STEER_JUMP (not latched)."""
+        c = self.c
+        on = ~(new | ~np.asarray(st2_ok)) if act is None else act & ~(new | ~np.asarray(st2_ok))
+        e = d - self.jump_prev
+        jumped = on & self.jump_ok & ((e > c.steer_jump) | (e < -c.steer_jump))
+        hold = np.where(jumped, c.kin_gap_steps, self.steer_hold_n)
+        suspect = on & (hold > 0)
+        self.steer_hold_n = np.where(on, hold - suspect, 0)
+        if act is None:
+            self.jump_prev, self.jump_ok = d, np.ones_like(self.jump_ok)
+        else:
+            self.jump_prev, self.jump_ok = np.where(act, d, self.jump_prev), act.copy()
+        return np.where(suspect, pl.SUSPECT_STEER_JUMP, 0)
 
     def _turn(self, new: np.ndarray, r: np.ndarray, lat: np.ndarray, v: np.ndarray) -> None:
         """Check 7, the speed against a_y / r in a steady turn, in the rows with a new sample."""
@@ -349,7 +372,7 @@ class BatchMonitor:
         """``_steady`` for the rows that ``act``; the others paused as ``monitor_step`` pauses a
         row below ``speed_min``: its counters and windows at 0, not started, the rest untouched."""
         kept = {k: getattr(self, k) for k in ("r_model", "model_err", "since", "yaw_last", "yaw_ref_ok", "st_last",
-                                              "st_ref_ok", "aux_lag", "delta_lag")}
+                                              "st_ref_ok", "aux_lag", "delta_lag", "jump_prev")}
         latched = self.latched.copy()
         with np.errstate(all="ignore"):  # a paused row's arithmetic (a speed of 0) is dropped
             self._steady(d, d2, r, lat, v, aux, r2, act)
@@ -362,7 +385,7 @@ class BatchMonitor:
         self.started = self.started & act
         self.latched = np.where(act, self.latched, latched)
         self.flags = (self.latched | np.where(self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0)
-                      | (self.flags & pl.SUSPECT_YAW_PAIR))
+                      | (self.flags & pl.SUSPECT_CHECKS))
         self.bits = self._bits_of[self.flags]
         return self.bits
 
@@ -420,6 +443,7 @@ class BatchMonitor:
         else:
             _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
         suspect = self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
+        suspect = suspect | self._steer_jump(act, True, False, d)
         self.flags = latched | np.where(self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0) | suspect
         self.bits = self._bits_of[self.flags]
         return self.bits

@@ -246,7 +246,7 @@ class _Group:
                     # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
                     bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending,
                                              sensors.yaw_rate_redundant(r), held["speed2"])
-                    u = self.law.step(steer, yaw, held["speed"], (self.monitor.flags & pl.SUSPECT_YAW_PAIR) != 0)
+                    u = self.law.step(steer, yaw, held["speed"], (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)
                     u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS)
                     tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:

@@ -17,7 +17,7 @@ with the bus taken out:
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
 * the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2, v_2)``,
-  ``u = step(d, r, v, ms.flags & SUSPECT_YAW_PAIR)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
+  ``u = step(d, r, v, ms.flags & SUSPECT_CHECKS)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
   ``bits & PLAUS_FAULT``.
 
 The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
@@ -134,7 +134,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
             bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
                             held["speed"], command, yaw_rate_2, held[SPEED_REDUNDANT])
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"],
-                          (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
+                          (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS)
             state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
             if (k + 1) % status_every == 0:

@@ -219,7 +219,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
                         pipeline[0], held["yaw_rate_redundant"], held["speed_redundant"])
         # before the law, as the node: the monitor's suspicion of the yaw rate holds its command
         u = reg.step(held["steer"], held["yaw_rate"], held["speed"],
-                     guard and (mon.state.flags & pl.SUSPECT_YAW_PAIR) != 0)
+                     guard and (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
         if guard:
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut)
         pipeline.append(u)
