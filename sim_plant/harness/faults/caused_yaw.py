@@ -17,9 +17,8 @@ run's car is that linear car with the ideal actuator, whose applied angle is the
 
 This is not the campaign's ``fault_yaw_rate``, which is |r − r of the fault-free twin| and so
 counts the fade and any backing-off as well (docs/campaigns.md). On a straight road with no
-disturbance the two are the same. The matrix judges the figure on every sensor row but the
-steering rows away from the shipped 500 Hz, which it reports (``verdicts_plausibility.
-judge_caused_yaw``; docs/faults.md, "The sensor rows").
+disturbance the two are the same. The matrix judges the figure on every sensor row at every
+rate (``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
 """
 
 from __future__ import annotations
