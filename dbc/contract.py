@@ -30,6 +30,17 @@ def sna_raw(signal: Any) -> int | None:
     return next((int(raw) for raw, label in (signal.choices or {}).items() if str(label) == SNA), None)
 
 
+def _carried(signal: Any) -> tuple[float, float]:
+    """The physical range a cantools signal's bits can carry, less its SNA raw value where that
+    is at an end (so that a saturated value does not read as 'not available')."""
+    bits = signal.length
+    lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signal.is_signed else (0, (1 << bits) - 1)
+    sna = sna_raw(signal)
+    lo, hi = lo + (sna == lo), hi - (sna == hi)
+    a, b = (signal.conversion.raw_to_scaled(raw, decode_choices=False) for raw in (lo, hi))
+    return (min(a, b), max(a, b))
+
+
 class ContractError(ValueError):
     """The DBC does not satisfy what the code requires of it."""
 
@@ -64,6 +75,7 @@ class Contract:
         self._sna = {m.name: {s.name: s.conversion.raw_to_scaled(raw, decode_choices=False)
                               for s in m.signals if (raw := sna_raw(s)) is not None}
                      for m in self.db.messages}
+        self._carried = {m.name: {s.name: _carried(s) for s in m.signals} for m in self.db.messages}
 
     @staticmethod
     def _e2e_config(msg: Any) -> E2EConfig | None:
@@ -136,7 +148,8 @@ class Contract:
         """Encode physical values; for E2E messages set the counter and the CRC.
 
         Signals not given take their DBC start value where it has one.  ``strict=False`` lets a
-        test bench send values outside the DBC ranges on purpose.
+        test bench send values outside the DBC ranges on purpose, as far as each signal's bits
+        carry them (saturated there, short of an SNA raw value, not an encoder's overflow).
         """
         return self.seal(name, self.encode_unsealed(name, values, counter, strict=strict))
 
@@ -151,6 +164,11 @@ class Contract:
             value = full.get(sig)
             if isinstance(value, float) and math.isnan(value):
                 full[sig] = SNA
+        if not strict:
+            for sig, (lo, hi) in self._carried[name].items():
+                value = full.get(sig)
+                if isinstance(value, int | float) and not isinstance(value, bool) and not math.isnan(value):
+                    full[sig] = min(max(value, lo), hi)
         if cfg is not None:
             if counter is None:
                 raise ValueError(f"{name} is E2E-protected: give the alive counter")

@@ -110,7 +110,8 @@ class RxLink:
 class TxLink:
     """The send side of one node: an alive counter per E2E message and, when keyed, the signer
     of the messages it authenticates.  ``strict=False`` sends values outside the DBC ranges as
-    they are (a real sensor saturates; the receiver range-checks)."""
+    far as each signal's bits carry them (saturated there: a sensor pegged past its range; the
+    receiver range-checks)."""
 
     def __init__(self, contract: Contract, names: Iterable[str], signer: FrameSigner | None = None,
                  *, strict: bool = True) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import random
 
 import cantools
@@ -142,6 +144,16 @@ def test_out_of_range_and_bad_counter_are_rejected(contract: mrsteer_dbc.Contrac
     fid = contract.frame_id("MRS_YawRate")
     hot = contract.encode("MRS_YawRate", {"YawRate_YawRate": 3.2}, counter=1, strict=False)
     assert contract.decode(fid, hot).status is E2EStatus.OUT_OF_RANGE
+    # Past what the signal's 16 bits carry it saturates there (+-3.2767/-3.2768 rad/s), not an
+    # encoder's overflow; and short of an SNA raw value at the field's end (Speed2's 255).
+    for value, carried in ((50.0, 3.2767), (-math.inf, -3.2768)):
+        frame = contract.decode(fid, contract.encode("MRS_YawRate", {"YawRate_YawRate": value}, counter=1,
+                                                     strict=False))
+        assert frame.status is E2EStatus.OUT_OF_RANGE and frame.signals["YawRate_YawRate"] == carried
+    red = contract.decode(contract.frame_id("MRS_RedundantSensors"), contract.encode(
+        "MRS_RedundantSensors", {"RedundantSensors_LatAccel": 0.0, "RedundantSensors_SteerAngle": 0.0,
+                                 "RedundantSensors_Speed2": 100.0}, counter=1, strict=False))
+    assert red.signals["RedundantSensors_Speed2"] == pytest.approx(76.2)  # raw 254, not SNA's 255
     # Counter 15 is never sent in profile 1; forge one with a correct CRC.
     data = bytearray(contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.0}, counter=1))
     data[1] = (data[1] & 0xF0) | 0x0F

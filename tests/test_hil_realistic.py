@@ -139,3 +139,16 @@ def test_a_stuck_yaw_rate_sensor_on_the_command_line_is_reported_and_the_command
     assert s["peak_yaw_rate_true_rad_s"] < 0.05
     steps = read_steps_csv(tmp_path / "steps.csv")
     assert all(st.ctrl_state == "FAULT" for st in steps if st.t_s > pl["fault_detected_s"] + 0.01)
+
+
+def test_a_sensor_past_its_range_saturates_there_and_a_fault_after_the_run_is_refused(tmp_path: Path) -> None:
+    # A yaw rate the frame cannot carry (stuck at 50 rad/s, or a spinning car) is sent as the
+    # sensor's end of range, 3 rad/s, in valid frames: the run completes and the monitor judges it
+    # (the plant used to die on the encoder's overflow, leaving no summary).
+    s = _run(tmp_path / "sat", "--scenario", "side-wind", "--duration", "1.0", "--sensor-fault", "yaw_rate:stuck:50@0.5")
+    assert s["peak_yaw_rate_rad_s"] == 3.0 and s["frames"]["rejected_controller"] == 0
+    assert s["plausibility"]["bits_seen"] & 1 and s["final_aux_steer_deg"] == 0.0
+    late = mrsteer("hil", "run", "--out", str(tmp_path / "late"), "--duration", "1.5", "--sensor-fault",
+                   "yaw_rate:stuck:0.01@9")
+    assert late.returncode == 2 and "starts at or after the run's end (1.5 s)" in late.stderr
+    assert not (tmp_path / "late").exists()
