@@ -324,7 +324,7 @@ def check_fade(e: Evidence, fails: list[str], observed: list[str], t_cmd: float)
         return
     t_zero = after[i_zero][0]
     observed.append(f"faded {math.degrees(u_det):.2f} deg to 0 in {i_zero} cycles, {1e3 * (t_zero - t_cmd):.0f} ms "
-                    f"(allowed {allowed})")
+                    f"(allowed {allowed} cycles)")
     if i_zero > allowed:
         fails.append(f"faded in {i_zero} cycles, allowed {allowed} ({math.degrees(u_det):.2f} deg at "
                      f"{math.degrees(PLAUS_FADE):g} deg/s)")
