@@ -192,6 +192,19 @@ def test_bad_fault_specs_are_one_line_errors(spec: str, words: str) -> None:
     assert "\n" not in str(err.value)
 
 
+def test_a_fault_that_starts_at_or_after_the_run_s_end_is_refused_by_both_commands() -> None:
+    sc = scn.load("side-wind").with_overrides(duration=1.0)
+    assert sc.with_sensor_faults((parse_spec("yaw_rate:bias:0.01@0.99"),)).sensor_faults[-1].start == 0.99
+    for start in ("1", "9"):
+        with pytest.raises(scn.ScenarioError, match=r"starts at or after the run's end \(1 s\)"):
+            sc.with_sensor_faults((parse_spec(f"yaw_rate:bias:0.01@{start}"),))
+    # the plant's command line (hil run's: tests/test_hil_realistic.py)
+    with pytest.raises(SystemExit) as exit_:
+        from sim_plant.nodes.plant import main as plant_main
+        plant_main(["--scenario", "side-wind", "--duration", "1.0", "--sensor-fault", "yaw_rate:stuck:0.01@2"])
+    assert exit_.value.code == 2
+
+
 def test_bad_fault_tables_name_the_file(tmp_path) -> None:
     with pytest.raises(ModelFileError, match="unknown"):
         fault_from_mapping({"sensor": "steer", "kind": "bias", "value": 1, "when": 2}, "f.toml sensor_fault 1")

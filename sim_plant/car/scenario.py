@@ -130,7 +130,13 @@ class Scenario:
         return replace(self.sensors, faults=self.sensors.faults + self.sensor_faults)
 
     def with_sensor_faults(self, faults: tuple[SensorFault, ...]) -> "Scenario":
-        """The same scenario with ``faults`` added to its own."""
+        """The same scenario with ``faults`` added to its own; ScenarioError for one that starts
+        at or after the scenario's end (give the duration first), which would never act."""
+        for f in faults:
+            if f.start >= self.duration:
+                raise ScenarioError(f"the sensor fault {f.sensor}:{f.kind}@{f.start:g} starts at or after the run's "
+                                    f"end ({self.duration:g} s): it would never act (give --duration, or an "
+                                    "earlier START)")
         return replace(self, sensor_faults=self.sensor_faults + tuple(faults))
 
     @property
