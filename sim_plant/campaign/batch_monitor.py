@@ -240,7 +240,9 @@ class BatchMonitor:
         second channel; a paused row forgets the angle before.  Returns the flags'
         SUSPECT_STEER_JUMP (not latched)."""
         c = self.c
-        on = ~(new | ~np.asarray(st2_ok)) if act is None else act & ~(new | ~np.asarray(st2_ok))
+        on = np.asarray(st2_ok) & ~np.asarray(new)  # the pair neither judging now nor unable to
+        if act is not None:
+            on = on & act
         e = d - self.jump_prev
         jumped = on & self.jump_ok & ((e > c.steer_jump) | (e < -c.steer_jump))
         hold = np.where(jumped, c.kin_gap_steps, self.steer_hold_n)
