@@ -19,9 +19,9 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    state r = a_y / v; the residual a_y / v - r is beta', which the car keeps small.  Evaluated
    at each new ``MRS_RedundantSensors`` sample (50 ms), against the yaw rate of the same cycle
    (the plant sends both frames in the same step, so the comparison has no hold error).  Less
-   the beta' of a family of nominal cars: every friction in [``mu_min``, 1], so that a car on
-   low mu or under a yaw moment, whose physical channels move together, is not taken for a
-   sensor that disagrees with them; and every sensor lag in [0, ``sensor_tau``] on the wheel
+   the beta' of a family of nominal cars: every friction in [``mu_min``, 1] (``mu_min_paired``
+   while the yaw-rate pair runs), so that a car on low mu or under a yaw moment, whose physical
+   channels move together, is not taken for a sensor that disagrees with them; and every sensor lag in [0, ``sensor_tau``] on the wheel
    angle, so that a brisk turn of the wheel, which reaches the nominal car's beta before the
    filtered a_y, is not either, whatever the sensors' filters.
 2. **Model** (yaw rate against the steering): the nominal (mu = 1) car's steady-state yaw
@@ -29,7 +29,8 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    yaw rate.  ``aux`` in both checks is the command sent the period before through the
    actuator's nominal lag ``actuator_tau``: the angle it puts on the car.  Low mu makes the car yaw *less* than the model, disturbances (the yaw moments the
    controller exists for) make it yaw otherwise, so this bound is wide: a gross check that
-   still works when the lateral acceleration is missing.
+   still works when the lateral acceleration is missing.  Out-voted (it does not count up) while
+   two measurements confirm the yaw rate: its second element (4) and a_y / v (1).
 3. **Steering pair**: the driver's angle against the steering sensor's second channel, at each
    new redundant sample.
 4. **Yaw-rate pair**: the yaw rate against the yaw-rate sensor's second element, sampled with it
@@ -66,6 +67,8 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    a_y / r (their r-weighted mean) against ``turn_speed_rel`` v plus what the sensors' offsets
    make of it, (``turn_yaw_bias`` v + ``turn_lat_bias``) / |r|.  A speed that drifts, which
    never jumps, is found here; straight on, nothing depends on the speed the law is given.
+   Out-voted while the second speed (8) is there and agrees: the speed is measured then, and
+   a_y / r off it is a side slip still settling.
 8. **Speed pair**: the speed against a second, independent speed (``speed_redundant``, from the
    redundant frame: the wheel speeds on a car), in every period while both are valid, before
    the pause below ``speed_min`` (a drift carries the reading under it): |v - v_2| over
@@ -221,6 +224,11 @@ class PlausibilityConfig:
     # (about 1 rad/s); a burst of seven samples at that hand reaches it (docs/controller.md,
     # "The steering pair's suspicion")
     steer_jump: float = 0.015
+    # The family's lowest friction while the yaw-rate pair is running (which then finds every
+    # yaw-rate error itself, as for side_accel): the issue's and the paper's lowest mu, 0.3, so
+    # that a car sliding on it is not taken for an a_y or yaw-rate error.  Without the pair the
+    # kinematic check is the yaw rate's and mu_min keeps it sharp (docs/controller.md, "Out-voted")
+    mu_min_paired: float = 0.3
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,6 +257,7 @@ class MonitorCoefficients:
     moment_m: float  # (c_r l_r - c_f l_f) / m
     cf_m: float  # c_f / m
     lat_span: float  # 1 / mu_min - 1: how far the family's a_y term reaches beyond mu = 1's
+    lat_span_paired: float  # 1 / mu_min_paired - 1: the same while the yaw-rate pair runs
     aux_alpha: float  # the actuator's lag per period: 1 - exp(-ts / actuator_tau)
     yaw_pair_bound: float
     inv_yaw_pair_bound: float
@@ -349,8 +358,10 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
                           "yaw_pair_bound", "yaw_pair_hold", "sensor_tau", "speed_step", "turn_yaw_min",
                           "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel", "speed_pair_bound", "speed_pair_time",
                           "steer_jump"))
-    if not (isinstance(cfg.mu_min, float | int) and 0.05 <= cfg.mu_min <= 1.0):
-        raise ValueError(f"mu_min must be in [0.05, 1], got {cfg.mu_min!r}")
+    for name in ("mu_min", "mu_min_paired"):
+        value = getattr(cfg, name)
+        if not (isinstance(value, float | int) and 0.05 <= value <= 1.0):
+            raise ValueError(f"{name} must be in [0.05, 1], got {value!r}")
     for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias",
                  "speed_pair_rel"):
         value = getattr(cfg, name)
@@ -383,6 +394,7 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         inv_cs_m=cfg.nominal_mass / (cfg.nominal_c_f + cfg.nominal_c_r),
         moment_m=(cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) / cfg.nominal_mass,
         cf_m=cfg.nominal_c_f / cfg.nominal_mass, lat_span=1.0 / cfg.mu_min - 1.0,
+        lat_span_paired=1.0 / cfg.mu_min_paired - 1.0,
         aux_alpha=1.0 - math.exp(-cfg.ts / cfg.actuator_tau), yaw_pair_bound=cfg.yaw_pair_bound,
         inv_yaw_pair_bound=1.0 / cfg.yaw_pair_bound, yaw_pair_hold=cfg.yaw_pair_hold,
         delta_alpha=1.0 - math.exp(-cfg.ts / cfg.sensor_tau),
@@ -437,6 +449,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     flags = s.latched
     # --- 8. speed pair: before the pause too, since a drifting speed carries the reading under
     #     speed_min while the car is still fast.
+    speed_vouched = False  # the second speed there and agreeing (it out-votes check 7)
     if 0.0 <= speed_redundant < 1e3:
         s.speed2_seen = True
         if 0.0 <= speed < 1e3:
@@ -452,6 +465,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                     s.latched |= CHECK_SPEED_PAIR
             elif s.speed_pair_count > 0:
                 s.speed_pair_count -= 1
+            speed_vouched = s.speed_pair_count == 0
         else:
             s.speed_pair_count = 0
     else:
@@ -536,7 +550,15 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     rm = -s.r_model if s.r_model < 0.0 else s.r_model
     bound = c.model_margin + c.model_rel * rm
     s.model_err = e / bound
-    if e > bound:
+    # Out-voted: the yaw rate agrees with its second element (the last YAW_PAIR_WINDOW samples
+    # within yaw_pair_hold) and with a_y / v (a full kinematic window within its bound, its last
+    # sample fresh).  Two measurements then confirm the yaw rate that the nominal car, which
+    # knows neither the road's grip nor a yaw moment, disagrees with: a disturbance the actuator
+    # cannot fully counter (the paper's 4000 Nm on mu 0.3), not a sensor error.
+    vouched = (-1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW
+               and s.yaw_clear_n >= YAW_PAIR_WINDOW and lat_ok and s.kin_n >= KIN_WINDOW and s.kin_count == 0
+               and s.since < c.kin_gap_steps)
+    if e > bound and not vouched:
         s.model_count += 1
         if s.model_count >= c.model_steps:
             s.model_count = c.model_steps  # saturated: C counts in 32 bits
@@ -636,12 +658,14 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.since = 0
         raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
         comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
-        # The family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]: the
+        # The family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the yaw-rate pair
+        # runs: it finds yaw-rate errors itself) and sensor lags in [0, sensor_tau]: the
         # car on mu has the a_y term of beta 1 / mu times mu = 1's, so its residual is
         # comp + (1 / mu - 1) lat, linear in 1 / mu, and the lagged car's is comp + sens (taken
         # as linear between the two lags).  The smallest |residual| of the family is 0 if its
         # four corners differ in sign, else the smallest corner's.
-        far = c.lat_span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
+        span = c.lat_span_paired if s.yaw_pair_n >= YAW_PAIR_WINDOW else c.lat_span
+        far = span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
         sens = (s.kin_sensor[0] + s.kin_sensor[1] + s.kin_sensor[2] + s.kin_sensor[3]) * (1.0 / KIN_WINDOW)
         raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
         lo = hi = comp
@@ -719,7 +743,10 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                 bound = c.turn_speed_rel * speed + (c.turn_yaw_bias * speed + c.turn_lat_bias) / rm
                 if s.turn_settled:
                     s.turn_err = e / bound
-                    if e > bound:
+                    # Out-voted by the second speed when it is there and agrees: the speed is then
+                    # measured twice, and a_y / r off it is a side slip still settling (a slide
+                    # on low mu), not a speed error
+                    if e > bound and not speed_vouched:
                         s.latched |= CHECK_TURN
                 s.turn_settled = True
                 s.turn_n = 0

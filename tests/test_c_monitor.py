@@ -226,6 +226,9 @@ CASES = {
     "the second speed lost half way (DEGRADED), with the speed missing and under speed_min": lambda: _lost_second_speed(
         _with_second_speed(_run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5)))),
     "random inputs with a second speed, NaN and inf": lambda: _random_speed_pair_rows(11),
+    "the paper's Figure 9 at 30 m/s on mu 0.3, both pairs in the loop (the model and steady-turn checks out-voted)":
+        lambda: _with_second_speed(_run_rows(pr.scn.load("paper-fig9").with_overrides(v=30.0, mu=0.3),
+                                             SensorConfig(seed=9))),
 }
 
 
@@ -360,7 +363,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                 mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
                 mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
                 mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, mc.speed_pair_steps,
-                mc.steer_jump]
+                mc.steer_jump, mc.lat_span_paired]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
@@ -374,14 +377,15 @@ def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str,
     m, a = dataclasses.replace(pl.PlausibilityConfig(), **changed), au.AuthorityConfig()
     first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
                            check=True).stdout.split()
-    assert int(first[-2]) == pl.configure(m).speed_pair_steps == steps
+    assert int(first[-3]) == pl.configure(m).speed_pair_steps == steps
 
 
 @pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},
                                  {"yaw_pair_hold": 0.031}, {"yaw_pair_hold": 0.0}, {"speed_pair_bound": 0.0},
                                  {"speed_pair_time": -0.1}, {"speed_pair_time": math.inf},
                                  {"speed_pair_rel": -0.01}, {"speed_pair_rel": 1e3}, {"speed_pair_rel": math.nan},
-                                 {"steer_jump": 0.0}, {"steer_jump": math.inf}])
+                                 {"steer_jump": 0.0}, {"steer_jump": math.inf}, {"mu_min_paired": 0.04},
+                                 {"mu_min_paired": 1.01}, {"mu_min_paired": math.nan}])
 def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
     cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
     assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,

@@ -245,8 +245,10 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     stuck driver's angle, a large yaw-rate offset (and the driver's angle jumping by 0.03 rad 13
     periods later); the second yaw-rate element also missing in
     every period divisible by 7 of the even rows, its window restarting there (below the
-    minimum speed too: the lost element's rule there).  Rows from the 50th on hold a steady
-    turn whose speed reads 25 % high from the onset (the steady-turn check).  The second speed
+    minimum speed too: the lost element's rule there).  Rows 50 and 51 hold a steady
+    turn whose speed reads 25 % high from the onset (the steady-turn check); rows from the 52nd
+    on one at 25 m/s whose a_y / r is 0.7 v, the speed right and the second speed agreeing (the
+    steady-turn check over its bound and out-voted).  The second speed
     (``v2``, in the redundant frame) reads the true speed to its 0.3 m/s: the speed pair trips
     where the speed reads high or low (kind 6's 3 m/s, below the pause), kind 3 loses it 200
     periods after the onset (DEGRADED), kind 8's car has none (NaN throughout)."""
@@ -272,7 +274,11 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
         r2 = np.where(turning, r_true + rng.normal(0, 2e-3, (steps, rows)), r2)
         lat = np.where(turning, r_true * v + rng.normal(0, 0.02, (steps, rows)), lat)
         d2 = np.where(turning, d + rng.normal(0, 2e-4, (steps, rows)), d2)
-        v = np.where(turning & after, 1.25 * v, v)
+        sliding = np.arange(rows) >= 52  # the right speed, a side slip still settling: a_y / r is 0.7 v
+        v = np.where(turning & ~sliding & after, 1.25 * v, np.where(sliding, 25.0, v))
+        r_true = d * v / (2.5 + 0.0025 * v * v)
+        lat = np.where(sliding, 0.7 * r_true * v + rng.normal(0, 0.02, (steps, rows)), lat)
+        v2 = np.where(sliding, np.round((v + rng.normal(0, 0.02, (steps, rows))) / 0.3) * 0.3, v2)
         kind = np.where(turning, -1, kind)
     r = np.where((kind == 1) & after, r + 0.1, r)
     r = np.where((kind == 2) & after, r[onset, np.arange(rows)], r)
@@ -306,13 +312,13 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
     from firmware_py import plausibility as pl
     from sim_plant.campaign.batch_monitor import BatchMonitor
 
-    rows, steps = 52, 900
+    rows, steps = 53, 900
     x = _monitor_inputs(rows, steps, 3)
     cfg = pl.PlausibilityConfig(ts=0.002)
     batch = BatchMonitor(cfg, rows)
     c = pl.configure(cfg)
     states = [pl.MonitorState() for _ in range(rows)]
-    seen, lost_speed2, kind = 0, False, np.where(np.arange(rows) >= 50, -1, np.arange(rows) % 10)
+    seen, lost_speed2, out_voted, kind = 0, False, 0.0, np.where(np.arange(rows) >= 50, -1, np.arange(rows) % 10)
     pair = (x["lat"][0], x["d2"][0], x["v2"][0])
     healthy = (np.arange(rows) % 10 == 0) & (np.arange(rows) < 50)  # rows without faults, gaps or pauses
     if held:  # a second monitor of the healthy rows alone: with no row paused, the shortcut runs
@@ -344,12 +350,16 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
             for name in ("speed_seen", "speed_last", "speed2_seen", "speed_pair_count", "speed_pair_err"):
                 assert getattr(batch.speeds, name)[i] == getattr(s, name), (k, i, name)
             seen |= s.flags
+            if i >= 52:
+                out_voted = max(out_voted, s.turn_err)
+                assert not s.flags & pl.CHECK_TURN, (k, i)
             lost_speed2 |= (s.flags & pl.MISSING != 0) & (kind[i] == 3) & (k > steps // 2 + 200)
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
     # every check tripped somewhere, MISSING and both suspicions (the steering one's is the
     # highest bit); a lost second speed is DEGRADED
     assert seen == 2 * pl.SUSPECT_STEER_JUMP - 1, f"flags seen {seen:#x}"
     assert lost_speed2
+    assert out_voted > 1.0  # the sliding row's steady-turn residual passed its bound
     assert not (batch.flags[healthy] & pl.CHECK_SPEED_PAIR).any()  # the two speeds agree
     assert not (batch.flags[healthy] & pl.CHECK_YAW_PAIR).any()  # two healthy elements agree
     if held:  # the shortcut ran in most periods of the healthy rows, and in some of all rows'

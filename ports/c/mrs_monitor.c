@@ -46,6 +46,7 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->speed_pair_rel = 0.05;
     cfg->speed_pair_time = 0.1;
     cfg->steer_jump = 0.015;
+    cfg->mu_min_paired = 0.3;
 }
 
 static int positive(double x)
@@ -77,6 +78,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     }
     if (!(g->model_rel >= 0.0 && g->model_rel < 1e3) || !(g->yaw_rel >= 0.0 && g->yaw_rel < 1e3) || g->yaw_count < 1 || g->yaw_count > 100 ||
         g->steer_count < 1 || g->steer_count > 100 || !(g->mu_min >= 0.05 && g->mu_min <= 1.0) ||
+        !(g->mu_min_paired >= 0.05 && g->mu_min_paired <= 1.0) ||
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
         !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
         !(g->speed_pair_rel >= 0.0 && g->speed_pair_rel < 1e3) ||
@@ -126,6 +128,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->speed_pair_rel = g->speed_pair_rel;
     c->speed_pair_steps = steps_of(g->speed_pair_time, g->ts);
     c->steer_jump = g->steer_jump;
+    c->lat_span_paired = 1.0 / g->mu_min_paired - 1.0;
     return 0;
 }
 
@@ -241,7 +244,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     const int lat_ok = lat_accel > -1e3 && lat_accel < 1e3;
     const int st2_ok = delta_driver_redundant > -1e3 && delta_driver_redundant < 1e3;
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
-    int new_sample;
+    int new_sample, vouched;
+    int speed_vouched = 0; /* the second speed there and agreeing: it out-votes check 7 */
 
     /* 6. speed: a jump no car makes; before the pause below speed_min (K_n(v) follows it) */
     if (speed >= 0.0 && speed < 1e3) {
@@ -266,6 +270,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             bound = c->speed_pair_bound + c->speed_pair_rel * rm;
             s->speed_pair_err = e / bound;
             MRS_COUNT(s->speed_pair_count, e > bound, c->speed_pair_steps, MRS_CHECK_SPEED_PAIR);
+            speed_vouched = s->speed_pair_count == 0;
         } else {
             s->speed_pair_count = 0;
         }
@@ -345,7 +350,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     rm = MRS_MAG(s->r_model);
     bound = c->model_margin + c->model_rel * rm;
     s->model_err = e / bound;
-    MRS_COUNT(s->model_count, e > bound, c->model_steps, MRS_CHECK_MODEL);
+    /* out-voted: the yaw rate confirmed by its second element and by a_y / v */
+    vouched = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW &&
+              s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW && s->kin_count == 0 &&
+              s->since < c->kin_gap_steps;
+    MRS_COUNT(s->model_count, e > bound && !vouched, c->model_steps, MRS_CHECK_MODEL);
     /* 4. yaw-rate pair */
     if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
         int32_t i = s->yaw_pair_idx;
@@ -439,9 +448,10 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         raw = MRS_MAG((s->kin_raw[0] + s->kin_raw[1] + s->kin_raw[2] + s->kin_raw[3]) * (1.0 / MRS_KIN_WINDOW)) *
               c->inv_yaw_raw_fraction;
         comp = (s->kin_comp[0] + s->kin_comp[1] + s->kin_comp[2] + s->kin_comp[3]) * (1.0 / MRS_KIN_WINDOW);
-        /* the family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]:
-         * 0 if its four corners differ in sign, else the smallest corner's magnitude */
-        far = c->lat_span * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
+        /* the family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the yaw-rate pair
+         * runs) and sensor lags in [0, sensor_tau]: 0 if its four corners differ in sign, else
+         * the smallest corner's magnitude */
+        far = (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW ? c->lat_span_paired : c->lat_span) * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
         sens = (s->kin_sensor[0] + s->kin_sensor[1] + s->kin_sensor[2] + s->kin_sensor[3]) * (1.0 / MRS_KIN_WINDOW);
         lo = comp;
         hi = comp;
@@ -519,7 +529,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
                 bound = c->turn_speed_rel * speed + (c->turn_yaw_bias * speed + c->turn_lat_bias) / rm;
                 if (s->turn_settled) {
                     s->turn_err = e / bound;
-                    if (e > bound) {
+                    if (e > bound && !speed_vouched) { /* out-voted by an agreeing second speed */
                         s->latched |= MRS_CHECK_TURN;
                     }
                 }

@@ -82,6 +82,7 @@ typedef struct {
     double speed_pair_bound, speed_pair_rel, speed_pair_time;
     /* rad the driver's angle may move in one sample before the steering pair suspects it */
     double steer_jump;
+    double mu_min_paired; /* the family's lowest friction while the yaw-rate pair runs */
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -101,6 +102,7 @@ typedef struct {
     double speed_pair_bound, speed_pair_rel;
     int32_t speed_pair_steps;
     double steer_jump;
+    double lat_span_paired; /* 1 / mu_min_paired - 1 */
 } mrs_monitor_coeffs_t;
 
 typedef struct {

@@ -144,8 +144,9 @@ class BatchMonitor:
                 self._set(name, paused, 0)
             self._set("turn_settled", paused, False)
             self._set("started", paused, False)
+            paired = self._paired(r2)  # the pair's state before this sample, as the model check reads it
             flags |= self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
-            flags |= self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux)
+            flags |= self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
@@ -156,7 +157,7 @@ class BatchMonitor:
     # The active rows' part of monitor_step, in its order (model, kinematic and pair at a new
     # redundant sample, frozen); long because it is the scalar's four checks inline.  Returns the
     # steering pair's suspicion (flags, not latched).
-    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux) -> np.ndarray:
+    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired) -> np.ndarray:
         c = self.c
         inv_v = 1.0 / v
         r_kin = np.where(lat_ok, lat * inv_v, 0.0)
@@ -176,7 +177,8 @@ class BatchMonitor:
         e = np.abs(r - self.r_model)
         bound = c.model_margin + c.model_rel * np.abs(self.r_model)
         self._set("model_err", act, e / bound)
-        self.model_count, trip = _count(self.model_count, e > bound, act, c.model_steps)
+        vouched = paired & lat_ok & self._kin_agrees()
+        self.model_count, trip = _count(self.model_count, (e > bound) & ~vouched, act, c.model_steps)
         self.latched |= np.where(trip, pl.CHECK_MODEL, 0)
         self._set("since", act & (self.since < 1000000), self.since + 1)
 
@@ -208,10 +210,11 @@ class BatchMonitor:
         raw_avg = np.abs((kr[0] + kr[1] + kr[2] + kr[3]) * (1.0 / pl.KIN_WINDOW)) * c.inv_yaw_raw_fraction
         comp = (kc[0] + kc[1] + kc[2] + kc[3]) * (1.0 / pl.KIN_WINDOW)
         kl, ks = self.kin_lat, self.kin_sensor
-        far = c.lat_span * ((kl[0] + kl[1] + kl[2] + kl[3]) * (1.0 / pl.KIN_WINDOW))
+        span = np.where(self.yaw_pair_n >= pl.YAW_PAIR_WINDOW, c.lat_span_paired, c.lat_span)
+        far = span * ((kl[0] + kl[1] + kl[2] + kl[3]) * (1.0 / pl.KIN_WINDOW))
         sens = (ks[0] + ks[1] + ks[2] + ks[3]) * (1.0 / pl.KIN_WINDOW)
-        # the family of nominal cars on mu in [mu_min, 1] and sensor lags in [0, sensor_tau]: 0
-        # where its four corners differ in sign, else the smallest corner's magnitude
+        # the family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the pair runs) and
+        # sensor lags in [0, sensor_tau]: 0 where its four corners differ in sign, else the smallest corner's magnitude
         corners = (comp, comp + sens, comp + far, comp + far + sens)
         lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
         comp = np.where((lo <= 0.0) & (0.0 <= hi), 0.0, np.where(lo > 0.0, lo, -hi))
@@ -280,7 +283,7 @@ class BatchMonitor:
             bound = c.turn_speed_rel * v + (c.turn_yaw_bias * v + c.turn_lat_bias) / rm
             judged = full & self.turn_settled
             self._set("turn_err", judged, e / bound)
-            self.latched |= np.where(judged & (e > bound), pl.CHECK_TURN, 0)
+            self.latched |= np.where(judged & (e > bound) & ~self.speeds.vouched(), pl.CHECK_TURN, 0)
             self._set("turn_settled", full, True)
             self._set("turn_n", full, 0)
 
@@ -323,6 +326,20 @@ class BatchMonitor:
         moved = on & ~changed & (np.abs(d - self.st2_ref) > move_st)
         self.st2_same, trip = _frozen(self.st2_same, moved, steps)
         self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
+
+    def _paired(self, r2: np.ndarray | None) -> np.ndarray | bool:
+        """The rows whose yaw rate its second element confirms (``monitor_step``'s half of
+        ``vouched`` from the pair, read before this sample enters the pair's window): the element
+        valid now, the window full and its last samples within ``yaw_pair_hold``."""
+        if r2 is None:
+            return False
+        return ((-1e3 < r2) & (r2 < 1e3) & (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW)
+                & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW))
+
+    def _kin_agrees(self) -> np.ndarray:
+        """The rows whose yaw rate a_y / v confirms (the other half of ``vouched``): a full
+        kinematic window within its bound, its last sample fresh."""
+        return (self.kin_n >= pl.KIN_WINDOW) & (self.kin_count == 0) & (self.since < self.c.kin_gap_steps)
 
     def _lost(self, r: np.ndarray, r2: np.ndarray | None) -> np.ndarray | bool:
         """The rows whose second yaw-rate element is missing after it was received, the first
@@ -405,6 +422,7 @@ class BatchMonitor:
         self.model_err = e / bound
         over = e > bound
         if over.any():  # +1 held at model_steps, else -1 down to 0 (_count)
+            over &= ~(self._paired(r2) & self._kin_agrees())  # out-voted (the redundant frame valid in every row)
             count = np.minimum(np.maximum(self.model_count + np.where(over, 1, -1), 0), c.model_steps)
             np.bitwise_or(latched, pl.CHECK_MODEL, out=latched, where=over & (count >= c.model_steps))
         else:

@@ -29,6 +29,7 @@ class SpeedChecks:
         self._pair_of: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # (v, v2) the pair's masks are of
         self._both = self._over = np.zeros(n, dtype=bool)
         self._lost: np.ndarray | bool = False
+        self._has_pair = False  # this period's second speed was an array (not None)
 
     def step(self, v: np.ndarray, v2: np.ndarray | None, latched: np.ndarray) -> np.ndarray | bool:
         """Checks 6 and 8 for this period's speed ``v`` and second speed ``v2`` (None: NaN in
@@ -56,6 +57,7 @@ class SpeedChecks:
         missing.  Both speeds are held for several periods: their masks are formed once per
         pair of arrays, the count moves every period."""
         c = self.c
+        self._has_pair = v2 is not None
         if v2 is None:
             self.speed_pair_count.fill(0)
             if not self.speed2_seen.any():
@@ -84,3 +86,9 @@ class SpeedChecks:
             count = np.maximum(count - 1, 0)
         self.speed_pair_count = count if self._both.all() else np.where(self._both, count, 0)
         return self._lost
+
+    def vouched(self) -> np.ndarray | bool:
+        """The rows where this period's second speed is there and agrees with the speed (both
+        valid, the pair's count at 0): ``monitor_step``'s ``speed_vouched``, which out-votes the
+        steady-turn check."""
+        return self._has_pair and self._both & (self.speed_pair_count == 0)
