@@ -15,6 +15,8 @@ from firmware_py.controller import node as rt
 from firmware_py.controller import timing
 
 C = mrsteer_dbc.load()
+#: RedundantSensors_LatAccel's LSB: a toggle of it makes a new redundant sample the monitor can tell
+LAT_LSB = C.message(names.MSG_REDUNDANT).get_signal_by_name(names.SIG_LAT_ACCEL).scale
 FADE = mr.ControllerConfig().fade_rate * 1e-3
 
 
@@ -48,7 +50,7 @@ class Rig:
         if speed is not None and self.k % 10 == 0:
             self.send(names.MSG_SPEED, {"VehicleSpeed_Speed": speed})
         if redundant is not None and self.k % 50 == 0:
-            lsb = 0.001 * ((self.k // 50) % 2)
+            lsb = LAT_LSB * ((self.k // 50) % 2)
             values = {names.SIG_LAT_ACCEL: redundant[0] + lsb, names.SIG_STEER_ANGLE_2: redundant[1]}
             if speed_2 is not None:
                 values[names.SIG_SPEED_2] = speed_2
@@ -359,7 +361,7 @@ def test_the_monitor_steps_on_the_yaw_rate_samples_not_on_the_cycles(rig: Rig) -
             if j % 10 == 0:
                 rig.send(names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0})
             if j % 50 == 0:
-                rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 20.0 * yaw + 0.001 * ((j // 50) % 2),
+                rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 20.0 * yaw + LAT_LSB * ((j // 50) % 2),
                                                names.SIG_STEER_ANGLE_2: steer})
             rig.send(names.MSG_YAW, {"YawRate_YawRate": yaw})
             node.drain()

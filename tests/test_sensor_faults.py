@@ -23,7 +23,8 @@ C = mrsteer_dbc.load()
 TS = 2e-3
 STEPS = 600  # 1.2 s
 ONSET = 0.7
-LSB = {names.SIG_YAW_RATE: 1e-4, names.SIG_STEER_ANGLE: 2.5e-5, names.SIG_LAT_ACCEL: 1e-3,
+LSB = {names.SIG_YAW_RATE: 1e-4, names.SIG_STEER_ANGLE: 2.5e-5,
+       names.SIG_LAT_ACCEL: C.message(names.MSG_REDUNDANT).get_signal_by_name(names.SIG_LAT_ACCEL).scale,
        names.SIG_STEER_ANGLE_2: 2.5e-5, names.SIG_SPEED: 2e-3}
 
 
