@@ -11,7 +11,8 @@ code row by row and period by period: the bits, the flags, the counters, the res
 ``engine`` runs it before the law, as the controller node does (its suspicion of the yaw rate
 holds the law), with the yaw-rate sensor's second element (``yaw_rate_redundant``) every
 period and the second speed held at the redundant frame.  The two checks on the speed, which
-run before the pause in every row (6 and 8, the speed pair), are ``batch_speed_checks``'.
+run before the pause in every row (6 and 8, the speed pair), are ``batch_speed_checks``', the
+frozen checks (5) ``batch_frozen``'s.
 ``step`` has a shortcut for the periods between redundant samples (the scalar's branches for
 such a period, checked by the same tests).
 """
@@ -22,6 +23,7 @@ import numpy as np
 
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_authority import within
+from sim_plant.campaign.batch_frozen import frozen_checks, frozen_steady
 from sim_plant.campaign.batch_speed_checks import SpeedChecks
 
 
@@ -33,12 +35,6 @@ def _count(count: np.ndarray, over: np.ndarray, runs: np.ndarray, steps: int) ->
     count = np.where(up, count + 1, np.where(down, count - 1, count))
     trip = up & (count >= steps)
     return np.where(trip, steps, count), trip
-
-
-def _frozen(same: np.ndarray, moved: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """A frozen-value counter: +1 (held at ``steps``) where the partner ``moved``; trips at steps."""
-    same = np.where(moved & (same < steps), same + 1, same)
-    return same, moved & (same >= steps)
 
 
 _FLOATS = ("lat_prev", "steer2_prev", "r_model", "yaw_last", "yaw_ref", "lat_last", "lat_ref", "st_last", "st_ref",
@@ -232,7 +228,7 @@ class BatchMonitor:
         self._turn(new, r, lat, v)
         self._set("lat_prev", act & lat_ok, lat)
         self._set("steer2_prev", act & st2_ok, d2)
-        self._frozen_checks(act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin)
+        frozen_checks(self, act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin)
         return suspect
 
     def _steer_jump(self, act: np.ndarray | None, st2_ok: np.ndarray | bool, new: np.ndarray | bool,
@@ -286,46 +282,6 @@ class BatchMonitor:
             self.latched |= np.where(judged & (e > bound) & ~self.speeds.vouched(), pl.CHECK_TURN, 0)
             self._set("turn_settled", full, True)
             self._set("turn_n", full, 0)
-
-    def _frozen_checks(self, act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin) -> None:
-        c = self.c
-        steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
-        changed = act & (r != self.yaw_last)  # the yaw rate against a_y / v
-        take = act & ~changed & new & ~self.yaw_ref_ok
-        check = act & ~changed & ~take & lat_ok & self.yaw_ref_ok
-        self._set("yaw_last", changed, r)
-        self._set("yaw_same", changed, 0)
-        self._set("yaw_ref_ok", changed, False)
-        self._set("yaw_ref", take, r_kin)
-        self._set("yaw_ref_ok", take, True)
-        self.yaw_same, trip = _frozen(self.yaw_same, check & (np.abs(r_kin - self.yaw_ref) > move_yaw), steps)
-        self.latched |= np.where(trip, pl.FROZEN_YAW, 0)
-        on = act & lat_ok  # a_y against the yaw rate
-        changed = on & (lat != self.lat_last)
-        self._set("lat_last", changed, lat)
-        self._set("lat_same", changed, 0)
-        self._set("lat_ref", changed, r)
-        moved = on & ~changed & (np.abs(r - self.lat_ref) > move_yaw)
-        self.lat_same, trip = _frozen(self.lat_same, moved, steps)
-        self.latched |= np.where(trip, pl.FROZEN_LAT, 0)
-        on = act & st2_ok  # each steering channel against the other
-        changed = on & (d != self.st_last)
-        take = on & ~changed & new & ~self.st_ref_ok
-        check = on & ~changed & ~take & self.st_ref_ok
-        self._set("st_last", changed, d)
-        self._set("st_same", changed, 0)
-        self._set("st_ref_ok", changed, False)
-        self._set("st_ref", take, d2)
-        self._set("st_ref_ok", take, True)
-        self.st_same, trip = _frozen(self.st_same, check & (np.abs(d2 - self.st_ref) > move_st), steps)
-        self.latched |= np.where(trip, pl.FROZEN_STEER, 0)
-        changed = on & (d2 != self.st2_last)
-        self._set("st2_last", changed, d2)
-        self._set("st2_same", changed, 0)
-        self._set("st2_ref", changed, d)
-        moved = on & ~changed & (np.abs(d - self.st2_ref) > move_st)
-        self.st2_same, trip = _frozen(self.st2_same, moved, steps)
-        self.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
 
     def _paired(self, r2: np.ndarray | None) -> np.ndarray | bool:
         """The rows whose yaw rate its second element confirms (``monitor_step``'s half of
@@ -429,48 +385,14 @@ class BatchMonitor:
             count = np.maximum(self.model_count - 1, 0)
         self.model_count = count
         self.since = np.minimum(self.since + 1, 1000000)
-        steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
-        # A counter whose largest value, plus the periods since the last full one, stays below
-        # frozen_steps can neither reach its cap nor trip: it only counts.
+        # A frozen counter whose largest value, plus the periods since the last full one, stays
+        # below frozen_steps can neither reach its cap nor trip: it only counts.
         self._run += 1
-        # the yaw rate against a_y / v
-        same = r == self.yaw_last
-        check = same & self.yaw_ref_ok
-        self.yaw_last = np.where(same, self.yaw_last, r)
-        self.yaw_same = np.where(same, self.yaw_same, 0)
-        self.yaw_ref_ok = check
-        if check.any():
-            moved = check & (np.abs(lat * (1.0 / v) - self.yaw_ref) > move_yaw)
-            _frozen_held(self.yaw_same, moved, steps, latched, pl.FROZEN_YAW)
-        # a_y against the yaw rate (a_y held: unchanged)
-        moved = np.abs(r - self.lat_ref) > move_yaw
-        if self._lat_max + self._run < steps:
-            self.lat_same += moved
-        else:
-            _frozen_held(self.lat_same, moved, steps, latched, pl.FROZEN_LAT)
-        # each steering channel against the other (the second held: unchanged)
-        same = d == self.st_last
-        check = same & self.st_ref_ok
-        self.st_last = np.where(same, self.st_last, d)
-        self.st_same = np.where(same, self.st_same, 0)
-        self.st_ref_ok = check
-        if check.any():
-            moved = check & (np.abs(d2 - self.st_ref) > move_st)
-            _frozen_held(self.st_same, moved, steps, latched, pl.FROZEN_STEER)
-        moved = np.abs(d - self.st2_ref) > move_st
-        if self._st2_max + self._run < steps:
-            self.st2_same += moved
-        else:
-            _frozen_held(self.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
+        frozen_steady(self, d, d2, r, lat, v, latched, self._lat_max + self._run < c.frozen_steps,
+                      self._st2_max + self._run < c.frozen_steps)
         suspect = self._yaw_pair(act, r, r2)  # (latches into self.latched, which is latched)
         suspect = suspect | self._steer_jump(act, True, False, d)
         self.flags = latched | np.where(self._lost(r, r2) | self._speed2_lost, pl.MISSING, 0) | suspect
         self.bits = self._bits_of[self.flags]
         return self.bits
 
-
-def _frozen_held(same: np.ndarray, moved: np.ndarray, steps: int, latched: np.ndarray, bit: int) -> np.ndarray:
-    """``_frozen`` on a fresh ``same`` (written in place), its trip latched into ``latched``."""
-    same += moved & (same < steps)
-    np.bitwise_or(latched, bit, out=latched, where=moved & (same >= steps))
-    return same
