@@ -64,12 +64,14 @@ def test_the_steady_turn_check_gives_way_only_to_an_agreeing_second_speed() -> N
     assert run.fault_time is not None and run.margins["turn"] > 1.0
 
 
-def _model_flags(redundant: bool, element: bool, periods: int = 450) -> list[int]:
+def _model_flags(redundant: bool, element: bool, periods: int = 450, toggle: bool = True) -> list[int]:
     """The monitor at 20 m/s while the car yaws steadily at 0.5 rad/s (a_y = v r: no side slip
     changing), first on the wheel angle the nominal car needs for it, then, from period 150 on, on
     a straight wheel (a yaw moment holding the car in its turn): the model check's residual
     grows past its bound.  ``redundant``: a_y and the second steering channel there (else the
-    redundant frame missing); ``element``: the yaw rate's second element agrees (else none)."""
+    redundant frame missing); ``element``: the yaw rate's second element agrees (else none);
+    ``toggle``: the redundant frame's values move by their noise throughout (else only until
+    period 150, then repeat exactly, as exact sensors' do in a steady state: no new sample)."""
     c = pl.configure(pl.PlausibilityConfig())
     r, v = 0.5, 20.0
     turn = r * (c.wheelbase + c.k_us * v * v) / v
@@ -77,7 +79,7 @@ def _model_flags(redundant: bool, element: bool, periods: int = 450) -> list[int
     out = []
     for k in range(periods):
         d = turn if k < 150 else 0.0
-        noise = 1e-3 * ((k // 25) % 2)  # the redundant frame's values change once per 50 ms
+        noise = 1e-3 * ((k // 25) % 2) * (toggle or k < 150)  # the redundant frame's values change once per 50 ms
         mon.step(d, d + noise * 1e-2 if redundant else math.nan, r, r * v + noise if redundant else math.nan, v,
                  0.0, r if element else math.nan, v)
         out.append(mon.state.flags)
@@ -90,6 +92,9 @@ def test_the_model_check_trips_unless_both_measurements_confirm_the_yaw_rate() -
     assert _model_flags(True, False)[-1] & pl.CHECK_MODEL  # a_y / v agrees, no element
     both = _model_flags(True, True)  # out-voted
     assert not any(f & pl.YAW_CHECKS for f in both)
+    # a_y repeating its value (no new redundant sample for 0.6 s) still confirms the yaw rate:
+    # the kinematic window it filled before is within its bound
+    assert not any(f & pl.YAW_CHECKS for f in _model_flags(True, True, toggle=False))
     # the same trip time whenever it is not out-voted: the count is the model check's own
     first = [[f & pl.CHECK_MODEL for f in _model_flags(*x)].index(pl.CHECK_MODEL)
              for x in ((False, False), (False, True), (True, False))]

@@ -352,8 +352,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     s->model_err = e / bound;
     /* out-voted: the yaw rate confirmed by its second element and by a_y / v */
     vouched = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW &&
-              s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW && s->kin_count == 0 &&
-              s->since < c->kin_gap_steps;
+              s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW && s->kin_count == 0;
     MRS_COUNT(s->model_count, e > bound && !vouched, c->model_steps, MRS_CHECK_MODEL);
     /* 4. yaw-rate pair */
     if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {

@@ -293,9 +293,9 @@ class BatchMonitor:
                 & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW))
 
     def _kin_agrees(self) -> np.ndarray:
-        """The rows whose yaw rate a_y / v confirms (the other half of ``vouched``): a full
-        kinematic window within its bound, its last sample fresh."""
-        return (self.kin_n >= pl.KIN_WINDOW) & (self.kin_count == 0) & (self.since < self.c.kin_gap_steps)
+        """The rows whose yaw rate a_y / v confirms (the other half of ``vouched``, with a_y
+        valid): a full kinematic window within its bound."""
+        return (self.kin_n >= pl.KIN_WINDOW) & (self.kin_count == 0)
 
     def _lost(self, r: np.ndarray, r2: np.ndarray | None) -> np.ndarray | bool:
         """The rows whose second yaw-rate element is missing after it was received, the first
