@@ -271,3 +271,15 @@ def test_the_second_yaw_rate_element_left_out_or_nan_is_sent_as_sna_and_read_as_
     # The first element has no SNA: its out-of-range values stay out of range.
     assert contract.decode(fid, contract.encode("MRS_YawRate", {"YawRate_YawRate": -3.2768}, 5,
                                                 strict=False)).status is E2EStatus.OUT_OF_RANGE
+
+
+@pytest.mark.parametrize("v", [10.0, 20.0, 40.0])
+def test_the_lateral_acceleration_carries_the_paper_s_figure_8_at_each_of_its_speeds(
+        contract: mrsteer_dbc.Contract, v: float) -> None:
+    # Figure 8's step is normalised to a unit yaw rate, so its linear car's a_y is v m/s^2 (and
+    # its overshoot a little more): valid and unsaturated in the frame, to its LSB.
+    a_y = 1.2 * v
+    frame = contract.decode(contract.frame_id("MRS_RedundantSensors"), contract.encode(
+        "MRS_RedundantSensors", {"RedundantSensors_LatAccel": -a_y, "RedundantSensors_SteerAngle": 0.0}, counter=1))
+    assert frame.status is E2EStatus.OK
+    assert frame.signals["RedundantSensors_LatAccel"] == pytest.approx(-a_y, abs=0.002)
