@@ -21,8 +21,8 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    (the plant sends both frames in the same step, so the comparison has no hold error).  Less
    the beta' of a family of nominal cars: every friction in [``mu_min``, 1] (``mu_min_paired``
    while the yaw-rate pair runs), so that a car on low mu or under a yaw moment, whose physical
-   channels move together, is not taken for a sensor that disagrees with them; and every sensor lag in [0, ``sensor_tau``] on the wheel
-   angle, so that a brisk turn of the wheel, which reaches the nominal car's beta before the
+   channels move together, is not taken for a sensor that disagrees with them; and every
+   sensor lag in [0, ``sensor_tau``] on the wheel angle, so that a brisk turn of the wheel, which reaches the nominal car's beta before the
    filtered a_y, is not either, whatever the sensors' filters.
 2. **Model** (yaw rate against the steering): the nominal (mu = 1) car's steady-state yaw
    rate K_n(v) (delta_driver + aux) of eq. (15), lagged by a first-order filter, against the

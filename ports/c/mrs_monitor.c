@@ -450,7 +450,8 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         /* the family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the yaw-rate pair
          * runs) and sensor lags in [0, sensor_tau]: 0 if its four corners differ in sign, else
          * the smallest corner's magnitude */
-        far = (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW ? c->lat_span_paired : c->lat_span) * ((s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW));
+        far = s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW ? c->lat_span_paired : c->lat_span;
+        far *= (s->kin_lat[0] + s->kin_lat[1] + s->kin_lat[2] + s->kin_lat[3]) * (1.0 / MRS_KIN_WINDOW);
         sens = (s->kin_sensor[0] + s->kin_sensor[1] + s->kin_sensor[2] + s->kin_sensor[3]) * (1.0 / MRS_KIN_WINDOW);
         lo = comp;
         hi = comp;

@@ -9,6 +9,7 @@ of the monitor.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -36,47 +37,76 @@ def _frozen_held(same: np.ndarray, moved: np.ndarray, steps: int, latched: np.nd
     return same
 
 
+def _fast(m: BatchMonitor, key: str, on, value, partner, partner_ok, new, move: float, bit: int) -> None:
+    """A value of every period (``key`` "yaw": the yaw rate, "st": the driver's angle) against
+    its partner from the 50 ms frame (a_y / v, the second channel), taken at the first new
+    sample after the value last changed, in the rows that are ``on``; checked where
+    ``partner_ok``."""
+    last, same, ref, ref_ok = f"{key}_last", f"{key}_same", f"{key}_ref", f"{key}_ref_ok"
+    changed = on & (value != getattr(m, last))
+    take = on & ~changed & new & ~getattr(m, ref_ok)
+    check = on & ~changed & ~take & partner_ok & getattr(m, ref_ok)
+    _set(m, last, changed, value)
+    _set(m, same, changed, 0)
+    _set(m, ref_ok, changed, False)
+    _set(m, ref, take, partner)
+    _set(m, ref_ok, take, True)
+    count, trip = _frozen(getattr(m, same), check & (np.abs(partner - getattr(m, ref)) > move), m.c.frozen_steps)
+    setattr(m, same, count)
+    m.latched |= np.where(trip, bit, 0)
+
+
+def _sampled(m: BatchMonitor, key: str, on, value, partner, move: float, bit: int) -> None:
+    """A value from the 50 ms frame (``key`` "lat": a_y, "st2": the second channel) against its
+    partner of every period (the yaw rate, the driver's angle) as it was when the value last
+    changed, in the rows that are ``on``."""
+    last, same, ref = f"{key}_last", f"{key}_same", f"{key}_ref"
+    changed = on & (value != getattr(m, last))
+    _set(m, last, changed, value)
+    _set(m, same, changed, 0)
+    _set(m, ref, changed, partner)
+    moved = on & ~changed & (np.abs(partner - getattr(m, ref)) > move)
+    count, trip = _frozen(getattr(m, same), moved, m.c.frozen_steps)
+    setattr(m, same, count)
+    m.latched |= np.where(trip, bit, 0)
+
+
 def frozen_checks(m: BatchMonitor, act, lat_ok, st2_ok, new, d, d2, r, lat, r_kin) -> None:
     """The four frozen checks in the rows that ``act``, as ``monitor_step`` has them in a period
     with every branch open (``new``: the rows with a new redundant sample; ``r_kin``: a_y / v)."""
     c = m.c
-    steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
-    changed = act & (r != m.yaw_last)  # the yaw rate against a_y / v
-    take = act & ~changed & new & ~m.yaw_ref_ok
-    check = act & ~changed & ~take & lat_ok & m.yaw_ref_ok
-    _set(m, "yaw_last", changed, r)
-    _set(m, "yaw_same", changed, 0)
-    _set(m, "yaw_ref_ok", changed, False)
-    _set(m, "yaw_ref", take, r_kin)
-    _set(m, "yaw_ref_ok", take, True)
-    m.yaw_same, trip = _frozen(m.yaw_same, check & (np.abs(r_kin - m.yaw_ref) > move_yaw), steps)
-    m.latched |= np.where(trip, pl.FROZEN_YAW, 0)
-    on = act & lat_ok  # a_y against the yaw rate
-    changed = on & (lat != m.lat_last)
-    _set(m, "lat_last", changed, lat)
-    _set(m, "lat_same", changed, 0)
-    _set(m, "lat_ref", changed, r)
-    moved = on & ~changed & (np.abs(r - m.lat_ref) > move_yaw)
-    m.lat_same, trip = _frozen(m.lat_same, moved, steps)
-    m.latched |= np.where(trip, pl.FROZEN_LAT, 0)
+    _fast(m, "yaw", act, r, r_kin, lat_ok, new, c.frozen_move_yaw, pl.FROZEN_YAW)  # the yaw rate against a_y / v
+    _sampled(m, "lat", act & lat_ok, lat, r, c.frozen_move_yaw, pl.FROZEN_LAT)  # a_y against the yaw rate
     on = act & st2_ok  # each steering channel against the other
-    changed = on & (d != m.st_last)
-    take = on & ~changed & new & ~m.st_ref_ok
-    check = on & ~changed & ~take & m.st_ref_ok
-    _set(m, "st_last", changed, d)
-    _set(m, "st_same", changed, 0)
-    _set(m, "st_ref_ok", changed, False)
-    _set(m, "st_ref", take, d2)
-    _set(m, "st_ref_ok", take, True)
-    m.st_same, trip = _frozen(m.st_same, check & (np.abs(d2 - m.st_ref) > move_st), steps)
-    m.latched |= np.where(trip, pl.FROZEN_STEER, 0)
-    changed = on & (d2 != m.st2_last)
-    _set(m, "st2_last", changed, d2)
-    _set(m, "st2_same", changed, 0)
-    _set(m, "st2_ref", changed, d)
-    moved = on & ~changed & (np.abs(d - m.st2_ref) > move_st)
-    m.st2_same, trip = _frozen(m.st2_same, moved, steps)
-    m.latched |= np.where(trip, pl.FROZEN_STEER_2, 0)
+    _fast(m, "st", on, d, d2, True, new, c.frozen_move_steer, pl.FROZEN_STEER)
+    _sampled(m, "st2", on, d2, d, c.frozen_move_steer, pl.FROZEN_STEER_2)
+
+
+def _fast_steady(m: BatchMonitor, key: str, value, partner: Callable[[], np.ndarray], move: float,
+                 latched: np.ndarray, bit: int) -> None:
+    """``_fast`` in a period without a new sample, every row on: ``partner`` formed only if a row
+    checks."""
+    last, same, ref, ref_ok = f"{key}_last", f"{key}_same", f"{key}_ref", f"{key}_ref_ok"
+    unchanged = value == getattr(m, last)
+    check = unchanged & getattr(m, ref_ok)
+    setattr(m, last, np.where(unchanged, getattr(m, last), value))
+    setattr(m, same, np.where(unchanged, getattr(m, same), 0))
+    setattr(m, ref_ok, check)
+    if check.any():
+        moved = check & (np.abs(partner() - getattr(m, ref)) > move)
+        _frozen_held(getattr(m, same), moved, m.c.frozen_steps, latched, bit)
+
+
+def _sampled_steady(m: BatchMonitor, key: str, partner, move: float, quiet: bool, latched: np.ndarray,
+                    bit: int) -> None:
+    """``_sampled`` in a period without a new sample (the value held: unchanged), every row on;
+    ``quiet``: no row can reach the cap, so the counter only counts."""
+    moved = np.abs(partner - getattr(m, f"{key}_ref")) > move
+    same = getattr(m, f"{key}_same")  # counted in place
+    if quiet:
+        same += moved
+    else:
+        _frozen_held(same, moved, m.c.frozen_steps, latched, bit)
 
 
 def frozen_steady(m: BatchMonitor, d, d2, r, lat, v, latched: np.ndarray, lat_quiet: bool, st2_quiet: bool) -> None:
@@ -86,33 +116,7 @@ def frozen_steady(m: BatchMonitor, d, d2, r, lat, v, latched: np.ndarray, lat_qu
     period (its largest value at the last full period plus the periods since is below
     ``frozen_steps``), so it only counts."""
     c = m.c
-    steps, move_yaw, move_st = c.frozen_steps, c.frozen_move_yaw, c.frozen_move_steer
-    # the yaw rate against a_y / v
-    same = r == m.yaw_last
-    check = same & m.yaw_ref_ok
-    m.yaw_last = np.where(same, m.yaw_last, r)
-    m.yaw_same = np.where(same, m.yaw_same, 0)
-    m.yaw_ref_ok = check
-    if check.any():
-        moved = check & (np.abs(lat * (1.0 / v) - m.yaw_ref) > move_yaw)
-        _frozen_held(m.yaw_same, moved, steps, latched, pl.FROZEN_YAW)
-    # a_y against the yaw rate (a_y held: unchanged)
-    moved = np.abs(r - m.lat_ref) > move_yaw
-    if lat_quiet:
-        m.lat_same += moved
-    else:
-        _frozen_held(m.lat_same, moved, steps, latched, pl.FROZEN_LAT)
-    # each steering channel against the other (the second held: unchanged)
-    same = d == m.st_last
-    check = same & m.st_ref_ok
-    m.st_last = np.where(same, m.st_last, d)
-    m.st_same = np.where(same, m.st_same, 0)
-    m.st_ref_ok = check
-    if check.any():
-        moved = check & (np.abs(d2 - m.st_ref) > move_st)
-        _frozen_held(m.st_same, moved, steps, latched, pl.FROZEN_STEER)
-    moved = np.abs(d - m.st2_ref) > move_st
-    if st2_quiet:
-        m.st2_same += moved
-    else:
-        _frozen_held(m.st2_same, moved, steps, latched, pl.FROZEN_STEER_2)
+    _fast_steady(m, "yaw", r, lambda: lat * (1.0 / v), c.frozen_move_yaw, latched, pl.FROZEN_YAW)
+    _sampled_steady(m, "lat", r, c.frozen_move_yaw, lat_quiet, latched, pl.FROZEN_LAT)
+    _fast_steady(m, "st", d, lambda: d2, c.frozen_move_steer, latched, pl.FROZEN_STEER)
+    _sampled_steady(m, "st2", d, c.frozen_move_steer, st2_quiet, latched, pl.FROZEN_STEER_2)

@@ -210,7 +210,8 @@ class BatchMonitor:
         far = span * ((kl[0] + kl[1] + kl[2] + kl[3]) * (1.0 / pl.KIN_WINDOW))
         sens = (ks[0] + ks[1] + ks[2] + ks[3]) * (1.0 / pl.KIN_WINDOW)
         # the family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the pair runs) and
-        # sensor lags in [0, sensor_tau]: 0 where its four corners differ in sign, else the smallest corner's magnitude
+        # sensor lags in [0, sensor_tau]: 0 where its four corners differ in sign, else the
+        # smallest corner's magnitude
         corners = (comp, comp + sens, comp + far, comp + far + sens)
         lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
         comp = np.where((lo <= 0.0) & (0.0 <= hi), 0.0, np.where(lo > 0.0, lo, -hi))
