@@ -152,7 +152,7 @@ class PlausibilityConfig:
 
     ts: float = 0.002
     speed_min: float = 5.0  # m/s: below, a_y / v and K_n(v) say too little; checks pause
-    yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel |a_y / v|, rad/s (2 deg/s)
+    yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel min(|a_y / v|, |r|), rad/s (2 deg/s)
     yaw_rel: float = 0.1
     yaw_count: int = 1  # samples of the redundant frame (50 ms each) over the bound, net (docs/controller.md)
     yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
@@ -688,7 +688,12 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         e = comp if comp < raw else raw
         if s.kin_n < KIN_WINDOW:
             e = 0.0  # the window is not full yet
-        bound = c.yaw_bound + c.yaw_rel * (-r_kin if r_kin < 0.0 else r_kin)
+        # The relative allowance on the smaller of the turn's two measures, a_y / v and r: a
+        # wrong one cannot widen its own bound (an a_y drift was found 0.3-0.7 s late).
+        turn = -r_kin if r_kin < 0.0 else r_kin
+        x = -yaw_rate if yaw_rate < 0.0 else yaw_rate
+        turn = x if x < turn else turn
+        bound = c.yaw_bound + c.yaw_rel * turn
         if s.yaw_pair_n >= YAW_PAIR_WINDOW:
             bound += c.side_accel * inv_v
         s.kin_err = e / bound

@@ -417,7 +417,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     s->jump_ok = 1u;
     if (new_sample) {
         double raw = r_kin - yaw_rate;
-        double comp, far, sens, lo, hi, x, beta, lat_beta, lag_beta;
+        double comp, far, sens, lo, hi, x, turn, beta, lat_beta, lag_beta;
         beta = (c->moment_m * inv_v * inv_v * yaw_rate + c->cf_m * inv_v * delta - r_kin) * c->inv_cs_m * speed;
         lat_beta = lat_accel * c->inv_cs_m;
         /* the nominal car's beta with the wheel angle through the sensors' lag, less beta */
@@ -487,7 +487,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
         if (s->kin_n < MRS_KIN_WINDOW) {
             e = 0.0;
         }
-        bound = c->yaw_bound + c->yaw_rel * MRS_MAG(r_kin);
+        /* the relative allowance on the smaller of the turn's two measures, a_y / v and r: a
+         * wrong one cannot widen its own bound */
+        x = MRS_MAG(yaw_rate);
+        turn = MRS_MAG(r_kin);
+        bound = c->yaw_bound + c->yaw_rel * (x < turn ? x : turn);
         if (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW) {
             bound += c->side_accel * inv_v; /* the pair checks the yaw rate: allow a side force */
         }

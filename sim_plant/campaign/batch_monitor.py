@@ -217,7 +217,7 @@ class BatchMonitor:
         comp = np.where((lo <= 0.0) & (0.0 <= hi), 0.0, np.where(lo > 0.0, lo, -hi))
         e = np.where(comp < raw_avg, comp, raw_avg)
         e = np.where(self.kin_n < pl.KIN_WINDOW, 0.0, e)
-        bound = c.yaw_bound + c.yaw_rel * np.abs(r_kin)
+        bound = c.yaw_bound + c.yaw_rel * np.minimum(np.abs(r_kin), np.abs(r))  # the smaller measure of the turn
         bound = np.where(self.yaw_pair_n >= pl.YAW_PAIR_WINDOW, bound + c.side_accel * inv_v, bound)
         self._set("kin_err", new, e / bound)
         self.kin_count, trip = _count(self.kin_count, e > bound, new, c.yaw_count)
