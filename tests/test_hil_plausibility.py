@@ -126,3 +126,8 @@ def test_the_command_line_says_early_or_late_against_the_bound() -> None:
     assert "10 ms before its error passed the bound" in plausibility_line(base | {"latency_from_bound_s": -0.01})
     quiet = {"bits_seen": 0, "fault_detected_s": None, "detection_latency_s": None, "latency_from_bound_s": None}
     assert plausibility_line(quiet) == "bits seen 0, fault reported none"
+    missed = quiet | {"error_over_bound_s": 3.9}
+    assert plausibility_line(missed, 4.0).endswith(
+        "none; its error passed the bound at 3.900 s, 100 ms before the run's end: too soon to judge, run longer")
+    assert plausibility_line(missed, 5.0).endswith("1.10 s before the run's end: not found in time")
+    assert plausibility_line(missed).endswith("none; its error passed the bound at 3.900 s")

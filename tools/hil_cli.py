@@ -129,13 +129,26 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
             value = s[key]
             print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
         print(f"  {'frames':<26}{s['frames']}")
-        print(f"  {'plausibility':<26}{plausibility_line(s['plausibility'])}")
+        print(f"  {'plausibility':<26}{plausibility_line(s['plausibility'], s['duration'])}")
     return 0
 
 
-def plausibility_line(pl: dict) -> str:
-    """The summary's ``plausibility`` entry in words (``hil run``'s last line)."""
+#: Issue 18's detection target: a fault reported within this long after its error passed the bound.
+DETECTION_TARGET_S = 0.3
+
+
+def plausibility_line(pl: dict, duration: float | None = None) -> str:
+    """The summary's ``plausibility`` entry in words (``hil run``'s last line).  A fault not
+    reported whose error passed the bound says how long before the run's ``duration`` (s) that
+    was: less than the 300 ms target is no verdict yet (a longer run would give one)."""
     found = "none" if pl["fault_detected_s"] is None else f"at {pl['fault_detected_s']:.3f} s"
+    over = pl.get("error_over_bound_s")
+    if pl["fault_detected_s"] is None and over is not None:
+        found += f"; its error passed the bound at {over:.3f} s"
+        if duration is not None:
+            left = duration - over
+            found += (f", {1e3 * left:.0f} ms before the run's end: too soon to judge, run longer"
+                      if left < DETECTION_TARGET_S else f", {left:.2f} s before the run's end: not found in time")
     if pl["detection_latency_s"] is not None:
         found += f", {1e3 * pl['detection_latency_s']:.0f} ms after the sensor fault"
     if pl["latency_from_bound_s"] is not None:
