@@ -18,6 +18,7 @@ from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
 from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
+from sim_plant.harness.faults.settings import PLAUS_DETECT
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS
 
@@ -133,10 +134,6 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
     return 0
 
 
-#: Issue 18's detection target: a fault reported within this long after its error passed the bound.
-DETECTION_TARGET_S = 0.3
-
-
 def plausibility_line(pl: dict, duration: float | None = None) -> str:
     """The summary's ``plausibility`` entry in words (``hil run``'s last line).  A fault not
     reported whose error passed the bound says how long before the run's ``duration`` (s) that
@@ -148,7 +145,7 @@ def plausibility_line(pl: dict, duration: float | None = None) -> str:
         if duration is not None:
             left = duration - over
             found += (f", {1e3 * left:.0f} ms before the run's end: too soon to judge, run longer"
-                      if left < DETECTION_TARGET_S else f", {left:.2f} s before the run's end: not found in time")
+                      if left < PLAUS_DETECT else f", {left:.2f} s before the run's end: not found in time")
     if pl["detection_latency_s"] is not None:
         found += f", {1e3 * pl['detection_latency_s']:.0f} ms after the sensor fault"
     if pl["latency_from_bound_s"] is not None:
