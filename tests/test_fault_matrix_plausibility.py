@@ -17,6 +17,7 @@ from firmware_py.plausibility import PlausibilityConfig
 from mrsteer_dbc import names
 from mrsteer_dbc.e2e import COUNTER_MODULO
 from sim_plant.car import scenario as scn
+from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.vehicle import VehicleParams, steering_tf
 from sim_plant.harness import faults as F
 from sim_plant.harness.faults.caused_yaw import caused_yaw
@@ -371,9 +372,45 @@ def test_caused_yaw_says_why_it_gives_no_figure() -> None:
     moving = replace(e, trace=_step_trace(math.radians(-0.6), t_on=0.95))
     assert caused_yaw(moving, 1001.0).reason == "the command was moving at the onset"
     assert caused_yaw(moving, 1001.06).value == 0.0  # 0.1 s after that step: steady again
+    # The nonlinear car is replayed from the onset's state: a trace without it gives no figure.
     nonlinear = replace(e, setup=replace(e.setup, plant="nonlinear"))
-    assert caused_yaw(nonlinear, 1001.0).value is None
+    assert caused_yaw(nonlinear, 1001.0).reason == (
+        "the plant's trace has no beta_rad, yaw_rate_rad_s, driver_angle_rad, m_z_nm")
     assert caused_yaw(replace(e, trace=Trace([0.0], [0.0], [0.0], [0.0])), 1001.0).value is None
+
+
+def test_on_the_realistic_car_the_caused_yaw_is_the_nonlinear_cars() -> None:
+    # The realistic car and actuator (faults run --plant nonlinear --actuator default): the
+    # trace's applied angle is the actuator's position. From straight running with nothing held,
+    # a 20 ms pulse of 0.25 deg keeps the tyres on their zero-slip slope, where the nonlinear car
+    # is the linear one.
+    delta = math.radians(-0.25)
+    base = _step_trace(delta, width=20)
+    n = len(base.t)
+    pulse = [a - U0 for a in base.applied]
+
+    def realistic(applied: list[float], driver: float, mu: float, beta: float, r: float) -> Evidence:
+        columns = {**base.columns, "aux_applied_rad": applied, "mu": [mu] * n, "driver_angle_rad": [driver] * n,
+                   "beta_rad": [beta] * n, "yaw_rate_rad_s": [r] * n, "m_z_nm": [0.0] * n}
+        e = evidence(_row())
+        return replace(e, trace=replace(base, applied=applied, columns=columns),
+                       setup=replace(e.setup, plant="nonlinear", actuator="default"))
+
+    straight = realistic(pulse, 0.0, 1.0, 0.0, 0.0)
+    assert caused_yaw(straight, 1001.0).value == pytest.approx(_peak([0.0] * 10 + [delta] * 20 + [0.0] * 2960),
+                                                                rel=2e-3)
+    # A steady left-hand curve on mu 0.3 (2.0 deg of front-wheel angle, the command holding 1.81
+    # of it; a_y 2.6 of the road's 2.9 m/s^2): the same pulse further into the turn yaws the car
+    # less than the linear car, its tyres past their slope.
+    driver = math.radians(2.0) + U0
+    car = NonlinearPlant(VehicleParams(v=20.0, mu=0.3), TS)
+    for _ in range(3000):
+        car.advance(driver - U0, 0.0)
+    beta, r = (float(x) for x in car.x)
+    curve = realistic([-a for a in base.applied], driver, 0.3, beta, r)
+    linear = caused_yaw(replace(curve, setup=replace(curve.setup, plant="linear", actuator="ideal")), 1001.0).value
+    assert linear is not None and 0.0 < caused_yaw(curve, 1001.0).value < 0.8 * linear
+
 
 
 def test_a_sensor_row_judges_the_caused_yaw_detected_or_not() -> None:

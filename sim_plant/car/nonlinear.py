@@ -37,7 +37,7 @@ h * ||A||_inf <= 0.25, where A is the linear model at the current speed with the
 friction on any wheel (the tyres' slope is largest at zero slip, so this bounds the
 Jacobian) and the relaxation rate v / sigma.  RK4's error per step is then about
 (h lambda)^5 / 120 <= 1e-5 of the state (measured against the exact ZOH solution at small
-slip: ``tests/test_car_models.py``).
+slip: ``tests/test_car_nonlinear.py``).
 """
 
 from __future__ import annotations
@@ -96,6 +96,13 @@ class NonlinearPlant:
         self._z[[0, 1, 3, 4]] = 0.0
         self._z[2] = self.params.v
 
+    def set_state(self, beta: float, r: float, delta: float = 0.0) -> None:
+        """Start from side slip ``beta`` and yaw rate ``r`` at the current speed (a state read
+        from a trace), with the lagged slip angles, if any, at their kinematic values for the
+        front-wheel angle ``delta``."""
+        self._z[0], self._z[1] = beta, r
+        self._z[3], self._z[4] = self._kinematic_slip(self._z, delta)
+
     def set_params(self, params: VehicleParams, keep_speed: bool = False) -> None:
         """A new operating point (mu, mass, ...); the speed becomes ``params.v`` unless
         ``keep_speed`` (then the integrated speed carries on, e.g. while braking)."""
@@ -122,6 +129,9 @@ class NonlinearPlant:
     def _slip(self, z: np.ndarray, delta: float) -> tuple[float, float]:
         if self.sigma > 0.0:
             return float(z[3]), float(z[4])
+        return self._kinematic_slip(z, delta)
+
+    def _kinematic_slip(self, z: np.ndarray, delta: float) -> tuple[float, float]:
         beta, r, v = z[0], z[1], z[2]
         return delta - beta - self.params.l_f * r / v, -beta + self.params.l_r * r / v
 

@@ -46,7 +46,8 @@ from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SensorConfig, Sensors, dbc_resolution
-from sim_plant.car.vehicle import DiscretePlant, VehicleParams
+from sim_plant.car.vehicle import VehicleParams
+from sim_plant.offline.excursion_yaw import excursion_yaw
 
 #: Each channel's bus cycle as a multiple of the 2 ms control period (from the DBC).
 _MESSAGE = {"yaw_rate": names.MSG_YAW, "steer": names.MSG_STEER, "speed": names.MSG_SPEED,
@@ -79,12 +80,7 @@ class MonitorRun:
         from the command at the onset (the healthy controller's, in a steady state) to zero."""
         dt = float(self.t[1] - self.t[0])
         i0 = max(0, int(round(start / dt)) - 1)
-        low, high = min(0.0, float(self.aux[i0])), max(0.0, float(self.aux[i0]))
-        plant, peak = DiscretePlant(car, dt), 0.0
-        for a in self.aux[i0:]:
-            plant.advance(a - min(max(a, low), high), 0.0)
-            peak = max(peak, abs(float(plant.x[1])))
-        return peak
+        return excursion_yaw([float(a) for a in self.aux[i0:]], dt, car)
 
     def first(self, mask: np.ndarray) -> float | None:
         idx = np.flatnonzero(mask)

@@ -10,10 +10,13 @@ faulty controller backs off toward zero before its report, which it is allowed t
 time.
 
 The command's *excursion* is the applied angle's distance outside [min(0, a0), max(0, a0)].
-The figure is the peak yaw rate the excursion gives the linear car. That car is the plant's own
-(eqs. 14/16, exact ZOH at the plant's step, the trace's speed and friction at the onset, the
-scenario's mass), so the figure is exact for it by superposition. It is computed only when the
-run's car is that linear car with the ideal actuator, whose applied angle is the car's input.
+The figure is the peak yaw rate the excursion gives the run's own car
+(``sim_plant.offline.excursion_yaw``): the plant's car (the paper's linear one, eqs. 14/16,
+exact by superposition; or the nonlinear one, replayed with and without the excursion from the
+trace's side slip and yaw rate at the onset) at the plant's step, the trace's speed and
+friction at the onset, the scenario's mass, the trace's driver angle and yaw moment (the sensor
+rows' only loads). The trace's applied angle is the actuator's position, so an actuator with
+its own dynamics is in it.
 
 This is not the campaign's ``fault_yaw_rate``, which is |r − r of the fault-free twin| and so
 counts the fade and any backing-off as well (docs/campaigns.md). On a straight road with no
@@ -26,11 +29,11 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass
 
-from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.car.plants import LINEAR
-from sim_plant.car.vehicle import DiscretePlant, VehicleParams
+from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.faults.evidence import Evidence
 from sim_plant.harness.faults.settings import row_scenario
+from sim_plant.offline.excursion_yaw import excursion_yaw
 
 #: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s (met at or below
 #: it, as a campaign's criteria are).
@@ -55,16 +58,16 @@ class CausedYaw:
 
 def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     """The largest |r| the applied angle's excursion (the module's docstring) from ``start``
-    (epoch s, the fault's onset on the trace's wall clock) to the run's end gives the linear
+    (epoch s, the fault's onset on the trace's wall clock) to the run's end gives the run's
     car, or why there is none."""
     setup = e.setup
     sc = row_scenario(e.row.scenario)
-    if setup.plant not in (None, LINEAR) or setup.actuator not in (None, "ideal") or not (
-            sc.plant == LINEAR and sc.actuator == ActuatorModelConfig.ideal()):
-        return CausedYaw(None, "the run's car is not the linear one with the ideal actuator")
+    kind = setup.plant or sc.plant
     tr, cols = e.trace, e.trace.columns
-    if "v_m_s" not in cols or "mu" not in cols:
-        return CausedYaw(None, "the plant's trace has no speed and friction")
+    needs = ("v_m_s", "mu") if kind == LINEAR else ("v_m_s", "mu", "beta_rad", "yaw_rate_rad_s",
+                                                    "driver_angle_rad", "m_z_nm")
+    if any(name not in cols for name in needs):
+        return CausedYaw(None, f"the plant's trace has no {', '.join(n for n in needs if n not in cols)}")
     # The last step at or before the onset: a bridge fault's first falsified frame is stamped
     # after the step that sent it, and the step after may already apply the answer to it.
     i0 = bisect.bisect_right(tr.wall, start) - 1
@@ -73,10 +76,9 @@ def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     before = tr.applied[bisect.bisect_left(tr.t, tr.t[i0] - STEADY_TIME, hi=i0 + 1):i0 + 1]
     if max(before) - min(before) > STEADY_MOVE:
         return CausedYaw(None, "the command was moving at the onset")
-    car = DiscretePlant(VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass), tr.t[i0 + 1] - tr.t[i0])
-    a0, peak = tr.applied[i0], 0.0
-    low, high = min(0.0, a0), max(0.0, a0)
-    for a in tr.applied[i0:]:
-        car.advance(a - min(max(a, low), high), 0.0)
-        peak = max(peak, abs(float(car.x[1])))
-    return CausedYaw(peak)
+    car = VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass)
+    ts = tr.t[i0 + 1] - tr.t[i0]
+    if kind == LINEAR:
+        return CausedYaw(excursion_yaw(tr.applied[i0:], ts, car))
+    return CausedYaw(excursion_yaw(tr.applied[i0:], ts, car, kind, cols["driver_angle_rad"][i0:], cols["m_z_nm"][i0:],
+                                   cols["beta_rad"][i0], cols["yaw_rate_rad_s"][i0]))

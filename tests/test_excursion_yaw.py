@@ -1,0 +1,81 @@
+"""The yaw rate a command's excursion caused, replayed on the run's car
+(``sim_plant.offline.excursion_yaw``): the paper's linear car against scipy's continuous
+response, the nonlinear car against the linear one where its tyres are linear and against its
+grip where they are not."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from scipy import signal
+
+from sim_plant.car.nonlinear import NonlinearPlant
+from sim_plant.car.vehicle import VehicleParams, steering_tf
+from sim_plant.offline.excursion_yaw import excursion, excursion_yaw
+
+TS = 0.002
+CAR = VehicleParams(v=20.0, mu=0.3)
+
+
+def _peak(u: list[float], car: VehicleParams = CAR) -> float:
+    """The continuous linear car's peak |r| for the input u held over each step (eqs. 14/16)."""
+    tf = steering_tf(car)
+    _, r, _ = signal.lsim(signal.lti(tf.num, tf.den), u, [k * TS for k in range(len(u))], interp=False)
+    return float(max(abs(r)))
+
+
+def _steady_curve(delta: float, car: VehicleParams = CAR) -> tuple[float, float]:
+    """The nonlinear car's (beta, r) after 6 s at the driver's front-wheel angle ``delta``."""
+    plant = NonlinearPlant(car, TS)
+    for _ in range(3000):
+        plant.advance(delta, 0.0)
+    beta, r = plant.x
+    return float(beta), float(r)
+
+
+def test_the_excursion_is_what_lies_beyond_the_held_angle_or_beyond_zero() -> None:
+    assert excursion(-0.03, -0.02) == pytest.approx(-0.01)  # further than the held angle
+    assert excursion(-0.01, -0.02) == 0.0  # between it and zero: a fade, the safe state
+    assert excursion(0.005, -0.02) == pytest.approx(0.005)  # past zero
+    assert excursion(0.01, 0.0) == pytest.approx(0.01)
+
+
+def test_on_the_linear_car_it_is_the_cars_response_to_the_excursion_alone() -> None:
+    a0, step = math.radians(-1.0), math.radians(-0.5)
+    applied = [a0] * 10 + [a0 + step] * 20 + [a0 * 0.5] * 970  # a pulse, then a fade halfway
+    assert excursion_yaw(applied, TS, CAR) == pytest.approx(_peak([0.0] * 10 + [step] * 20 + [0.0] * 970), rel=2e-3)
+
+
+def test_the_nonlinear_car_gives_the_linear_figure_where_its_tyres_are_linear() -> None:
+    # From straight running, 0.2 deg: the slip angles stay small, the tyres on their slope at
+    # zero slip, which is the linear car's cornering stiffness.
+    applied = [0.0] + [math.radians(0.2)] * 1000
+    zeros = [0.0] * len(applied)
+    nonlinear = excursion_yaw(applied, TS, CAR, "nonlinear", zeros, zeros)
+    assert nonlinear == pytest.approx(_peak(applied), rel=2e-3)
+
+
+@pytest.mark.parametrize("driver_deg", [1.0, 2.0])
+def test_near_its_grip_the_nonlinear_car_answers_less_and_fading_causes_nothing(driver_deg: float) -> None:
+    # A steady curve on mu 0.3 at 20 m/s (a_y 1.5 and 2.6 m/s^2 of the road's 2.9): the tyres'
+    # slope there is below the zero-slip one, so the same 0.5 deg further into the turn yaws the
+    # car less than it would the linear car, and less the nearer the limit.
+    delta = math.radians(driver_deg)
+    beta, r = _steady_curve(delta)
+    a0 = math.radians(0.2)
+    further = [a0] + [a0 + math.radians(0.5)] * 1000
+    driver, m_z = [delta] * len(further), [0.0] * len(further)
+    nonlinear = excursion_yaw(further, TS, CAR, "nonlinear", driver, m_z, beta, r)
+    linear = excursion_yaw(further, TS, CAR)
+    assert 0.0 < nonlinear < (0.95 if driver_deg == 1.0 else 0.7) * linear
+    # Back to zero from the held angle: the replay without the excursion is the same run.
+    fade = [a0 * (1.0 - k / 50) if k < 50 else 0.0 for k in range(1000)]
+    assert excursion_yaw(fade, TS, CAR, "nonlinear", driver[:1000], m_z[:1000], beta, r) == 0.0
+
+
+def test_the_nonlinear_replay_needs_the_driver_angle_and_the_yaw_moment() -> None:
+    with pytest.raises(ValueError, match="driver angle and the yaw moment"):
+        excursion_yaw([0.0, 0.01], TS, CAR, "nonlinear")
+    with pytest.raises(ValueError, match="plant must be one of"):
+        excursion_yaw([0.0, 0.01], TS, CAR, "bicycle")
