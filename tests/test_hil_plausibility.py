@@ -131,3 +131,10 @@ def test_the_command_line_says_early_or_late_against_the_bound() -> None:
         "none; its error passed the bound at 3.900 s, 100 ms before the run's end: too soon to judge, run longer")
     assert plausibility_line(missed, 5.0).endswith("1.10 s before the run's end: not found in time")
     assert plausibility_line(missed).endswith("none; its error passed the bound at 3.900 s")
+    # With a sensor fault the line ends with the yaw rate its command caused, against the target.
+    faulted = base | {"latency_from_bound_s": 0.12, "sensor_faults": ["yaw_rate:stuck:0.01@1.5"]}
+    assert plausibility_line(faulted | {"caused_yaw_rad_s": 0.0123}).endswith(
+        "after its error passed the bound; the command caused at most 0.0123 rad/s of yaw (target 0.05: met)")
+    assert plausibility_line(faulted | {"caused_yaw_rad_s": 0.07}).endswith("0.0700 rad/s of yaw (target 0.05: NOT met)")
+    assert plausibility_line(faulted | {"caused_yaw_rad_s": None, "caused_yaw_note": "a realtime run"}).endswith(
+        "; caused yaw not estimated: a realtime run")

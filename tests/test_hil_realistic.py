@@ -137,6 +137,10 @@ def test_a_stuck_yaw_rate_sensor_on_the_command_line_is_reported_and_the_command
     assert pl["fault_detected_s"] > 1.5 and pl["latency_from_bound_s"] <= 0.3
     assert s["final_aux_steer_deg"] == 0.0
     assert s["peak_yaw_rate_true_rad_s"] < 0.05
+    # The yaw rate its command caused, against a fault-free twin that is this run before the
+    # onset (to the bus's quantisation): the wrong command acted until the report, within the target.
+    assert pl["caused_yaw_twin_mismatch_deg"] < 0.01
+    assert 0.001 < pl["caused_yaw_rad_s"] <= 0.05
     steps = read_steps_csv(tmp_path / "steps.csv")
     assert all(st.ctrl_state == "FAULT" for st in steps if st.t_s > pl["fault_detected_s"] + 0.01)
 

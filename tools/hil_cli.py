@@ -18,6 +18,7 @@ from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
 from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
+from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET
 from sim_plant.harness.faults.settings import PLAUS_DETECT
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS
@@ -130,7 +131,9 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
             value = s[key]
             print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
         print(f"  {'frames':<26}{s['frames']}")
-        print(f"  {'plausibility':<26}{plausibility_line(s['plausibility'], s['duration'])}")
+        print(f"  {'plausibility':<26}"
+              + (plausibility_line(s['plausibility'], s['duration']) if s["controller"] != "none"
+                 else "no controller: nothing monitors the sensors"))
     return 0
 
 
@@ -152,7 +155,13 @@ def plausibility_line(pl: dict, duration: float | None = None) -> str:
         ms = 1e3 * pl["latency_from_bound_s"]
         found += f", {ms:.0f} ms after its error passed the bound" if ms >= 0.0 else (
             f", {-ms:.0f} ms before its error passed the bound (found by its noise or another check)")
-    return f"bits seen {pl['bits_seen']}, fault reported {found}"
+    line = f"bits seen {pl['bits_seen']}, fault reported {found}"
+    if pl.get("sensor_faults"):
+        caused = pl.get("caused_yaw_rad_s")
+        line += (f"; caused yaw not estimated: {pl.get('caused_yaw_note')}" if caused is None else
+                 f"; the command caused at most {caused:.4f} rad/s of yaw (target {CAUSED_YAW_TARGET:g}: "
+                 f"{'met' if caused <= CAUSED_YAW_TARGET else 'NOT met'})")
+    return line
 
 
 def _cmd_hil_evidence(args: argparse.Namespace) -> int:

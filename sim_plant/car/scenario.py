@@ -139,6 +139,11 @@ class Scenario:
                                     "earlier START)")
         return replace(self, sensor_faults=self.sensor_faults + tuple(faults))
 
+    def without_sensor_faults(self) -> "Scenario":
+        """The same scenario with every sensor healthy: its own faults and its sensor models'
+        dropped (a fault-free twin of a run)."""
+        return replace(self, sensor_faults=(), sensors=replace(self.sensors, faults=()))
+
     @property
     def ideal_car(self) -> bool:
         """The paper's car: linear plant, ideal actuator, exact sensors."""

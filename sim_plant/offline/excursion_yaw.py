@@ -2,22 +2,24 @@
 command causes"), replayed on the run's own car from what its trace recorded.
 
 The *excursion* of an applied front-wheel angle ``a`` is its distance outside the range from
-the angle held at the onset ``a0`` (the healthy controller's, in a steady state) to zero, the
-safe state: ``a - clamp(a, min(0, a0), max(0, a0))``. Fading toward zero, or backing off to
-anywhere between, is not counted.
+the healthy controller's angle ``h`` to zero, the safe state: ``a - clamp(a, min(0, h),
+max(0, h))``. Fading toward zero, or backing off to anywhere between, is not counted. ``h`` is
+the angle held at the onset where the run is in a steady state there (the fault matrix's rows),
+or, per step, what a fault-free twin of the run applied (``hil run``: the healthy controller's
+answer to whatever else happens after the onset, a disturbance or the driver, is then not
+counted either).
 
 The figure is the peak over the run of |r - r'|, where r is the car's yaw rate under the
 applied angles and r' under the same angles without their excursion, both from the state at
-the onset with the same driver angle and yaw moment:
+the onset with the same driver angle, yaw moment, friction and loads:
 
 * the paper's linear car (eqs. 14/16, exact ZOH): by superposition r - r' is the car's
   response to the excursion alone from rest, computed so; exact for that car.
 * the nonlinear car (``sim_plant.car.nonlinear``, magic-formula tyres): the two runs, each from
-  the onset's side slip, yaw rate and speed. Near the grip limit the tyres' slope is lower than
-  at zero slip, and the figure is then below the linear car's for the same excursion. Only the
-  loads a trace records are replayed (the yaw moment): a side force, a braking deceleration or a
-  changed grip is not, so on a car with one of those acting the figure is the car's answer
-  without it (``excursion_yaw``'s callers say so).
+  the onset's side slip, yaw rate and speed, with the side force, deceleration and grip of each
+  step when given (``loads``; a trace records only the yaw moment). Near the grip limit the
+  tyres' slope is lower than at zero slip, and the figure is then below the linear car's for
+  the same excursion.
 
 The angles are held over each step as the trace records them. With an actuator of its own
 dynamics (``sim_plant.car.actuator_dynamics``) the trace's angle is its position at the end of
@@ -29,44 +31,65 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from sim_plant.car.disturbances import Loads
 from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 
-def excursion(a: float, a0: float) -> float:
-    """The part of the applied angle ``a`` outside [min(0, a0), max(0, a0)] (rad)."""
-    return a - min(max(a, min(0.0, a0)), max(0.0, a0))
+def excursion(a: float, h: float) -> float:
+    """The part of the applied angle ``a`` outside [min(0, h), max(0, h)] (rad)."""
+    return a - min(max(a, min(0.0, h)), max(0.0, h))
 
 
 def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind: str = LINEAR,
                   driver: Sequence[float] | None = None, m_z: Sequence[float] | None = None,
-                  beta0: float = 0.0, r0: float = 0.0) -> float:
+                  beta0: float = 0.0, r0: float = 0.0, *, healthy: Sequence[float] | None = None,
+                  mu: Sequence[float] | None = None, loads: Sequence[Loads] | None = None) -> float:
     """The peak |r - r'| (rad/s; the module's docstring) over ``applied``, the angles applied
-    from the onset's step on (``applied[0]`` is the held one), each held over one step of
-    ``ts`` s, on the car ``kind`` (``sim_plant.car.plants.PLANTS``) at ``car``'s speed and
-    friction. The nonlinear car also needs the driver's front-wheel angle and the yaw moment of
-    each step (``driver``, ``m_z``; the same lengths as ``applied``) and the onset's state
-    (``beta0``, ``r0``); the linear car's figure depends on none of them."""
+    from the onset's step on, each held over one step of ``ts`` s, on the car ``kind``
+    (``sim_plant.car.plants.PLANTS``) at ``car``'s speed and friction. ``healthy`` is the
+    healthy controller's angle of each step (default: ``applied[0]``, the one held at the
+    onset); ``mu`` the road's friction of each step (default ``car.mu`` throughout). The
+    nonlinear car also needs the driver's front-wheel angle and the yaw moment of each step
+    (``driver``, ``m_z``), the onset's state (``beta0``, ``r0``) and, where they act, the loads
+    of each step (their side force, deceleration and grip; their yaw moment is ``m_z``'s). Every
+    sequence has ``applied``'s length. The linear car's figure depends only on the angles, the
+    friction and the car."""
     if kind not in PLANTS:
         raise ValueError(f"plant must be one of {', '.join(PLANTS)}, got {kind!r}")
-    if not applied:
+    n = len(applied)
+    for name, seq in (("healthy", healthy), ("mu", mu), ("loads", loads)):
+        if seq is not None and len(seq) != n:
+            raise ValueError(f"{name} has {len(seq)} steps, the applied angles {n}")
+    if not n:
         return 0.0
-    a0, peak = applied[0], 0.0
+    held = healthy if healthy is not None else [applied[0]] * n
+    road = mu if mu is not None else [car.mu] * n
+    peak = 0.0
     if kind == LINEAR:
         plant = DiscretePlant(car, ts)
-        for a in applied:
-            plant.advance(excursion(a, a0), 0.0)
+        for a, h, m in zip(applied, held, road):
+            if m != plant.params.mu:
+                plant.set_params(plant.params.at(mu=m))
+            plant.advance(excursion(a, h), 0.0)
             peak = max(peak, abs(float(plant.x[1])))
         return peak
     assert kind == NONLINEAR
-    if driver is None or m_z is None or not len(driver) == len(m_z) == len(applied):
+    if driver is None or m_z is None or not len(driver) == len(m_z) == n:
         raise ValueError("the nonlinear car's replay needs the driver angle and the yaw moment of every step")
     actual, without = NonlinearPlant(car, ts), NonlinearPlant(car, ts)
     for plant in (actual, without):
-        plant.set_state(beta0, r0, driver[0] + a0)
-    for a, d, m in zip(applied, driver, m_z):
-        actual.advance(d + a, m)
-        without.advance(d + a - excursion(a, a0), m)
+        plant.set_state(beta0, r0, driver[0] + applied[0])
+    for k, (a, h, d, m) in enumerate(zip(applied, held, driver, m_z)):
+        load = loads[k] if loads is not None else None
+        for plant in (actual, without):
+            if road[k] != plant.params.mu:
+                plant.set_params(plant.params.at(mu=road[k]), keep_speed=True)
+            if load is not None:
+                plant.set_grip(load.grip)
+        f_y, a_x = (load.f_y, load.a_x) if load is not None else (0.0, 0.0)
+        actual.advance(d + a, m, f_y, a_x)
+        without.advance(d + a - excursion(a, h), m, f_y, a_x)
         peak = max(peak, abs(float(actual.x[1] - without.x[1])))
     return peak

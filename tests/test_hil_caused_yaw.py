@@ -1,0 +1,92 @@
+"""The yaw rate a HIL run's command caused (``sim_plant.harness.hil_caused_yaw``), on synthetic
+runs built from the fault-free twin itself: what the run did beyond the twin is the only thing
+counted, and the figure is then the linear car's response to it (scipy's, eqs. 14/16)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+from scipy import signal
+
+from firmware_py import model_regulator as mr
+from sim_plant.car import scenario as scn
+from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.vehicle import VehicleParams, steering_tf
+from sim_plant.harness.hil_caused_yaw import caused_yaw_figures
+from sim_plant.harness.hil_steps import Step
+from sim_plant.offline import plausibility_runs
+
+RATE = 500.0
+TS = 1.0 / RATE
+CTRL = mr.ControllerConfig()
+#: paper-fig9 (the linear car, ideal sensors): the 4000 Nm step at 0.5 s; the fault at 0.55 s,
+#: while the healthy command is still moving (so a constant held angle would be the wrong
+#: reference), with an onset where the error is plainly visible.
+ONSET = 0.55
+SCENARIO = scn.load("paper-fig9").with_sensor_faults((SensorFault("yaw_rate", "stuck", ONSET, 0.01),))
+
+
+def _twin() -> list[float]:
+    run = plausibility_runs.run(SCENARIO.without_sensor_faults(), TS, controller=CTRL,
+                                second_yaw=SCENARIO.sensor_config, second_speed=True)
+    return [float(a) for a in run.aux]
+
+
+def _steps(applied: list[float]) -> list[Step]:
+    """A run of paper-fig9 on the bus that applied ``applied`` (its other columns as the linear
+    car's figure needs them: the speed, mu and the yaw moment)."""
+    return [Step(k, k * TS, 0.0, 0.0, 0.0, 20.0, a, a, "ACTIVE", 0, 4000.0 if k * TS >= 0.5 else 0.0, 1.0, 0.0, 0.0,
+                 1000.0 + k * TS) for k, a in enumerate(applied)]
+
+
+def _peak(u: list[float]) -> float:
+    tf = steering_tf(VehicleParams(v=20.0, mu=1.0))
+    _, r, _ = signal.lsim(signal.lti(tf.num, tf.den), u, [k * TS for k in range(len(u))], interp=False)
+    return float(max(abs(r)))
+
+
+@pytest.fixture(scope="module")
+def twin() -> list[float]:
+    return _twin()
+
+
+def test_only_what_the_run_applied_beyond_the_healthy_command_counts(twin: list[float]) -> None:
+    k0 = round(ONSET / TS)
+    moving = abs(twin[k0 + 50] - twin[k0])
+    assert moving > math.radians(0.2)  # the healthy command moves after the onset: a held angle is no reference
+    # 0.3 deg further from zero than the twin for 20 ms from 0.6 s, then the twin's again
+    pulse = [0.0] * len(twin)
+    for k in range(round(0.6 / TS), round(0.6 / TS) + 10):
+        pulse[k] = math.copysign(math.radians(0.3), twin[k])
+    fig = caused_yaw_figures(_steps([a + p for a, p in zip(twin, pulse)]), SCENARIO, CTRL, RATE)
+    assert fig["caused_yaw_rad_s"] == pytest.approx(_peak(pulse[k0:]), rel=2e-3)
+    assert fig["caused_yaw_twin_mismatch_deg"] == 0.0
+    assert "fault-free twin" in fig["caused_yaw_note"] and "linear car" in fig["caused_yaw_note"]
+    # The same run following the twin: nothing caused. A fade to zero from the onset: nothing either.
+    assert caused_yaw_figures(_steps(twin), SCENARIO, CTRL, RATE)["caused_yaw_rad_s"] == 0.0
+    fade = twin[:k0] + [twin[k0] * max(0.0, 1.0 - (k - k0) / 100) for k in range(k0, len(twin))]
+    assert caused_yaw_figures(_steps(fade), SCENARIO, CTRL, RATE)["caused_yaw_rad_s"] == 0.0
+
+
+def test_a_run_its_twin_does_not_match_before_the_onset_gets_no_figure(twin: list[float]) -> None:
+    off = caused_yaw_figures(_steps([a + math.radians(0.1) for a in twin]), SCENARIO, CTRL, RATE)
+    assert off["caused_yaw_rad_s"] is None
+    assert off["caused_yaw_note"].startswith("the fault-free twin differs from the run by 0.100 deg before the onset")
+
+
+def test_runs_without_a_twin_say_why(twin: list[float]) -> None:
+    steps = _steps(twin)
+    cases = {"no sensor fault": caused_yaw_figures(steps, SCENARIO.without_sensor_faults(), CTRL, RATE),
+             "no controller": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, controller=False),
+             "a realtime run": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, lockstep=False),
+             "one-step delay, the run 2": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, delay_steps=2),
+             "ends at the fault's onset": caused_yaw_figures(steps[:round(ONSET / TS)], SCENARIO, CTRL, RATE)}
+    for words, fig in cases.items():
+        assert fig["caused_yaw_rad_s"] is None and words in fig["caused_yaw_note"], (words, fig)
+    # A fault in the sensor models' own file counts as the run's fault, and the twin drops it too.
+    in_file = SCENARIO.without_sensor_faults()
+    in_file = replace(in_file, sensors=replace(in_file.sensors, faults=SCENARIO.sensor_faults))
+    assert in_file.without_sensor_faults().sensor_config.faults == ()
+    assert caused_yaw_figures(steps, in_file, CTRL, RATE)["caused_yaw_rad_s"] == 0.0
