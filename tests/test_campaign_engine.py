@@ -451,6 +451,20 @@ def test_the_second_yaw_element_and_both_speeds_read_as_the_samples_scalar_senso
     assert np.any(speed2 != np.round(v[-1] / 0.3) * 0.3)  # the second speed's faults and noise act
 
 
+def test_the_batch_readings_saturate_at_their_signals_ranges_as_the_scalar_sensors() -> None:
+    from sim_plant.campaign.batch_sensors import BatchSensors
+
+    rows = 3
+    batch = BatchSensors(np.full(rows, 0.014), np.zeros(rows), np.arange(rows), 0.002, steps=2)
+    batch.at(0)
+    far = np.array([4.5, -4.5, 0.5])
+    assert batch.yaw_rate(far)[:2].tolist() == [3.0, -3.0] and batch.yaw_rate_redundant(-far)[:2].tolist() == [-3.0, 3.0]
+    assert abs(batch.yaw_rate(far)[2] - 0.5) < 0.1  # within range: as it was
+    assert batch.quantised_lat(np.array([80.0, -80.0, 1.0])).tolist() == [65.0, -65.0, 1.0]
+    assert batch.steer(np.array([1.0, -1.0, 0.1])).tolist()[:2] == [0.7, -0.7]
+    assert batch.steer_redundant(np.array([1.0, -1.0, 0.1])).tolist()[:2] == [0.7, -0.7]
+
+
 def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light_grippy_cars() -> None:
     from sim_plant.campaign.batch_car import BatchCar
 

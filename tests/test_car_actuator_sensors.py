@@ -270,3 +270,20 @@ def test_the_second_elements_table_takes_the_first_ones_keys_it_leaves_out(tmp_p
     f.write_text("[yaw_rate_redundant]\nbias_deg_s = 99\n")
     with pytest.raises(ModelFileError, match="bias_deg_s"):
         SensorConfig.load(str(f))
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig.ideal()], ids=["default", "ideal"])
+def test_every_reading_saturates_at_its_signals_range_as_the_bus_carries_it(config: SensorConfig) -> None:
+    # The DBC's ranges: yaw rate (both elements) +-3 rad/s, a_y +-65 m/s^2, the steering angles
+    # +-0.7 rad, the speed 0-70 and the second speed 0-75 m/s.  A spinning car reads 3 rad/s
+    # offline as the plant node sends it, not 4.5.
+    s = Sensors(config, 0.002)
+    assert (s.yaw_rate(4.5), s.yaw_rate_redundant(-4.5)) == (3.0, -3.0)
+    assert (s.lat_accel(80.0), s.steer(1.0), s.steer_redundant(-1.0)) == (65.0, 0.7, -0.7)
+    assert (s.speed(-1.0), s.speed_redundant(80.0)) == (0.0, 75.0)
+    # within range a reading is left as it was (a fresh sensor: the filter holds the 4.5 above)
+    fresh = Sensors(config, 0.002)
+    assert abs(fresh.yaw_rate(0.5) - 0.5) < 0.01 and abs(fresh.speed(20.0) - 20.0) < 0.2
+    # a fault's value past the range saturates too: a yaw rate stuck at 50 rad/s reads 3
+    stuck = Sensors(SensorConfig(faults=(SensorFault("yaw_rate", "stuck", 0.0, 50.0),)), 0.002)
+    assert stuck.yaw_rate(0.0) == 3.0

@@ -98,6 +98,9 @@ class BatchSensors:
                                         YAW_RATE_REDUNDANT))
         self.q_speed2 = dbc_resolution(SPEED_REDUNDANT)
         self.speed_range, self.speed2_range = dbc_range("speed"), dbc_range(SPEED_REDUNDANT)
+        # every reading saturates at its DBC range, as Sensors' (a spinning car's yaw rate reads 3)
+        self.yaw_range, self.yaw2_range, self.lat_range, self.steer_range, self.steer2_range = (
+            dbc_range(q) for q in ("yaw_rate", YAW_RATE_REDUNDANT, "lat_accel", "steer", "steer_redundant"))
         # Sensors.reset's children of SeedSequence(seed): one per channel, in CHANNELS' order
         # the second steering channel is read every 25 steps, unless a row faults it
         self._yaw_noise, self._lat_noise, self._steer2_noise = (
@@ -132,22 +135,24 @@ class BatchSensors:
     def yaw_rate(self, r: np.ndarray) -> np.ndarray:
         noise = self._yaw_noise.at(self._k)  # sigma times the draw
         q = self.q_yaw
+        lo, hi = self.yaw_range
         rest = self._input("yaw_rate", r) + self.bias
-        y = np.round(self._yaw_lpf(rest + noise, rest) / q) * q
+        y = np.clip(np.round(self._yaw_lpf(rest + noise, rest) / q) * q, lo, hi)
         if self._yaw_clean is not None:
             rest = r + self.bias
-            self._error("yaw_rate", y, np.round(self._yaw_clean(rest + noise, rest) / q) * q)
+            self._error("yaw_rate", y, np.clip(np.round(self._yaw_clean(rest + noise, rest) / q) * q, lo, hi))
         return y
 
     def yaw_rate_redundant(self, r: np.ndarray) -> np.ndarray:
         """The yaw-rate sensor's second element (its bias 0: ``params.scenario_for``'s)."""
         noise = self._yaw2_noise.at(self._k)
         q = self.q_yaw2
+        lo, hi = self.yaw2_range
         rest = self._input("yaw_rate_redundant", r) + 0.0
-        y = np.round(self._yaw2_lpf(rest + noise, rest) / q) * q
+        y = np.clip(np.round(self._yaw2_lpf(rest + noise, rest) / q) * q, lo, hi)
         if self._yaw2_clean is not None:
             rest = r + 0.0
-            self._error("yaw_rate_redundant", y, np.round(self._yaw2_clean(rest + noise, rest) / q) * q)
+            self._error("yaw_rate_redundant", y, np.clip(np.round(self._yaw2_clean(rest + noise, rest) / q) * q, lo, hi))
         return y
 
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
@@ -163,22 +168,25 @@ class BatchSensors:
         return y
 
     def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
-        return np.round(filtered / self.q_lat) * self.q_lat
+        """The reading sent: quantised, and saturated at the signal's range."""
+        return np.clip(np.round(filtered / self.q_lat) * self.q_lat, *self.lat_range)
 
     def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
         """The second steering channel (no filter: only a step whose reading is sent needs it,
         and, for its error, every step of a row that faults it)."""
         noise = self._steer2_noise.at(self._k)
         q = self.q_steer2
-        y = np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q
+        lo, hi = self.steer2_range
+        y = np.clip(np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q, lo, hi)
         if "steer_redundant" in self.tracked:
-            self._error("steer_redundant", y, np.round((delta + 0.0 + noise) / q) * q)
+            self._error("steer_redundant", y, np.clip(np.round((delta + 0.0 + noise) / q) * q, lo, hi))
         return y
 
     def steer(self, delta: np.ndarray) -> np.ndarray:
-        y = np.round(self._input("steer", delta) / self.q_steer) * self.q_steer
+        lo, hi = self.steer_range
+        y = np.clip(np.round(self._input("steer", delta) / self.q_steer) * self.q_steer, lo, hi)
         if "steer" in self.tracked:
-            self._error("steer", y, np.round(delta / self.q_steer) * self.q_steer)
+            self._error("steer", y, np.clip(np.round(delta / self.q_steer) * self.q_steer, lo, hi))
         return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:

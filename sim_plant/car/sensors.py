@@ -17,7 +17,9 @@ Yaw rate, per plant step ts (fs = 1 / ts):
   value without its noise (scipy.signal.lfilter_zi) so it adds no start-up transient.  0 = no
   filter.
 * Q: quantisation to the DBC signal's resolution (YawRate_YawRate's scale), read from the
-  contract, so offline simulations see what the bus carries.
+  contract, so offline simulations see what the bus carries; and, as every channel's, the
+  reading saturates at the signal's DBC range (+-3 rad/s: a spinning car reads 3), as the plant
+  node sends it.
 
 The yaw-rate sensor's second sensing element (``yaw_rate_redundant``, YawRate_YawRate2 in the same
 frame, for the plausibility monitor's yaw-rate pair check) is the same chain with its own
@@ -279,10 +281,10 @@ class Sensors:
         filtered = not config.exact  # exact sensors filter nothing
         self.lowpass = _Lowpass(yaw.lowpass_hz, fs).ba if filtered and yaw.lowpass_hz > 0.0 else None
         self._q = {name: _quantiser(getattr(config, name).quantise, name) for name in ALL_CHANNELS}
-        # A speed sensor reads no negative speed and none beyond what its signal carries: a
-        # fault's negative offset at low speed, or a gain at speed, saturates the reading (the
-        # frame could not carry it; the second speed's 8 bits end at 75 m/s).
-        self._speed_range = {name: dbc_range(name) for name in ("speed", SPEED_REDUNDANT)}
+        # A sensor reads nothing beyond what its signal carries, as the plant node sends it: a
+        # spinning car's yaw rate reads 3 rad/s, a speed no negative value (a fault's negative
+        # offset at low speed) and the second speed nothing past its 8 bits' 75 m/s.
+        self._range = {name: dbc_range(name) for name in ALL_CHANNELS}
         for f in config.faults:
             if f.sensor not in ALL_CHANNELS:
                 raise ModelFileError(f"sensor fault: sensor must be one of {', '.join(ALL_CHANNELS)}, "
@@ -318,7 +320,8 @@ class Sensors:
             x = clean + (sigma * self._rng[name].standard_normal() if sigma else 0.0)
             lpf = self._lpf.get(name)
             x = self._q[name](lpf(x, clean) if lpf is not None else x)
-        return fault.output(self.t, x)
+        lo, hi = self._range[name]
+        return min(max(fault.output(self.t, x), lo), hi)
 
     def yaw_rate(self, r: float) -> float:
         return self._measure("yaw_rate", r)
@@ -327,8 +330,7 @@ class Sensors:
         return self._measure("steer", delta)
 
     def speed(self, v: float) -> float:
-        lo, hi = self._speed_range["speed"]
-        return min(max(self._measure("speed", v), lo), hi)
+        return self._measure("speed", v)
 
     def lat_accel(self, a_y: float) -> float:
         return self._measure("lat_accel", a_y)
@@ -344,5 +346,4 @@ class Sensors:
         """The second speed's reading; NaN for a car without one."""
         if not self.config.speed_redundant_present:
             return math.nan
-        lo, hi = self._speed_range[SPEED_REDUNDANT]
-        return min(max(self._measure(SPEED_REDUNDANT, v), lo), hi)
+        return self._measure(SPEED_REDUNDANT, v)

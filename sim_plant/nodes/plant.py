@@ -131,13 +131,11 @@ class PlantNode:
         self.rx = RxLink(c, (MSG_CMD, MSG_BENCH, MSG_STATUS),
                          {MSG_CMD: self.verifier} if self.verifier is not None else None)
         bus.set_filters(self.rx.filters())
-        # A real sensor saturates at the end of its range, the DBC's: a spinning car's yaw rate
-        # reads 3 rad/s in a valid frame (which the monitor judges), not a value the frame cannot
-        # carry.  strict=False still lets an out-of-range value through (a bench's injection; the
-        # controller range-checks).
+        # The sensors saturate at their signals' DBC ranges (``Sensors``): a spinning car's yaw
+        # rate reads 3 rad/s in a valid frame (which the monitor judges), not a value the frame
+        # cannot carry.  strict=False lets an out-of-range value through (a bench's injection;
+        # the controller range-checks).
         self.tx = TxLink(c, (MSG_SYNC, *VEHICLE_SENSORS), self.sensor_signer, strict=False)
-        self.ranges = {sig.name: c.signal_range(name, sig.name) for name in VEHICLE_SENSORS
-                       for sig in c.message(name).signals}
         self.every = {name: max(1, int(round((c.cycle_time_s(name, ts) or ts) / ts))) for name in VEHICLE_SENSORS}
         self.lockstep_timeout = lockstep_timeout
         self.expect_controller = expect_controller
@@ -207,7 +205,6 @@ class PlantNode:
         if k % self.every[MSG_YAW] == 0:
             sends.append((MSG_YAW, {SIG_YAW_RATE: m[SIG_YAW_RATE], SIG_YAW_RATE_2: m[SIG_YAW_RATE_2]}))
         for name, values in sends:
-            values = {sig: min(max(x, self.ranges[sig][0]), self.ranges[sig][1]) for sig, x in values.items()}
             send(self.tx.frame(name, values))
             self.stats.tx_frames += 1
             if name == MSG_YAW:
