@@ -10,6 +10,7 @@ from firmware_py import model_regulator as mr
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.sensors import SensorConfig
 from sim_plant.harness.hil_plausibility import plausibility_figures
 
 RATE = 500.0
@@ -103,18 +104,43 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
     # either speed: the speed pair's 1.0 m/s + 5 % of 20 m/s, and half the second speed's
     # 0.3 m/s LSB with its 5 %, on a car with the second speed; without it no check bounds the
     # speed's error
+    # speed (ideal sensors: the readings as the synthetic columns give them, unquantised).
+    ideal = replace(scn.load("side-wind"), sensors=SensorConfig.ideal())
     for sensor, column in (("speed", "speed_measured_m_s"), ("speed_redundant", "speed_redundant_measured_m_s")):
         fault = SensorFault(sensor, "drift", 0.2, -2.0)
         steps = _steps(800, **{column: lambda t: 20.0 - 2.0 * max(0.0, t - 0.2)})
-        fig = plausibility_figures(_traffic(fault_from=None, steps=800), scn.load("side-wind").with_sensor_faults(
-            (fault,)), RATE, steps)
+        fig = plausibility_figures(_traffic(fault_from=None, steps=800), ideal.with_sensor_faults((fault,)), RATE, steps)
         bound = cfg.speed_pair_bound + cfg.speed_pair_rel * 20.0 + 0.15 * (1.0 + cfg.speed_pair_rel)
         assert fig["error_over_bound_s"] == pytest.approx(0.2 + bound / 2.0, abs=2.5 / RATE)
-        without = replace(scn.load("side-wind"), sensors=replace(scn.load("side-wind").sensors,
-                                                                 speed_redundant_present=False))
+        without = replace(ideal, sensors=replace(ideal.sensors, speed_redundant_present=False))
         fig = plausibility_figures(_traffic(fault_from=None, steps=800), without.with_sensor_faults((fault,)), RATE,
                                    steps)
         assert fig["error_over_bound_s"] is None
+
+
+def test_the_error_is_the_faults_own_not_the_sensors_lag_in_a_transient() -> None:
+    # The realistic a_y sensor (30 Hz low-pass, noise) through a 5 m/s^2 step of the true a_y at
+    # 0.3 s: for a few ms its reading lags the truth by more than the bound (0.035 * 20 + 0.6).
+    # The readings are the plant's own sensor model with the fault, as the plant sends them.
+    from dataclasses import replace
+
+    from sim_plant.car.sensors import Sensors
+
+    base = scn.load("side-wind")
+    truth = [0.4 if k / RATE < 0.3 else 5.4 for k in range(400)]
+    for offset, over in ((0.1, None), (2.0, 0.2)):
+        fault = SensorFault("lat_accel", "bias", 0.2, offset)
+        sensor = Sensors(replace(base.sensor_config, faults=(fault,)), 1.0 / RATE)
+        readings = []
+        for k, a_y in enumerate(truth):
+            sensor.at(k / RATE)
+            readings.append(sensor.lat_accel(a_y))
+        assert max(abs(r - a) for r, a in zip(readings, truth)) > 1.3  # the lag: over the bound
+        steps = [replace(s, lat_accel_m_s2=a, lat_accel_measured_m_s2=r)
+                 for s, a, r in zip(_steps(400), truth, readings)]
+        fig = plausibility_figures(_traffic(fault_from=None), base.with_sensor_faults((fault,)), RATE, steps)
+        # (the 2 m/s^2 offset acts before the sensor's filter: over the bound 10 ms after its onset)
+        assert fig["error_over_bound_s"] == (None if over is None else pytest.approx(over, abs=0.015))
 
 
 def test_the_command_line_says_early_or_late_against_the_bound() -> None:

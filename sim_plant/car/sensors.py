@@ -61,7 +61,7 @@ reproducible and the sensors' streams independent.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -69,7 +69,7 @@ import numpy as np
 import mrsteer_dbc
 from mrsteer_dbc import names
 from sim_plant.car.model_files import ModelFileError, boolean, integer, number, read_table, reject_unknown, table
-from sim_plant.car.sensor_faults import FaultedChannel, SensorFault
+from sim_plant.car.sensor_faults import MAX_TIME, FaultedChannel, SensorFault
 
 G = 9.80665  # m/s^2 per g
 
@@ -249,6 +249,13 @@ YAW_RATE_REDUNDANT = "yaw_rate_redundant"
 #: The second speed: its stream after the yaw rate's second element's, for the same reason.
 SPEED_REDUNDANT = "speed_redundant"
 ALL_CHANNELS = (*CHANNELS, YAW_RATE_REDUNDANT, SPEED_REDUNDANT)
+
+
+def dormant_faults(config: SensorConfig) -> SensorConfig:
+    """``config`` with its faults never starting: readings as without them, from the same noise
+    streams (each fault keeps its place among the seed's children, and a fault draws from its
+    own stream only while active), so a faulted reading less this one's is the fault's own error."""
+    return replace(config, faults=tuple(replace(f, start=MAX_TIME, stop=math.inf) for f in config.faults))
 
 
 class Sensors:

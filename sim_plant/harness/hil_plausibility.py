@@ -5,8 +5,8 @@ first sensor fault that was, and where the command was at the end.  Part of ``su
 The detection time is read from the command frames, which come every control period: the first
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
 plausibility fault bit (``CtrlStatus_Plausibility`` 1 or 2; the status frame itself comes only
-every 100 ms).  The plant's trace also gives when the faulted sensor's error (measured less
-true) first exceeded the bound the monitor checks it against, the moment from which issue 18
+every 100 ms).  The plant's trace also gives when the faulted sensor's error (its reading less
+the same sensor's without the fault, at the trace's true values: the fault's own) first exceeded the bound the monitor checks it against, the moment from which issue 18
 counts its 300 ms (``error_over_bound_s``; ``yaw_error_over_bound_s`` the same for a yaw-rate
 fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pair's
 ``yaw_pair_bound`` when the car has the sensor's second element (a stuck element is found as its
@@ -27,6 +27,7 @@ from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
+from sim_plant.car.sensors import Sensors, dormant_faults
 from sim_plant.harness.hil_steps import Step
 from sim_plant.offline.plausibility_runs import sensor_bound
 
@@ -58,7 +59,7 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
             if bits & _FAULT_BITS and detected_s is None:
                 detected_s = run_start if run_start is not None else (yaw_frames - 1) * ts
     onset = min((f.start for f in sc.sensor_faults), default=None)
-    over = error_over_bound(steps, sc) if steps and sc.sensor_faults else None
+    over = error_over_bound(steps, sc, 1.0 / rate_hz) if steps and sc.sensor_faults else None
     return {
         "bits_seen": seen,
         "fault_detected_s": detected_s,
@@ -73,11 +74,14 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
     }
 
 
-def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
-    """When the scenario's first sensor fault's error (measured less true, from the plant's
-    trace) first exceeded the bound the monitor checks it against (the module's docstring);
-    None if it never did, or for a fault of the speed on a car without the second speed (its
-    check then bounds its jumps, not its error; with it, the speed pair's ``speed_pair_bound``)."""
+def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | None:
+    """When the scenario's first sensor fault's error first exceeded the bound the monitor checks
+    it against (the module's docstring); None if it never did, or for a fault of the speed on a
+    car without the second speed (its check then bounds its jumps, not its error; with it, the
+    speed pair's ``speed_pair_bound``).  The error is the fault's own: the reading the plant sent
+    less what the same sensor (its noise, filter, quantisation and bias; ``sensors.dormant_faults``)
+    reads of the trace's true value at each step of ``ts`` s without the fault.  A sensor's
+    filter lag in a fast transient, or its noise, is not the fault's."""
     cfg = pl.PlausibilityConfig()
     sensor = min(sc.sensor_faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
@@ -89,15 +93,23 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario) -> float | None:
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
         return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair))
 
-    error = {"yaw_rate": lambda s: s.yaw_rate_measured_rad_s - s.yaw_rate_rad_s,
-             "lat_accel": lambda s: s.lat_accel_measured_m_s2 - s.lat_accel_m_s2,
-             "steer": lambda s: s.steer_measured_rad - s.driver_angle_rad,
-             "steer_redundant": lambda s: s.steer_redundant_measured_rad - s.driver_angle_rad,
-             "yaw_rate_redundant": lambda s: s.yaw_rate_redundant_measured_rad_s - s.yaw_rate_rad_s,
-             "speed": lambda s: s.speed_measured_m_s - s.v_m_s,
-             "speed_redundant": lambda s: s.speed_redundant_measured_m_s - s.v_m_s}.get(sensor)
     if sensor in ("speed", "speed_redundant") and not speed_pair:
-        error = None
-    if error is None:
         return None
-    return next((s.t_s for s in steps if abs(error(s)) > bound(s)), None)
+    measured, truth = _READINGS[sensor]
+    clean = Sensors(dormant_faults(sc.sensor_config), ts)
+    read = getattr(clean, sensor)
+    for s in steps:
+        clean.at(s.t_s)
+        if abs(getattr(s, measured) - read(getattr(s, truth))) > bound(s):
+            return s.t_s
+    return None
+
+
+#: Each sensor's reading in a step (``Step``'s field) and the true value the sensor measures.
+_READINGS = {"yaw_rate": ("yaw_rate_measured_rad_s", "yaw_rate_rad_s"),
+             "yaw_rate_redundant": ("yaw_rate_redundant_measured_rad_s", "yaw_rate_rad_s"),
+             "lat_accel": ("lat_accel_measured_m_s2", "lat_accel_m_s2"),
+             "steer": ("steer_measured_rad", "driver_angle_rad"),
+             "steer_redundant": ("steer_redundant_measured_rad", "driver_angle_rad"),
+             "speed": ("speed_measured_m_s", "v_m_s"),
+             "speed_redundant": ("speed_redundant_measured_m_s", "v_m_s")}
