@@ -64,6 +64,12 @@ def test_only_what_the_run_applied_beyond_the_healthy_command_counts(twin: list[
     assert fig["caused_yaw_rad_s"] == pytest.approx(_peak(pulse[k0:]), rel=2e-3)
     assert fig["caused_yaw_twin_mismatch_deg"] == 0.0
     assert "fault-free twin" in fig["caused_yaw_note"] and "linear car" in fig["caused_yaw_note"]
+    assert "unchecked" not in fig["caused_yaw_note"]  # the command moved from 0.5 s: the twin was checked
+    # A fault at 0.3 s, before the yaw moment: the command was 0 until then, so the twin's
+    # match there says nothing, and the note says so (the figure is still given).
+    early = caused_yaw_figures(_steps(twin), scn.load("paper-fig9").with_sensor_faults(
+        (SensorFault("yaw_rate", "stuck", 0.3, 0.01),)), CTRL, RATE)
+    assert early["caused_yaw_rad_s"] == 0.0 and "twin unchecked" in early["caused_yaw_note"]
     # The same run following the twin: nothing caused. A fade to zero from the onset: nothing either.
     assert caused_yaw_figures(_steps(twin), SCENARIO, CTRL, RATE)["caused_yaw_rad_s"] == 0.0
     fade = twin[:k0] + [twin[k0] * max(0.0, 1.0 - (k - k0) / 100) for k in range(k0, len(twin))]
@@ -82,7 +88,8 @@ def test_runs_without_a_twin_say_why(twin: list[float]) -> None:
              "no controller": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, controller=False),
              "a realtime run": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, lockstep=False),
              "one-step delay, the run 2": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, delay_steps=2),
-             "ends at the fault's onset": caused_yaw_figures(steps[:round(ONSET / TS)], SCENARIO, CTRL, RATE)}
+             "ends at the fault's onset": caused_yaw_figures(steps[:round(ONSET / TS)], SCENARIO, CTRL, RATE),
+             "another controller program": caused_yaw_figures(steps, SCENARIO, CTRL, RATE, shipped=False)}
     for words, fig in cases.items():
         assert fig["caused_yaw_rad_s"] is None and words in fig["caused_yaw_note"], (words, fig)
     # A fault in the sensor models' own file counts as the run's fault, and the twin drops it too.

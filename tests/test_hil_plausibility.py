@@ -103,8 +103,7 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
         assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
     # either speed: the speed pair's 1.0 m/s + 5 % of 20 m/s, and half the second speed's
     # 0.3 m/s LSB with its 5 %, on a car with the second speed; without it no check bounds the
-    # speed's error
-    # speed (ideal sensors: the readings as the synthetic columns give them, unquantised).
+    # speed's error (ideal sensors: the readings as the synthetic columns give them, unquantised)
     ideal = replace(scn.load("side-wind"), sensors=SensorConfig.ideal())
     for sensor, column in (("speed", "speed_measured_m_s"), ("speed_redundant", "speed_redundant_measured_m_s")):
         fault = SensorFault(sensor, "drift", 0.2, -2.0)

@@ -55,7 +55,7 @@ Generator per sensor (yaw rate, steer, speed, lateral acceleration, second steer
 one per noise fault, then the yaw rate's second element, then the second speed: the first three streams are those of the
 three-sensor model before, and each model since added its stream after the others), so runs are
 reproducible and the sensors' streams independent.
-``SensorConfig.ideal()`` keeps today's exact sensors (output = input).
+``SensorConfig.ideal()`` keeps today's exact sensors (output = input, within the signal's range).
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ below 0.05 rad/s"), for a run with a sensor fault: ``caused_yaw_rad_s`` in ``sum
 
 What the faulty command is measured against is the healthy controller's angle at each step,
 taken from a *fault-free twin* of the run: the same scenario, car, actuator, sensors (the same
-seed, so the same noise) and calibration without the sensor fault, played offline
+seed and, with the faults kept dormant, the same noise streams) and calibration without the
+sensor fault, played offline
 (``offline.plausibility_runs.run``, the plant node's step and the controller's cycle side by
 side, with the bus's one-step delay). Only the excursion of the run's applied angle beyond the
 twin's or beyond zero counts (``offline.excursion_yaw``): the healthy controller's answer to a
@@ -16,19 +17,25 @@ state at the onset, with the scenario's loads (side force, braking, grip) at eac
 Before the onset the twin and the run are the same run; their largest difference there is the
 figure's floor (``caused_yaw_twin_mismatch_deg``: the bus carries the measurements quantised to
 their DBC resolution, the twin does not; about 0.01 deg in a fast transient). A twin further than
-``TWIN_TOLERANCE`` from the run before the onset is no twin, and the run gets no figure: a
-controller that is not the shipped one (``--controller-cmd``) or a run the bus disturbed. The
-twin needs lockstep (in realtime the commands meet the steps by wall clock) and the one-step
-delay ``run`` models."""
+``TWIN_TOLERANCE`` from the run before the onset is no twin, and the run gets no figure (a run
+the bus disturbed). That check sees something only where the command moved before the onset by
+more than the tolerance; otherwise the note says the twin is unchecked. A controller program
+other than the shipped Python or C node (``--controller-cmd``) gets no figure: the twin is the
+shipped firmware. The twin's second yaw-rate element is a copy of the first (``plausibility_runs``
+models no element of its own), so its pair check sees no difference where the run's may see the
+elements' noise; only the twin's monitor sees it. The twin needs lockstep (in realtime the
+commands meet the steps by wall clock) and the one-step delay ``run`` models."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 from firmware_py import model_regulator as mr
 from sim_plant.car import scenario as scn
 from sim_plant.car.scenario_play import ScenarioState
+from sim_plant.car.sensors import dormant_faults
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.hil_steps import Step
 from sim_plant.offline import plausibility_runs
@@ -40,10 +47,13 @@ TWIN_TOLERANCE = math.radians(0.05)
 
 
 def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerConfig, rate_hz: float, *,
-                       lockstep: bool = True, delay_steps: int = 1, controller: bool = True) -> dict[str, Any]:
+                       lockstep: bool = True, delay_steps: int = 1, controller: bool = True,
+                       shipped: bool = True) -> dict[str, Any]:
     """``caused_yaw_rad_s`` (None with ``caused_yaw_note`` saying why) and the twin's mismatch
     before the onset, for the run's ``steps`` (``hil_steps.step_table``) of scenario ``sc`` (its
-    sensor faults included) under the calibration ``ctrl``."""
+    sensor faults, the scenario's and its sensor models', included) under the calibration
+    ``ctrl``; ``shipped`` False for a controller program that is neither the Python nor the C
+    node (``--controller-cmd``), which the twin is not."""
     def none(why: str) -> dict[str, Any]:
         return {"caused_yaw_rad_s": None, "caused_yaw_note": why, "caused_yaw_twin_mismatch_deg": None}
 
@@ -52,6 +62,8 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
         return none("no sensor fault")
     if not controller:
         return none("no controller: no command")
+    if not shipped:
+        return none("another controller program than the shipped Python or C node: the twin is the shipped one")
     if not lockstep:
         return none("a realtime run: the fault-free twin is a lockstep run")
     if delay_steps != 1:
@@ -60,7 +72,8 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
     k0 = next((i for i, s in enumerate(steps) if s.t_s >= onset - 1e-9), None)
     if k0 is None or k0 + 1 >= len(steps):
         return none("the run ends at the fault's onset")
-    healthy_sc = sc.without_sensor_faults()
+    # The faults kept but dormant: the twin's sensors draw from the run's noise streams.
+    healthy_sc = replace(sc.without_sensor_faults(), sensors=dormant_faults(sc.sensor_config))
     config = healthy_sc.sensor_config
     twin = plausibility_runs.run(healthy_sc, 1.0 / rate_hz, controller=ctrl,
                                  second_yaw=config if config.yaw_rate_redundant_present else None,
@@ -71,6 +84,9 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
     if mismatch > TWIN_TOLERANCE:
         return none(f"the fault-free twin differs from the run by {math.degrees(mismatch):.3f} deg before the onset "
                     "(another controller?)")
+    # A command that did not move before the onset tests the twin against nothing there.
+    before = healthy[:min(k0, n)]
+    checked = bool(before) and max(before) - min(before) > TWIN_TOLERANCE
     run = steps[k0:n]
     scene = ScenarioState(sc)
     car = VehicleParams(v=run[0].v_m_s, mu=run[0].mu, mass=sc.mass)
@@ -79,5 +95,6 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
                            run[0].yaw_rate_rad_s, healthy=healthy[k0:n], mu=[s.mu for s in run],
                            loads=[scene.loads(s.t_s) for s in run])
     return {"caused_yaw_rad_s": figure,
-            "caused_yaw_note": f"the excursion beyond a fault-free twin's command, replayed on the {sc.plant} car",
+            "caused_yaw_note": f"the excursion beyond a fault-free twin's command, replayed on the {sc.plant} car"
+                               + ("" if checked else " (the twin unchecked: the command did not move before the onset)"),
             "caused_yaw_twin_mismatch_deg": math.degrees(mismatch)}

@@ -58,8 +58,8 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
                 degraded_s = (yaw_frames - 1) * ts
             if bits & _FAULT_BITS and detected_s is None:
                 detected_s = run_start if run_start is not None else (yaw_frames - 1) * ts
-    onset = min((f.start for f in sc.sensor_faults), default=None)
-    over = error_over_bound(steps, sc, 1.0 / rate_hz) if steps and sc.sensor_faults else None
+    onset = min((f.start for f in sc.sensor_config.faults), default=None)
+    over = error_over_bound(steps, sc, 1.0 / rate_hz) if steps and sc.sensor_config.faults else None
     return {
         "bits_seen": seen,
         "fault_detected_s": detected_s,
@@ -67,10 +67,10 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
         "sensor_fault_onset_s": onset,
         "detection_latency_s": None if detected_s is None or onset is None else detected_s - onset,
         "error_over_bound_s": over,
-        "yaw_error_over_bound_s": over if any(f.sensor == "yaw_rate" for f in sc.sensor_faults) else None,
+        "yaw_error_over_bound_s": over if any(f.sensor == "yaw_rate" for f in sc.sensor_config.faults) else None,
         "latency_from_bound_s": None if detected_s is None or over is None else detected_s - over,
         "sensor_faults": [f"{f.sensor}:{f.kind}" + ("" if f.value is None else f":{f.value:g}") + f"@{f.start:g}"
-                          for f in sc.sensor_faults],
+                          for f in sc.sensor_config.faults],
     }
 
 
@@ -83,9 +83,9 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     reads of the trace's true value at each step of ``ts`` s without the fault.  A sensor's
     filter lag in a fast transient, or its noise, is not the fault's."""
     cfg = pl.PlausibilityConfig()
-    sensor = min(sc.sensor_faults, key=lambda f: f.start).sensor
+    sensor = min(sc.sensor_config.faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
-        f.sensor == "yaw_rate_redundant" for f in sc.sensor_faults)
+        f.sensor == "yaw_rate_redundant" for f in sc.sensor_config.faults)
     speed_pair = sc.sensor_config.speed_redundant_present
 
     def bound(s: Step) -> float:

@@ -20,7 +20,7 @@ from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
 from sim_plant.car.vehicle import VehicleParams
-from sim_plant.harness import hil_plot
+from sim_plant.harness import hil_plot, launch
 from sim_plant.harness.hil_caused_yaw import caused_yaw_figures
 from sim_plant.harness.hil_plausibility import plausibility_figures
 from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, step_table, steps_csv
@@ -70,7 +70,7 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
     summary["secoc"] = cfg.secoc_key is not None
     summary["plausibility"] = plausibility_figures(rows, sc, cfg.rate_hz, steps) | caused_yaw_figures(
         steps, sc, ctrl, cfg.rate_hz, lockstep=cfg.mode == "lockstep", delay_steps=cfg.delay_steps,
-        controller=cfg.controller != "none")
+        controller=cfg.controller != "none", shipped=cfg.controller_program in (None, (str(launch.C_NODE),)))
     summary["loop"] = {"controller": stats["controller"], "plant": stats["plant"]}
     files = {
         "traffic.log": (work / "traffic.log").read_bytes(),

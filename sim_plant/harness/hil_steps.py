@@ -55,8 +55,9 @@ class Step:
     lat_accel_m_s2: float
     wall_s: float  # epoch s when the plant recorded the step, for aligning with traffic.log
     # What the other sensors gave (NaN: a steps.csv written before they were kept; the second
-    # yaw-rate element NaN also when the sensor has none): their faults' errors are these less
-    # the truth above (the steering channels' truth is driver_angle_rad).
+    # yaw-rate element NaN also when the sensor has none); each measures the truth above (the
+    # steering channels' truth is driver_angle_rad), and a fault's error is the reading less the
+    # same sensor's without the fault (``hil_plausibility.error_over_bound``).
     steer_measured_rad: float = math.nan
     lat_accel_measured_m_s2: float = math.nan
     steer_redundant_measured_rad: float = math.nan

@@ -13,9 +13,10 @@ The command's *excursion* is the applied angle's distance outside [min(0, a0), m
 The figure is the peak yaw rate the excursion gives the run's own car
 (``sim_plant.offline.excursion_yaw``): the plant's car (the paper's linear one, eqs. 14/16,
 exact by superposition; or the nonlinear one, replayed with and without the excursion from the
-trace's side slip and yaw rate at the onset) at the plant's step, the trace's speed and
-friction at the onset, the scenario's mass, the trace's driver angle and yaw moment (the sensor
-rows' only loads). The trace's applied angle is the actuator's position, so an actuator with
+trace's side slip and yaw rate at the onset) at the plant's step, the trace's speed at the onset
+and friction at each step, the scenario's mass, the trace's driver angle and yaw moment (the
+sensor rows' only loads: the matrix's scenarios carry no side force, braking or grip change,
+``settings.scenario_toml`` refuses them). The trace's applied angle is the actuator's position, so an actuator with
 its own dynamics is in it.
 
 This is not the campaign's ``fault_yaw_rate``, which is |r − r of the fault-free twin| and so
@@ -78,7 +79,8 @@ def caused_yaw(e: Evidence, start: float) -> CausedYaw:
         return CausedYaw(None, "the command was moving at the onset")
     car = VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass)
     ts = tr.t[i0 + 1] - tr.t[i0]
+    mu = cols["mu"][i0:]
     if kind == LINEAR:
-        return CausedYaw(excursion_yaw(tr.applied[i0:], ts, car))
+        return CausedYaw(excursion_yaw(tr.applied[i0:], ts, car, mu=mu))
     return CausedYaw(excursion_yaw(tr.applied[i0:], ts, car, kind, cols["driver_angle_rad"][i0:], cols["m_z_nm"][i0:],
-                                   cols["beta_rad"][i0], cols["yaw_rate_rad_s"][i0]))
+                                   cols["beta_rad"][i0], cols["yaw_rate_rad_s"][i0], mu=mu))
