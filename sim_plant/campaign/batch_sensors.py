@@ -56,6 +56,12 @@ class _Butterworth:
         return y
 
 
+def _reading(x: np.ndarray, q: float, lo: float, hi: float) -> np.ndarray:
+    """A value as its frame carries it: quantised to the signal's resolution ``q`` and saturated
+    at its DBC range [lo, hi] (``Sensors._measure``'s quantiser and clamp)."""
+    return np.clip(np.round(x / q) * q, lo, hi)
+
+
 class BatchSensors:
     """The sensors per row (``sensors.Sensors``): the yaw rate (noise density and bias per row)
     and its second element (the same noise density and filter, no bias: ``params.scenario_for``'s
@@ -137,10 +143,10 @@ class BatchSensors:
         q = self.q_yaw
         lo, hi = self.yaw_range
         rest = self._input("yaw_rate", r) + self.bias
-        y = np.clip(np.round(self._yaw_lpf(rest + noise, rest) / q) * q, lo, hi)
+        y = _reading(self._yaw_lpf(rest + noise, rest), q, lo, hi)
         if self._yaw_clean is not None:
             rest = r + self.bias
-            self._error("yaw_rate", y, np.clip(np.round(self._yaw_clean(rest + noise, rest) / q) * q, lo, hi))
+            self._error("yaw_rate", y, _reading(self._yaw_clean(rest + noise, rest), q, lo, hi))
         return y
 
     def yaw_rate_redundant(self, r: np.ndarray) -> np.ndarray:
@@ -149,10 +155,10 @@ class BatchSensors:
         q = self.q_yaw2
         lo, hi = self.yaw2_range
         rest = self._input("yaw_rate_redundant", r) + 0.0
-        y = np.clip(np.round(self._yaw2_lpf(rest + noise, rest) / q) * q, lo, hi)
+        y = _reading(self._yaw2_lpf(rest + noise, rest), q, lo, hi)
         if self._yaw2_clean is not None:
             rest = r + 0.0
-            self._error("yaw_rate_redundant", y, np.clip(np.round(self._yaw2_clean(rest + noise, rest) / q) * q, lo, hi))
+            self._error("yaw_rate_redundant", y, _reading(self._yaw2_clean(rest + noise, rest), q, lo, hi))
         return y
 
     def lat_filtered(self, a_y: np.ndarray) -> np.ndarray:
@@ -169,7 +175,7 @@ class BatchSensors:
 
     def quantised_lat(self, filtered: np.ndarray) -> np.ndarray:
         """The reading sent: quantised, and saturated at the signal's range."""
-        return np.clip(np.round(filtered / self.q_lat) * self.q_lat, *self.lat_range)
+        return _reading(filtered, self.q_lat, *self.lat_range)
 
     def steer_redundant(self, delta: np.ndarray) -> np.ndarray:
         """The second steering channel (no filter: only a step whose reading is sent needs it,
@@ -177,25 +183,25 @@ class BatchSensors:
         noise = self._steer2_noise.at(self._k)
         q = self.q_steer2
         lo, hi = self.steer2_range
-        y = np.clip(np.round((self._input("steer_redundant", delta) + 0.0 + noise) / q) * q, lo, hi)
+        y = _reading(self._input("steer_redundant", delta) + 0.0 + noise, q, lo, hi)
         if "steer_redundant" in self.tracked:
-            self._error("steer_redundant", y, np.clip(np.round((delta + 0.0 + noise) / q) * q, lo, hi))
+            self._error("steer_redundant", y, _reading(delta + 0.0 + noise, q, lo, hi))
         return y
 
     def steer(self, delta: np.ndarray) -> np.ndarray:
         lo, hi = self.steer_range
-        y = np.clip(np.round(self._input("steer", delta) / self.q_steer) * self.q_steer, lo, hi)
+        y = _reading(self._input("steer", delta), self.q_steer, lo, hi)
         if "steer" in self.tracked:
-            self._error("steer", y, np.clip(np.round(delta / self.q_steer) * self.q_steer, lo, hi))
+            self._error("steer", y, _reading(delta, self.q_steer, lo, hi))
         return y
 
     def speed(self, v: np.ndarray) -> np.ndarray:
         """The speed (its noise 0 in a campaign), quantised and clamped to its DBC field as
         ``Sensors.speed`` (a speed stuck below 0 reads 0)."""
         lo, hi = self.speed_range
-        y = np.clip(np.round(self._input("speed", v) / self.q_speed) * self.q_speed, lo, hi)
+        y = _reading(self._input("speed", v), self.q_speed, lo, hi)
         if "speed" in self.tracked:
-            self._error("speed", y, np.clip(np.round(v / self.q_speed) * self.q_speed, lo, hi))
+            self._error("speed", y, _reading(v, self.q_speed, lo, hi))
         return y
 
     def speed_redundant(self, v: np.ndarray) -> np.ndarray:
@@ -204,7 +210,7 @@ class BatchSensors:
         call it only at the steps the bus sends it, or every step for a row that faults it)."""
         noise = self._speed2_noise.at(self._k)
         q, (lo, hi) = self.q_speed2, self.speed2_range
-        y = np.clip(np.round((self._input("speed_redundant", v) + 0.0 + noise) / q) * q, lo, hi)
+        y = _reading(self._input("speed_redundant", v) + 0.0 + noise, q, lo, hi)
         if "speed_redundant" in self.tracked:
-            self._error("speed_redundant", y, np.clip(np.round((v + 0.0 + noise) / q) * q, lo, hi))
+            self._error("speed_redundant", y, _reading(v + 0.0 + noise, q, lo, hi))
         return y
