@@ -2,7 +2,7 @@
 
 An independent limit on how far and how long the auxiliary command may act, whatever computed
 it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
-``authority_step(c, s, u_request, plaus_bits, cut)`` once per control period (scalar arithmetic, no
+``authority_step(c, s, u_request, plaus_bits, cut, fade)`` once per control period (scalar arithmetic, no
 allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
 bit (float64) in ``ports/c/mrs_monitor.c``; the reasoning is in docs/controller.md, "Bounded
 authority".  Meant to run where the command leaves the controller and again at the actuator.
@@ -70,7 +70,7 @@ def configure_authority(cfg: AuthorityConfig) -> AuthorityCoefficients:
 
 
 def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int,
-                   cut: int = 0) -> float:
+                   cut: int = 0, fade: int = 0) -> float:
     """The command allowed this period for ``u_request`` (rad), given the monitor's bits: within
     +-u_max, moving at most ``rate_max``; faded to zero at ``fault_fade_rate`` on a plausibility
     fault or a non-finite request, and at ``fade_rate`` once the intervention has lasted
@@ -80,10 +80,12 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
     than coming back for another window each time the faded command has rested.
     ``cut`` nonzero with a fault (the node passes the monitor's ``flags & CUT_CHECKS``: a pair
     check): the fault was found while its command is still building, so the command is removed
-    at ``rate_max``, not faded.  ``s.flags`` says which bound acted."""
+    at ``rate_max``, not faded.  ``fade`` nonzero (the node passes the monitor's ``flags &
+    FADE_CHECKS``: the car outside the model the checks and the law assume) fades the command
+    as a fault does, though the bits say DEGRADED.  ``s.flags`` says which bound acted."""
     flags = 0
     du = c.du_max
-    if (plaus_bits & PLAUS_FAULT) != 0 or not (-1e3 < u_request < 1e3):
+    if (plaus_bits & PLAUS_FAULT) != 0 or fade != 0 or not (-1e3 < u_request < 1e3):
         target = 0.0
         du = c.du_max if cut != 0 and (plaus_bits & PLAUS_FAULT) != 0 else c.fault_fade_step
         flags |= AUTH_FAULT

@@ -82,13 +82,22 @@ within it, and trips at ``*_count``; 2 and 8 likewise per control period, trippi
 ``model_time`` and ``speed_pair_time``; 4 trips on one window over its bound (at other rates
 than 500 Hz its ``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block
 over its bound.
+While the yaw rate's second element confirms it (4 running, its window full), a trip of 1 or 2
+is not the yaw rate's fault: what disagrees is the lateral acceleration or the car itself,
+which past its grip limit (sliding, spinning) is neither the nominal car nor in a steady turn.
+It latches ``OUTSIDE_MODEL`` instead, which is DEGRADED and fades the command as a fault does
+(``authority_step``'s ``fade``): the law's linear car does not hold there, and a wrong a_y
+leaves the yaw rate with one check.  Without the element the trips are the yaw rate's, as the
+monitor cannot tell the car from the sensor (docs/controller.md, "Outside the model").
+
 A trip latches (until ``reset_monitor``: the next ignition cycle).  A missing redundant input
 (NaN: the node's freshness check) pauses the checks that need it and sets DEGRADED; below
 ``speed_min`` every check but 6 and 8 pauses and its counters restart.
 
 ``monitor_step`` returns the ``CtrlStatus_Plausibility`` bits: ``PLAUS_YAW`` or ``PLAUS_STEER``
 is a fault (the command fades to zero), ``PLAUS_DEGRADED`` a degraded state (fewer checks; the
-authority limiter then ends an intervention at the panic window).
+authority limiter then ends an intervention at the panic window; with ``OUTSIDE_MODEL`` the
+node fades the command at once).
 """
 
 from __future__ import annotations
@@ -125,6 +134,12 @@ SUSPECT_YAW_PAIR = 0x800
 #: sample (not latched): held as ``SUSPECT_YAW_PAIR`` until the steering pair judges it at the
 #: next one (docs/controller.md, "The steering pair's suspicion").
 SUSPECT_STEER_JUMP = 0x2000
+#: The kinematic (1) or the model (2) check tripped while the yaw rate's second element confirmed
+#: it (latched): the lateral acceleration or the car is what disagrees -- a car past its grip
+#: limit, spinning, is neither the nominal car nor a steady turn -- not the yaw rate.
+#: PLAUS_DEGRADED, and the node fades the command as on a fault (``authority_step``'s ``fade``):
+#: the law's linear car does not hold there (docs/controller.md, "Outside the model").
+OUTSIDE_MODEL = 0x4000
 #: The suspicions: the node passes ``flags & SUSPECT_CHECKS != 0`` as ``step()``'s ``hold``.
 SUSPECT_CHECKS = SUSPECT_YAW_PAIR | SUSPECT_STEER_JUMP
 #: The speed schedules the nominal car's yaw rate K_n(v) the law follows: its fault is the yaw
@@ -135,6 +150,9 @@ STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: The pair checks, which find a fault while the command it drove is still building: the node
 #: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
 CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED | CHECK_SPEED_PAIR
+#: The flags on which the command fades though no fault bit is set: the node passes
+#: ``flags & FADE_CHECKS`` as ``authority_step``'s ``fade``.
+FADE_CHECKS = OUTSIDE_MODEL
 
 #: Samples (of the 50 ms redundant frame) the kinematic residual is averaged over: 200 ms.
 KIN_WINDOW = 4
@@ -510,7 +528,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             bits |= PLAUS_YAW
         if flags & STEER_CHECKS:
             bits |= PLAUS_STEER
-        if flags & MISSING:
+        if flags & (MISSING | OUTSIDE_MODEL):
             bits |= PLAUS_DEGRADED
         s.flags = flags
         s.bits = bits
@@ -557,13 +575,16 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     # cannot fully counter (the paper's 4000 Nm on mu 0.3), not a sensor error.  Not "its last
     # sample recent": a steady a_y on exact sensors repeats its value, which the monitor cannot
     # tell from no sample, and a frozen a_y is the frozen check's.
-    vouched = (-1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW
-               and s.yaw_clear_n >= YAW_PAIR_WINDOW and lat_ok and s.kin_n >= KIN_WINDOW and s.kin_count == 0)
+    confirmed = -1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW  # by its second element
+    vouched = (confirmed and s.yaw_clear_n >= YAW_PAIR_WINDOW and lat_ok and s.kin_n >= KIN_WINDOW
+               and s.kin_count == 0)
     if e > bound and not vouched:
         s.model_count += 1
         if s.model_count >= c.model_steps:
             s.model_count = c.model_steps  # saturated: C counts in 32 bits
-            s.latched |= CHECK_MODEL
+            # the yaw rate confirmed by its second element: it is the car that the nominal one
+            # does not explain (past its grip), not the sensor
+            s.latched |= OUTSIDE_MODEL if confirmed else CHECK_MODEL
     elif s.model_count > 0:
         s.model_count -= 1
 
@@ -701,7 +722,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             s.kin_count += 1
             if s.kin_count >= c.yaw_count:
                 s.kin_count = c.yaw_count
-                s.latched |= CHECK_KINEMATIC
+                # the yaw rate confirmed by its second element: a_y or the car disagrees
+                s.latched |= OUTSIDE_MODEL if s.yaw_pair_n >= YAW_PAIR_WINDOW else CHECK_KINEMATIC
         elif s.kin_count > 0:
             s.kin_count -= 1
         e = delta_driver - delta_driver_redundant
@@ -817,7 +839,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         bits |= PLAUS_YAW
     if flags & STEER_CHECKS:
         bits |= PLAUS_STEER
-    if flags & MISSING:
+    if flags & (MISSING | OUTSIDE_MODEL):
         bits |= PLAUS_DEGRADED
     s.flags = flags
     s.bits = bits

@@ -83,14 +83,17 @@ def test_batch_equals_scalar_firmware_on_random_samples(seed: int) -> None:
 
 
 def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
+    from firmware_py import plausibility as pl
+
     c = spec.parse(WIDE.format(seed=5), "wide.toml")
     s = sampling.samples(c, np.arange(4))
     s["disturbance"][:] = KINDS.index("yaw_moment")
-    s["yaw_moment"][:2] = 15000.0  # a spin on a slippery road: |r| beyond 3 rad/s is a fault
+    s["yaw_moment"][:2] = 15000.0  # a spin on a slippery road: the car outside the model, its command faded
     s["mu"][:2] = 0.3
     s["onset"][:] = 0.1
     res = _compare(s, mr.ControllerConfig())
-    assert res["fault_steps"][:2].min() > 0, "the spin must reach the fault path"
+    assert (res["plausibility_bits"][:2] == pl.PLAUS_DEGRADED).all(), "the spin must reach the fade path"
+    assert res["authority_steps"][:2].min() > 0
     _compare(s, None)
 
 
@@ -298,6 +301,7 @@ def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:
     r2 = np.where(then & (k % 2 == 0), np.nan, r2)
     v2 = np.where((kind == 3) & (k >= onset + 200), np.nan, v2)
     v2 = np.where(kind == 8, np.nan, v2)
+    r2 = np.where((kind == 9) & (np.arange(rows) >= 20), np.nan, r2)  # no element: CHECK_MODEL, not OUTSIDE_MODEL
     held = (k // 25) * 25  # the 50 ms frame, sampled at the period it is sent in
     lat, d2, v2 = lat[held[:, 0]], d2[held[:, 0]], v2[held[:, 0]]
     return {"d": d, "d2": d2, "r": r, "lat": lat, "v": v, "aux": aux, "r2": r2, "v2": v2}
@@ -355,9 +359,9 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
                 assert not s.flags & pl.CHECK_TURN, (k, i)
             lost_speed2 |= (s.flags & pl.MISSING != 0) & (kind[i] == 3) & (k > steps // 2 + 200)
     assert seen & pl.MISSING and seen & pl.CHECK_STEER_PAIR and seen & (pl.CHECK_KINEMATIC | pl.CHECK_MODEL)
-    # every check tripped somewhere, MISSING and both suspicions (the steering one's is the
-    # highest bit); a lost second speed is DEGRADED
-    assert seen == 2 * pl.SUSPECT_STEER_JUMP - 1, f"flags seen {seen:#x}"
+    # every check tripped somewhere, MISSING, both suspicions and OUTSIDE_MODEL (the highest
+    # bit); a lost second speed is DEGRADED
+    assert seen == 2 * pl.OUTSIDE_MODEL - 1, f"flags seen {seen:#x}"
     assert lost_speed2
     assert out_voted > 1.0  # the sliding row's steady-turn residual passed its bound
     assert not (batch.flags[healthy] & pl.CHECK_SPEED_PAIR).any()  # the two speeds agree

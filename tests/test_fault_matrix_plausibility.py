@@ -194,7 +194,10 @@ def test_a_fault_free_row_must_keep_the_monitor_quiet() -> None:
 def test_sensor_rows_are_the_issues_kinds() -> None:
     sensor = [r for r in F.ROWS if r.fault.kind in SENSOR_KINDS]
     assert {r.fault.kind for r in sensor} == set(SENSOR_KINDS) - {"sensor_noise"}
-    assert all(r.plausibility in (names.PLAUS_YAW, names.PLAUS_STEER) for r in sensor)
+    # the a_y row's report is DEGRADED (the yaw rate's second element confirms the yaw rate)
+    lat = [r for r in sensor if r.fault.signal == names.SIG_LAT_ACCEL]
+    assert lat and all(r.plausibility == names.PLAUS_DEGRADED for r in lat)
+    assert all(r.plausibility in (names.PLAUS_YAW, names.PLAUS_STEER) for r in sensor if r not in lat)
     # each lasts to its run's end: the fault latches, so there is nothing to recover from
     assert all(r.fault.stop == r.duration and not r.no_fault and r.detect_within is None for r in sensor)
     targets = {(r.fault.target, r.fault.signal) for r in sensor}
@@ -465,3 +468,42 @@ def test_the_lateral_accelerations_bound_allows_a_side_force_while_the_car_has_t
     series = error_series(e, cfg)
     assert all(b == pytest.approx(expected) for *_, b in series)
     assert max(err for _, err, _ in series) == pytest.approx(2.0)
+
+
+def _lat_accel_evidence(**kwargs) -> Evidence:
+    """The a_y row's run: ``evidence``'s frames, commands and statuses (``plaus`` DEGRADED, the
+    row's bit), plus the redundant frame every 50 ms, a_y 0.4 m/s^2 on the vehicle's bus and
+    2 m/s^2 more from ONSET on the controller's."""
+    row = _row("lateral acceleration offset +2 m/s^2")
+    e = evidence(row, **kwargs)
+
+    def redundant(t: float, k: int, a_y: float) -> tuple[float, int, bytes]:
+        return (t, C.frame_id(names.MSG_REDUNDANT), C.encode(
+            names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: a_y, names.SIG_STEER_ANGLE_2: 0.0}, k % 15))
+
+    ks = range(0, int(round(END / TS)), 25)
+    vehicle = [redundant(k * TS + 2e-4, k // 25, 0.4) for k in ks]
+    ctl = [redundant(k * TS + 3e-4, k // 25, 0.4 + 2.0 * (k * TS >= ONSET)) for k in ks]
+    return replace(e, vehicle_frames=sorted(e.vehicle_frames + vehicle), frames=sorted(e.frames + ctl))
+
+
+def test_the_lateral_acceleration_row_is_reported_degraded_and_its_command_faded() -> None:
+    """The a_y row's report is DEGRADED (the yaw rate its second element confirms is not what
+    disagrees): the status with the bit within 300 ms plus its cycle, latched, the command at
+    zero as fast as a fault fades it; no fault bit or FAULT state is asked for."""
+    assert _row("lateral acceleration offset +2 m/s^2").plausibility == names.PLAUS_DEGRADED
+    fails, observed, cycles = _judge(_lat_accel_evidence(detect=0.2))
+    assert fails == [], fails
+    assert cycles == pytest.approx(0.2 / TS, abs=2)
+    assert any("DEGRADED in the status 200 ms" in o for o in observed), observed
+
+
+@pytest.mark.parametrize("kwargs,needle", [
+    (dict(detect=0.5), "DEGRADED reported late"),
+    (dict(fade=FADE / 3), "the command reached zero"),
+    (dict(plaus=names.PLAUS_YAW), "no status frame reported DEGRADED"),
+    (dict(early_alarm=0.5), "before the fault's onset"),
+])
+def test_the_lateral_acceleration_rows_broken_promises_fail(kwargs: dict, needle: str) -> None:
+    fails, _, _ = _judge(_lat_accel_evidence(**kwargs))
+    assert any(needle in f for f in fails), fails

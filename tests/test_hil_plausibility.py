@@ -59,6 +59,21 @@ def test_a_clean_run_reports_nothing_and_degraded_is_its_own_figure() -> None:
     degraded = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), scn.load("side-wind"), RATE)
     assert degraded["fault_detected_s"] is None  # DEGRADED is no fault
     assert degraded["first_degraded_s"] == pytest.approx(149 / RATE)
+    assert clean["reported_s"] is None and clean["reported_as"] is None
+
+
+def test_the_report_is_the_fault_or_the_degraded_state_whichever_came_first() -> None:
+    """Issue 18 counts the degraded state as the report: an a_y fault on a car with the yaw
+    rate's second element is DEGRADED only (OUTSIDE_MODEL), and its latencies count from it."""
+    from mrsteer_cli.hil_cli import plausibility_line
+
+    degraded = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), _scenario(0.1), RATE)
+    assert degraded["reported_s"] == pytest.approx(149 / RATE) and degraded["reported_as"] == "degraded"
+    assert degraded["detection_latency_s"] == pytest.approx(149 / RATE - 0.1)
+    assert "DEGRADED (no sensor fault bit) reported at 0.298 s, 198 ms after the sensor fault" in plausibility_line(
+        degraded)
+    fault = plausibility_figures(_traffic(fault_from=123), _scenario(0.1), RATE)
+    assert fault["reported_s"] == fault["fault_detected_s"] and fault["reported_as"] == "fault"
 
 
 def _steps(n: int, **measured) -> list:

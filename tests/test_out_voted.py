@@ -52,7 +52,8 @@ def test_the_kinematic_family_reaches_mu_min_paired_only_while_the_pair_runs() -
     # rate of a mu 0.3 car, outside the mu 0.5 family.
     assert _paper("paper-fig8", 40.0, 0.3).fault_time is None
     narrow = _paper("paper-fig8", 40.0, 0.3, monitor=pl.PlausibilityConfig(mu_min_paired=0.5))
-    assert narrow.fault_time is not None
+    # (the element confirms the yaw rate: the trip is the car outside the family, DEGRADED)
+    assert narrow.report_time is not None and narrow.fault_time is None
     assert _paper("paper-fig8", 40.0, 0.3, pairs=False).fault_time is not None  # mu_min 0.5 without the pair
 
 
@@ -88,7 +89,8 @@ def _model_flags(redundant: bool, element: bool, periods: int = 450, toggle: boo
 
 def test_the_model_check_trips_unless_both_measurements_confirm_the_yaw_rate() -> None:
     assert _model_flags(False, False)[-1] & pl.CHECK_MODEL  # neither
-    assert _model_flags(False, True)[-1] & pl.CHECK_MODEL  # the element agrees, a_y is missing
+    # the element agrees, a_y is missing: the car is what disagrees (OUTSIDE_MODEL, DEGRADED)
+    assert _model_flags(False, True)[-1] & (pl.CHECK_MODEL | pl.OUTSIDE_MODEL) == pl.OUTSIDE_MODEL
     assert _model_flags(True, False)[-1] & pl.CHECK_MODEL  # a_y / v agrees, no element
     both = _model_flags(True, True)  # out-voted
     assert not any(f & pl.YAW_CHECKS for f in both)
@@ -96,8 +98,9 @@ def test_the_model_check_trips_unless_both_measurements_confirm_the_yaw_rate() -
     # the kinematic window it filled before is within its bound
     assert not any(f & pl.YAW_CHECKS for f in _model_flags(True, True, toggle=False))
     # the same trip time whenever it is not out-voted: the count is the model check's own
-    first = [[f & pl.CHECK_MODEL for f in _model_flags(*x)].index(pl.CHECK_MODEL)
-             for x in ((False, False), (False, True), (True, False))]
+    first = [[f & bit for f in _model_flags(*x)].index(bit)
+             for x, bit in (((False, False), pl.CHECK_MODEL), ((False, True), pl.OUTSIDE_MODEL),
+                            ((True, False), pl.CHECK_MODEL))]
     assert first[0] == first[1] == first[2] > 150 + pl.configure(pl.PlausibilityConfig()).model_steps
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from firmware_py import model_regulator as mr
@@ -233,6 +234,26 @@ def test_no_false_alarm_in_the_fault_free_scenarios(name: str, seed: int) -> Non
     assert max(r.margins.values()) < 0.9  # every residual stayed below 90 % of its bound
 
 
+@pytest.mark.parametrize("name, v, mu", [("paper-fig8", 15.0, 0.5), ("paper-fig9", 20.0, 0.3)])
+def test_a_realistic_car_past_its_grip_is_degraded_not_a_sensor_fault(name: str, v: float, mu: float) -> None:
+    """The paper's Figure 8 (the wheel turned for a dry-road yaw rate of 1 rad/s: 15 m/s^2 of
+    a_y at 15 m/s, three times what mu 0.5 gives) and Figure 9 (4000 Nm on mu 0.3) on the
+    realistic car, fault-free: it slides past its grip (side slip beyond 20 deg), where a_y / v and the nominal car part from the yaw rate.  With the
+    yaw rate's second element confirming the yaw rate that is DEGRADED (OUTSIDE_MODEL), never
+    a sensor's fault bit, and the command fades; without the element the same run is the yaw
+    rate's fault, as before (the monitor cannot tell the car from the sensor)."""
+    sc = scn.load(name).with_overrides(v=v, mu=mu).with_models(plant="nonlinear", actuator="default",
+                                                                sensors="default")
+    r = pr.run(sc, controller=LAW, second_yaw=sc.sensor_config, second_speed=True)
+    assert np.degrees(np.abs(r.beta).max()) > 20.0
+    assert r.fault_time is None and r.report_time is not None
+    k = int(round(r.report_time / TS))
+    assert set(np.unique(r.bits[k:])) == {pl.PLAUS_DEGRADED}
+    assert np.abs(r.aux[k + 200:]).max() < 1e-5  # faded (3 deg at 30 deg/s is 100 ms) and held at zero
+    alone = pr.run(sc, controller=LAW, second_speed=True)
+    assert alone.fault_time is not None and alone.bits.max() & pl.PLAUS_YAW
+
+
 @pytest.mark.parametrize("v, mu", [(10.0, 0.3), (20.0, 0.6), (40.0, 1.0)])
 def test_no_false_alarm_steering_into_a_curve(v: float, mu: float) -> None:
     r = pr.run(pr.steady_curve(v, mu, duration=2.0), controller=LAW)
@@ -285,14 +306,19 @@ def test_an_a_y_fault_over_the_widened_bound_is_still_reported_within_300_ms(v: 
                                                                             value: float, a_y: float) -> None:
     """With the yaw-rate pair running the kinematic check is the lateral acceleration's, and its
     bound ``error_bound`` states (``side_accel`` more than without the pair): a fault whose
-    error passes it is reported within 300 ms of that."""
+    error passes it is reported within 300 ms of that, as DEGRADED (the yaw rate its second
+    element confirms is not what is wrong: OUTSIDE_MODEL), and the command fades as on a fault."""
     sc = pr.steady_curve(v, mu, a_y=a_y, duration=3.0).with_sensor_faults((SensorFault("lat_accel", kind, 1.4, value),))
     cfg = pl.PlausibilityConfig()
     r = pr.run(sc, controller=LAW, second_yaw=SECOND)
     bound = pr.error_bound("lat_accel", cfg, r)
     assert bound[-1] == pytest.approx((cfg.yaw_bound + cfg.yaw_rel * abs(r.r_true[-1])) * v + cfg.side_accel)
     exceeded = r.exceeded_time(bound)
-    assert exceeded is not None and r.fault_time is not None and 0.0 <= r.fault_time - exceeded <= 0.3
+    assert exceeded is not None and r.report_time is not None and 0.0 <= r.report_time - exceeded <= 0.3
+    k = int(round(r.report_time / TS))
+    assert r.bits[k] == pl.PLAUS_DEGRADED  # not the yaw rate's fault bit
+    fade = int(abs(r.aux[k]) / (math.radians(30.0) * TS)) + 2  # the fault fade rate's periods
+    assert np.abs(r.aux[k + fade + 100:]).max() < 1e-5  # the applied angle, the actuator's lag after the command
 
 
 @pytest.mark.parametrize("v, mu, value, a_y, duration", [(20.0, 0.6, -0.4, 0.0, 4.7), (15.0, 1.0, 0.3, 1.5, 5.7)])
@@ -307,7 +333,7 @@ def test_an_a_y_drift_is_reported_within_300_ms_of_passing_the_bound_of_the_true
     r = pr.run(sc, controller=LAW, second_yaw=SECOND, second_speed=True)
     exceeded = r.exceeded_time(pr.error_bound("lat_accel", pl.PlausibilityConfig(), r))
     assert exceeded is not None and exceeded > 3.0  # a slow drift: its error passes the bound seconds after onset
-    assert r.fault_time is not None and r.fault_time - exceeded <= 0.3
+    assert r.report_time is not None and r.report_time - exceeded <= 0.3
 
 
 def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays() -> None:

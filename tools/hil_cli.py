@@ -141,9 +141,10 @@ def plausibility_line(pl: dict, duration: float | None = None) -> str:
     """The summary's ``plausibility`` entry in words (``hil run``'s last line).  A fault not
     reported whose error passed the bound says how long before the run's ``duration`` (s) that
     was: less than the 300 ms target is no verdict yet (a longer run would give one)."""
-    found = "none" if pl["fault_detected_s"] is None else f"at {pl['fault_detected_s']:.3f} s"
+    reported = pl.get("reported_s", pl["fault_detected_s"])
+    found = "none" if reported is None else f"at {reported:.3f} s"
     over = pl.get("error_over_bound_s")
-    if pl["fault_detected_s"] is None and over is not None:
+    if reported is None and over is not None:
         found += f"; its error passed the bound at {over:.3f} s"
         if duration is not None:
             left = duration - over
@@ -155,7 +156,8 @@ def plausibility_line(pl: dict, duration: float | None = None) -> str:
         ms = 1e3 * pl["latency_from_bound_s"]
         found += f", {ms:.0f} ms after its error passed the bound" if ms >= 0.0 else (
             f", {-ms:.0f} ms before its error passed the bound (found by its noise or another check)")
-    line = f"bits seen {pl['bits_seen']}, fault reported {found}"
+    what = "DEGRADED (no sensor fault bit)" if pl.get("reported_as") == "degraded" else "fault"
+    line = f"bits seen {pl['bits_seen']}, {what} reported {found}"
     if pl.get("sensor_faults"):
         caused = pl.get("caused_yaw_rad_s")
         line += (f"; caused yaw not estimated: {pl.get('caused_yaw_note')}" if caused is None else

@@ -279,7 +279,7 @@ class ControllerNode:
         # a pair check's fault (yaw rate or steering) is found while its command builds: removed at
         # the limiter's rate bound, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
-                              self.monitor.flags & pl.CUT_CHECKS)
+                              self.monitor.flags & pl.CUT_CHECKS, self.monitor.flags & pl.FADE_CHECKS)
         state = self.state.status
         if bits & pl.PLAUS_FAULT:
             state = mr.STATUS_FAULT

@@ -230,7 +230,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
         s->flags = (flags);                                                                      \
         s->bits = (uint8_t)((((flags) & MRS_YAW_CHECKS) != 0u ? MRS_PLAUS_YAW : 0u) |            \
                             (((flags) & MRS_STEER_CHECKS) != 0u ? MRS_PLAUS_STEER : 0u) |        \
-                            (((flags) & MRS_MISSING) != 0u ? MRS_PLAUS_DEGRADED : 0u));          \
+                            (((flags) & (MRS_MISSING | MRS_OUTSIDE_MODEL)) != 0u ? MRS_PLAUS_DEGRADED : 0u)); \
     } while (0)
 
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,
@@ -244,7 +244,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     const int lat_ok = lat_accel > -1e3 && lat_accel < 1e3;
     const int st2_ok = delta_driver_redundant > -1e3 && delta_driver_redundant < 1e3;
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
-    int new_sample, vouched;
+    int new_sample, vouched, confirmed;
     int speed_vouched = 0; /* the second speed there and agreeing: it out-votes check 7 */
 
     /* 6. speed: a jump no car makes; before the pause below speed_min (K_n(v) follows it) */
@@ -351,9 +351,12 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     bound = c->model_margin + c->model_rel * rm;
     s->model_err = e / bound;
     /* out-voted: the yaw rate confirmed by its second element and by a_y / v */
-    vouched = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW &&
-              s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW && s->kin_count == 0;
-    MRS_COUNT(s->model_count, e > bound && !vouched, c->model_steps, MRS_CHECK_MODEL);
+    confirmed = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW;
+    vouched = confirmed && s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW &&
+              s->kin_count == 0;
+    /* the yaw rate confirmed by its second element: the car is what the nominal one does not explain */
+    MRS_COUNT(s->model_count, e > bound && !vouched, c->model_steps,
+              (confirmed != 0) ? MRS_OUTSIDE_MODEL : MRS_CHECK_MODEL);
     /* 4. yaw-rate pair */
     if (yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3) {
         int32_t i = s->yaw_pair_idx;
@@ -496,7 +499,9 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             bound += c->side_accel * inv_v; /* the pair checks the yaw rate: allow a side force */
         }
         s->kin_err = e / bound;
-        MRS_COUNT(s->kin_count, e > bound, c->yaw_count, MRS_CHECK_KINEMATIC);
+        /* the yaw rate confirmed by its second element: a_y or the car disagrees, not the yaw rate */
+        MRS_COUNT(s->kin_count, e > bound, c->yaw_count,
+                  (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW) ? MRS_OUTSIDE_MODEL : MRS_CHECK_KINEMATIC);
         e = MRS_MAG(delta_driver - delta_driver_redundant);
         s->pair_err = e * c->inv_steer_bound;
         MRS_COUNT(s->pair_count, e > c->steer_bound, c->steer_count, MRS_CHECK_STEER_PAIR);
@@ -633,12 +638,12 @@ void mrs_authority_reset(mrs_authority_state_t *s)
 }
 
 double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
-                          uint8_t plaus_bits, uint8_t cut)
+                          uint8_t plaus_bits, uint8_t cut, uint8_t fade)
 {
     uint8_t flags = 0u;
     double du = c->du_max;
     double target, d, u;
-    if ((plaus_bits & MRS_PLAUS_FAULT) != 0u || !(u_request > -1e3 && u_request < 1e3)) {
+    if ((plaus_bits & MRS_PLAUS_FAULT) != 0u || fade != 0u || !(u_request > -1e3 && u_request < 1e3)) {
         target = 0.0;
         du = (cut != 0u && (plaus_bits & MRS_PLAUS_FAULT) != 0u) ? c->du_max : c->fault_fade_step;
         flags |= MRS_AUTH_FAULT;

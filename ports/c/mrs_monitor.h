@@ -39,10 +39,16 @@
 /* the driver's angle moved by more than steer_jump in one sample since the last redundant
  * sample (not latched): held as MRS_SUSPECT_YAW_PAIR until the steering pair judges it */
 #define MRS_SUSPECT_STEER_JUMP 0x2000u
+/* the kinematic or the model check tripped while the yaw rate's second element confirmed it
+ * (latched): a_y or the car (past its grip) disagrees, not the yaw rate; MRS_PLAUS_DEGRADED, and
+ * the node fades the command as on a fault (mrs_authority_step's fade) */
+#define MRS_OUTSIDE_MODEL 0x4000u
 /* The suspicions: the node passes (flags & MRS_SUSPECT_CHECKS) != 0 as mrs_step's hold. */
 #define MRS_SUSPECT_CHECKS (MRS_SUSPECT_YAW_PAIR | MRS_SUSPECT_STEER_JUMP)
-/* The pair checks: the node passes (flags & MRS_CUT_CHECKS) as mrs_authority_step's cut. */
+/* The pair checks: the node passes (flags & MRS_CUT_CHECKS) != 0 as mrs_authority_step's cut. */
 #define MRS_CUT_CHECKS (MRS_CHECK_YAW_PAIR | MRS_CHECK_STEER_PAIR | MRS_CHECK_SPEED | MRS_CHECK_SPEED_PAIR)
+/* The node passes (flags & MRS_FADE_CHECKS) != 0 as mrs_authority_step's fade. */
+#define MRS_FADE_CHECKS MRS_OUTSIDE_MODEL
 #define MRS_YAW_CHECKS (MRS_CHECK_KINEMATIC | MRS_CHECK_MODEL | MRS_FROZEN_YAW | MRS_FROZEN_LAT | MRS_CHECK_YAW_PAIR | \
                         MRS_CHECK_SPEED | MRS_CHECK_TURN | MRS_CHECK_SPEED_PAIR)
 #define MRS_STEER_CHECKS (MRS_CHECK_STEER_PAIR | MRS_FROZEN_STEER | MRS_FROZEN_STEER_2)
@@ -166,8 +172,9 @@ void mrs_authority_default_config(mrs_authority_config_t *cfg);
 int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);
 void mrs_authority_reset(mrs_authority_state_t *s);
 /* The command allowed this period for u_request (rad), given the monitor's bits; cut nonzero
- * with a fault (the monitor's MRS_CUT_CHECKS: a pair check) removes the command at rate_max, not faded. */
+ * with a fault (the monitor's MRS_CUT_CHECKS: a pair check) removes the command at rate_max, not
+ * faded; fade nonzero (the monitor's MRS_FADE_CHECKS) fades it as a fault does. */
 double mrs_authority_step(const mrs_authority_coeffs_t *c, mrs_authority_state_t *s, double u_request,
-                          uint8_t plaus_bits, uint8_t cut);
+                          uint8_t plaus_bits, uint8_t cut, uint8_t fade);
 
 #endif

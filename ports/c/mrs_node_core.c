@@ -280,7 +280,8 @@ int mrs_node_control(mrs_node_t *n)
     }
     /* independent of the law: a pair's fault removes the command at the rate bound, not faded */
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
-                                    (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u));
+                                    (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u),
+                                    (uint8_t)((n->mon_s.flags & MRS_FADE_CHECKS) != 0u));
     state = n->state.status;
     if (n->plaus & MRS_PLAUS_FAULT) {
         state = MRS_STATUS_FAULT;

@@ -109,7 +109,8 @@ int main(int argc, char **argv)
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
                                  (uint8_t)((mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
-                                    (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u));
+                                    (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u),
+                                    (uint8_t)((mon_s.flags & MRS_FADE_CHECKS) != 0u));
         state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
         printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
     }

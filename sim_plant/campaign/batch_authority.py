@@ -24,15 +24,17 @@ class BatchAuthority:
         self.quiet = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros(n, dtype=np.int64)
 
-    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None = None) -> np.ndarray:
+    def step(self, u_request: np.ndarray, plaus_bits: np.ndarray, cut: np.ndarray | None = None,
+             fade: np.ndarray | None = None) -> np.ndarray:
         """The command allowed this period per row (rad) for the law's ``u_request``, the
-        monitor's ``plaus_bits`` and ``cut`` (nonzero: ``authority_step``'s cut; None: none)."""
-        if within(u_request) and not (plaus_bits & PLAUS_DEGRADED).any():
+        monitor's ``plaus_bits``, ``cut`` and ``fade`` (nonzero: ``authority_step``'s cut and
+        fade; None: none)."""
+        if within(u_request) and not (plaus_bits & PLAUS_DEGRADED).any() and (fade is None or not fade.any()):
             return self._checked(u_request, plaus_bits, cut)
         c = self.c
         finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
         plaus_fault = (plaus_bits & PLAUS_FAULT) != 0
-        fault = plaus_fault | ~finite
+        fault = plaus_fault | ~finite if fade is None else plaus_fault | ~finite | (fade != 0)
         timed_out = ~fault & (self.engaged >= c.window_steps) & ((plaus_bits & PLAUS_DEGRADED) != 0)
         fading = fault | timed_out
         flags = np.where(fault, au.AUTH_FAULT, 0) | np.where(timed_out, au.AUTH_TIME, 0)

@@ -108,7 +108,7 @@ class FaultFigures:
         """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed."""
         after = self.faulted & (self.faults.onset <= k * self.ts)
         self.alarms += (bits != 0) & ~after
-        fault = (bits & pl.PLAUS_FAULT) != 0
+        fault = (bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED)) != 0  # the report: a fault or DEGRADED
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)

@@ -59,15 +59,16 @@ from sim_plant.offline.plausibility_runs import cycles
 METRICS = {
     "peak_yaw_rate": ("rad/s", "largest |r| of the run"),
     "peak_side_slip": ("deg", "largest |beta| of the run"),
-    "time_at_limit": ("s", "time the command sat at the actuator's +-3 deg"),
+    "time_at_limit": ("s", "time the reported state was SATURATED (the law's command at the actuator's +-3 deg; "
+                           "the limiter may be fading it: the state stays the law's)"),
     "fault_steps": ("", "steps the controller reported a fault: step()'s input ranges or the monitor's"),
     "false_alarm_steps": ("", "steps the monitor reported PLAUS_FAULT or PLAUS_DEGRADED"),
     "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
-    "detection_time": ("s", "first PLAUS_FAULT less when the fault's error left its bound (plausibility_runs."
-                            "sensor_bound; either speed's: the speed pair's) for 0.3 s (0: it never did, or was "
-                            "reported before; inf: never reported)"),
+    "detection_time": ("s", "first PLAUS_FAULT or PLAUS_DEGRADED less when the fault's error left its bound "
+                            "(plausibility_runs.sensor_bound; either speed's: the speed pair's) for 0.3 s (0: it "
+                            "never did, or was reported before; inf: never reported)"),
     "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
                                 "the fault makes the command cause, its fade included (0 without a fault or a "
                                 "controller)"),
@@ -247,7 +248,8 @@ class _Group:
                     bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending,
                                              sensors.yaw_rate_redundant(r), held["speed2"])
                     u = self.law.step(steer, yaw, held["speed"], (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)
-                    u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS)
+                    u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS,
+                                          self.monitor.flags & pl.FADE_CHECKS)
                     tally.control(j, u, self.law.status, bits, self.limiter.flags)
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits

@@ -17,8 +17,9 @@ with the bus taken out:
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
 * the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2, v_2)``,
-  ``u = step(d, r, v, ms.flags & SUSPECT_CHECKS)``, ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS)``, the reported state FAULT when
-  ``bits & PLAUS_FAULT``.
+  ``u = step(d, r, v, ms.flags & SUSPECT_CHECKS)``,
+  ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS, flags & FADE_CHECKS)``, the reported
+  state FAULT when ``bits & PLAUS_FAULT``.
 
 The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
 campaign`` times it as the scalar firmware loop the engine is measured against.
@@ -135,7 +136,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                             held["speed"], command, yaw_rate_2, held[SPEED_REDUNDANT])
             u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"],
                           (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
-            u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS)
+            u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS,
+                                  mon.state.flags & pl.FADE_CHECKS)
             state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
             if (k + 1) % status_every == 0:
                 in_flight = bits
@@ -172,7 +174,7 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"yaw_rate_redundant": yaw_rate_2},
                      np.zeros(bits.size))
     bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True)
-    exceeded, reported = run.exceeded_time(bound), run.fault_time
+    exceeded, reported = run.exceeded_time(bound), run.report_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
     caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
     return false_alarms, detection, caused

@@ -1,6 +1,8 @@
 """What a HIL run's logged traffic says about the plausibility monitor (issue 18): which bits the
-controller reported, when it first reported a plausibility fault, how long after the scenario's
-first sensor fault that was, and where the command was at the end.  Part of ``summary.json``.
+controller reported, when it first reported a plausibility fault (``fault_detected_s``) or the
+degraded state (``first_degraded_s``), the earlier of the two (``reported_s``, ``reported_as``:
+issue 18's report), how long after the scenario's first sensor fault that was, and where the
+command was at the end.  Part of ``summary.json``.
 
 The detection time is read from the command frames, which come every control period: the first
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
@@ -60,15 +62,21 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
                 detected_s = run_start if run_start is not None else (yaw_frames - 1) * ts
     onset = min((f.start for f in sc.sensor_config.faults), default=None)
     over = error_over_bound(steps, sc, 1.0 / rate_hz) if steps and sc.sensor_config.faults else None
+    # Issue 18's report is the fault or the degraded state, whichever came first: a lateral
+    # acceleration that disagrees with a yaw rate its second element confirms is DEGRADED
+    # (plausibility.OUTSIDE_MODEL), as is a car past its grip.
+    reported = min((t for t in (detected_s, degraded_s) if t is not None), default=None)
     return {
         "bits_seen": seen,
         "fault_detected_s": detected_s,
         "first_degraded_s": degraded_s,
+        "reported_s": reported,
+        "reported_as": None if reported is None else "fault" if reported == detected_s else "degraded",
         "sensor_fault_onset_s": onset,
-        "detection_latency_s": None if detected_s is None or onset is None else detected_s - onset,
+        "detection_latency_s": None if reported is None or onset is None else reported - onset,
         "error_over_bound_s": over,
         "yaw_error_over_bound_s": over if any(f.sensor == "yaw_rate" for f in sc.sensor_config.faults) else None,
-        "latency_from_bound_s": None if detected_s is None or over is None else detected_s - over,
+        "latency_from_bound_s": None if reported is None or over is None else reported - over,
         "sensor_faults": [f"{f.sensor}:{f.kind}" + ("" if f.value is None else f":{f.value:g}") + f"@{f.start:g}"
                           for f in sc.sensor_config.faults],
     }

@@ -232,7 +232,7 @@ class _Replayer:
             bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2, v2)
         u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v, (monitor.flags & pl.SUSPECT_CHECKS) != 0)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
-                                 monitor.flags & pl.CUT_CHECKS)
+                                 monitor.flags & pl.CUT_CHECKS, monitor.flags & pl.FADE_CHECKS)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node

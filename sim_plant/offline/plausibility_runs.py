@@ -91,6 +91,13 @@ class MonitorRun:
         """When the monitor first reported a fault (PLAUS_YAW or PLAUS_STEER)."""
         return self.first((self.bits & pl.PLAUS_FAULT) != 0)
 
+    @property
+    def report_time(self) -> float | None:
+        """When the monitor first reported the fault or the degraded state (issue 18's report:
+        a lateral acceleration that disagrees with a yaw rate its second element confirms is
+        DEGRADED, ``plausibility.OUTSIDE_MODEL``)."""
+        return self.first((self.bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED)) != 0)
+
     def exceeded_time(self, bound: float | np.ndarray, hold: float = 0.3) -> float | None:
         """When the sensor's error became larger than ``bound`` to stay so for ``hold`` s (or
         until the monitor reported, if sooner): the start of the window the detection target
@@ -98,7 +105,7 @@ class MonitorRun:
         over = np.abs(self.error) > bound
         dt = float(self.t[1] - self.t[0]) if self.t.size > 1 else 1.0
         need = max(1, int(round(hold / dt)))
-        reported = self.fault_time
+        reported = self.report_time
         start = None
         for k in np.flatnonzero(over):
             if start is not None and k < start:
@@ -217,7 +224,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         u = reg.step(held["steer"], held["yaw_rate"], held["speed"],
                      guard and (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
         if guard:
-            u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut)
+            u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut, mon.state.flags & pl.FADE_CHECKS)
         pipeline.append(u)
         applied = actuator.step(pipeline.popleft())
         out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
@@ -262,4 +269,4 @@ def detection_latency(sc: scn.Scenario, ts: float = 0.002, monitor: pl.Plausibil
     r = run(sc, ts, cfg)
     if r.fault_sensor is None:
         raise ValueError("the scenario has no sensor fault")
-    return r.exceeded_time(error_bound(r.fault_sensor, cfg, r)), r.fault_time
+    return r.exceeded_time(error_bound(r.fault_sensor, cfg, r)), r.report_time

@@ -40,7 +40,8 @@ class Row:
     scenario: str = SCENARIO  # the plant's scenario: paper-fig9, or CURVE (settings.CURVE_SCENARIO)
     duration: float | None = None  # s of scenario; None: settings.DURATION
     # Sensor rows: the CtrlStatus_Plausibility bit the monitor must report (PLAUS_YAW or
-    # PLAUS_STEER), with cause 0x80, the command faded to zero and both latched to the end.
+    # PLAUS_STEER, with cause 0x80; PLAUS_DEGRADED for the lateral acceleration), the command
+    # faded to zero and both latched to the end.
     plausibility: int = 0
     at_plant: bool = False  # the plant injects the sensor fault (``plant_fault``), not the bridge
 
@@ -124,9 +125,10 @@ SENSOR_ROWS = (
     # paper-fig9's driver holds the wheel straight: an angle stuck at 0 would be the truth.
     _sensor("wheel held, angle stuck at 0.57 deg", "sensor_stuck", names.MSG_STEER, 0.01, _STEER,
             f"FAULT <= 300 ms, {_LATCH}"),
-    # +2: the bound is 0.74 m/s^2 here plus side_accel 0.6 (the car has the second yaw-rate element)
-    _sensor("lateral acceleration offset +2 m/s^2", "sensor_bias", names.MSG_REDUNDANT, 2.0, _YAW,
-            f"FAULT <= 300 ms, {_LATCH}", signal=names.SIG_LAT_ACCEL),
+    # +2: the bound is 0.74 m/s^2 here plus side_accel 0.6 (the car has the second yaw-rate element,
+    # which confirms the yaw rate: the disagreement is the lateral acceleration's, DEGRADED)
+    _sensor("lateral acceleration offset +2 m/s^2", "sensor_bias", names.MSG_REDUNDANT, 2.0, names.PLAUS_DEGRADED,
+            f"DEGRADED <= 300+100 ms, {_LATCH}", signal=names.SIG_LAT_ACCEL),
     Row("baseline, driver steers into a curve", Fault("none", names.MSG_YAW, *WINDOW, 1.0),
         "no plausibility alarm", no_fault=True, scenario=CURVE, duration=PLAUS_DURATION),
     _sensor("curve: driver angle stuck at 0", "sensor_stuck", names.MSG_STEER, 0.0, _STEER,

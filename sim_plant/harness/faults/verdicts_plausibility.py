@@ -3,7 +3,9 @@ command faded and both latched; no alarm in a fault-free row.  Judged from the l
 (``evidence``) like every other verdict (``verdicts.judge`` calls these).
 
 A sensor row (``Row.plausibility`` set) must show, counted from when the fault's error left
-the monitor's bound (for a step fault: its onset, the first falsified frame):
+the monitor's bound (for a step fault: its onset, the first falsified frame) -- a row whose bit
+is DEGRADED (the lateral acceleration's: ``plausibility.OUTSIDE_MODEL``) the status's DEGRADED
+within 300 ms plus its cycle instead, latched, and the command faded to zero (``_check_degraded_row``):
 
 * **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms;
   in time (the car's, ``evidence.CarClock``) or in controller cycles, as the other rows count on
@@ -203,6 +205,8 @@ def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observ
     if start is None:
         fails.append("the fault never hit a frame")
         return None
+    if e.row.plausibility == PLAUS_DEGRADED:
+        return _check_degraded_row(e, start, fails, observed)
     t_cmd, t_st, early = _first_fault(e, start)
     fails.extend(early)
     series = error_series(e)
@@ -247,6 +251,45 @@ def _check_sensor_row(e: Evidence, start: float | None, fails: list[str], observ
         return None
     check_fade(e, fails, observed, t_cmd)
     return cycles
+
+
+def _check_degraded_row(e: Evidence, start: float, fails: list[str], observed: list[str]) -> int | None:
+    """A row whose report is DEGRADED (a lateral acceleration that disagrees with the yaw rate
+    its second element confirms: ``plausibility.OUTSIDE_MODEL``): the first status with the bit
+    within 300 ms plus its cycle of the error leaving its bound, every later status with it, no
+    fault bit before it; the command faded as on a fault (from the status's cycle before it,
+    where the monitor may have tripped) and at zero to the end."""
+    ts = e.setup.ts
+    if any(s.t < start and s.plausibility for s in e.statuses):
+        fails.append("plausibility bits reported before the fault's onset")
+    t_st = next((s.t for s in e.statuses if s.t >= start and s.plausibility & PLAUS_DEGRADED), None)
+    series = [x for x in error_series(e) if x[0] >= start]
+    over = exceeded_at(series, t_st)
+    if t_st is None:
+        fails.append("no status frame reported DEGRADED")
+        return None
+    ref = over if over is not None else start
+    observed.append(f"DEGRADED in the status {1e3 * (t_st - ref):.0f} ms after "
+                    + ("its error left the bound" if over is not None else "the onset (before the error left it)"))
+    if over is not None and t_st - ref > PLAUS_DETECT + STATUS_CYCLE + 2 * ts:
+        fails.append(f"DEGRADED reported late ({1e3 * (t_st - ref):.0f} ms; allowed "
+                     f"{1e3 * (PLAUS_DETECT + STATUS_CYCLE):.0f} ms with the status's cycle)")
+    after = [s for s in e.statuses if s.t >= t_st]
+    if lost := [s for s in after if not s.plausibility & PLAUS_DEGRADED]:
+        fails.append(f"{len(lost)} of {len(after)} status frames after the report lack DEGRADED")
+    if faults := sorted({s.plausibility for s in after if s.plausibility & PLAUS_FAULT}):
+        observed.append(f"fault bits too: {faults}")
+    window = [abs(a) for t_, a in e.angles if t_st - STATUS_CYCLE <= t_ < t_st] or [0.0]
+    allowed = math.ceil(max(window) / (PLAUS_FADE * ts) - 1e-9) + 2
+    later = [(t_, abs(a)) for t_, a in e.angles if t_ >= t_st]
+    i_zero = next((i for i, (_, m) in enumerate(later) if m <= BUS_RESOLUTION / 2), None)
+    if i_zero is None or any(m > BUS_RESOLUTION / 2 for _, m in later[i_zero:]):
+        fails.append("the command did not fade to zero and stay there after DEGRADED")
+    elif i_zero > allowed:
+        fails.append(f"the command reached zero {i_zero} cycles after the status, allowed {allowed}")
+    else:
+        observed.append(f"command at zero {i_zero} cycles after the status (allowed {allowed})")
+    return round((t_st - ref) / ts)
 
 
 def judge_caused_yaw(e: Evidence, start: float, fails: list[str], observed: list[str]) -> None:
