@@ -67,6 +67,8 @@ CAUSE_PLAUSIBILITY = 0x80
 # CtrlStatus_Plausibility bits.
 PLAUS_YAW = 0x01  # yaw rate (or the speed scheduling its model) implausible: see the DBC's comment
 PLAUS_STEER = 0x02  # the two steering-angle channels disagree, or one is frozen
-PLAUS_DEGRADED = 0x04  # a redundant input missing: fewer checks, authority limited to the panic window
+# a redundant input missing (fewer checks, authority limited to the panic window), or the monitor's
+# OUTSIDE_MODEL (a_y or the car disagrees with a confirmed yaw rate: the controller fades its command)
+PLAUS_DEGRADED = 0x04
 
 MEAS_NONE = 15  # AuxSteerCmd_MeasCounter when the command answers no measurement (the DBC's "NONE")

@@ -82,10 +82,12 @@ within it, and trips at ``*_count``; 2 and 8 likewise per control period, trippi
 ``model_time`` and ``speed_pair_time``; 4 trips on one window over its bound (at other rates
 than 500 Hz its ``YAW_PAIR_WINDOW`` samples span another time), 6 on one jump, 7 on one block
 over its bound.
-While the yaw rate's second element confirms it (4 running, its window full), a trip of 1 or 2
-is not the yaw rate's fault: what disagrees is the lateral acceleration or the car itself,
-which past its grip limit (sliding, spinning) is neither the nominal car nor in a steady turn.
-It latches ``OUTSIDE_MODEL`` instead, which is DEGRADED and fades the command as a fault does
+
+While the yaw rate's second element confirms it (4 running, its window full, its last samples
+within ``yaw_pair_hold``), a trip of 1 or 2 is not the yaw rate's fault: what disagrees is the
+lateral acceleration, the car itself, which past its grip limit (sliding, spinning) is neither
+the nominal car nor in a steady turn, or an input the speed pair or the steering pair answers
+for.  It latches ``OUTSIDE_MODEL`` instead, which is DEGRADED and fades the command as a fault does
 (``authority_step``'s ``fade``): the law's linear car does not hold there, and a wrong a_y
 leaves the yaw rate with one check.  Without the element the trips are the yaw rate's, as the
 monitor cannot tell the car from the sensor (docs/controller.md, "Outside the model").
@@ -135,8 +137,9 @@ SUSPECT_YAW_PAIR = 0x800
 #: next one (docs/controller.md, "The steering pair's suspicion").
 SUSPECT_STEER_JUMP = 0x2000
 #: The kinematic (1) or the model (2) check tripped while the yaw rate's second element confirmed
-#: it (latched): the lateral acceleration or the car is what disagrees -- a car past its grip
-#: limit, spinning, is neither the nominal car nor a steady turn -- not the yaw rate.
+#: it (latched): not the yaw rate, but a_y, the car (past its grip limit, spinning, it is neither
+#: the nominal car nor in a steady turn) or another input the nominal car reads (the speed and
+#: the steering have their own pairs, which report their faults).
 #: PLAUS_DEGRADED, and the node fades the command as on a fault (``authority_step``'s ``fade``):
 #: the law's linear car does not hold there (docs/controller.md, "Outside the model").
 OUTSIDE_MODEL = 0x4000
@@ -575,15 +578,16 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     # cannot fully counter (the paper's 4000 Nm on mu 0.3), not a sensor error.  Not "its last
     # sample recent": a steady a_y on exact sensors repeats its value, which the monitor cannot
     # tell from no sample, and a frozen a_y is the frozen check's.
-    confirmed = -1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW  # by its second element
-    vouched = (confirmed and s.yaw_clear_n >= YAW_PAIR_WINDOW and lat_ok and s.kin_n >= KIN_WINDOW
-               and s.kin_count == 0)
+    # the yaw rate confirmed by its second element: valid, the pair's window full and its last
+    # samples each within yaw_pair_hold (no suspicion)
+    confirmed = (-1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW
+                 and s.yaw_clear_n >= YAW_PAIR_WINDOW)
+    vouched = confirmed and lat_ok and s.kin_n >= KIN_WINDOW and s.kin_count == 0
     if e > bound and not vouched:
         s.model_count += 1
         if s.model_count >= c.model_steps:
             s.model_count = c.model_steps  # saturated: C counts in 32 bits
-            # the yaw rate confirmed by its second element: it is the car that the nominal one
-            # does not explain (past its grip), not the sensor
+            # the yaw rate confirmed by its second element: not the yaw rate's error
             s.latched |= OUTSIDE_MODEL if confirmed else CHECK_MODEL
     elif s.model_count > 0:
         s.model_count -= 1
@@ -722,8 +726,10 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             s.kin_count += 1
             if s.kin_count >= c.yaw_count:
                 s.kin_count = c.yaw_count
-                # the yaw rate confirmed by its second element: a_y or the car disagrees
-                s.latched |= OUTSIDE_MODEL if s.yaw_pair_n >= YAW_PAIR_WINDOW else CHECK_KINEMATIC
+                # the yaw rate confirmed by its second element (this sample in the pair's
+                # window and within its hold): not the yaw rate's error
+                confirmed = s.yaw_pair_n >= YAW_PAIR_WINDOW and s.yaw_clear_n >= YAW_PAIR_WINDOW
+                s.latched |= OUTSIDE_MODEL if confirmed else CHECK_KINEMATIC
         elif s.kin_count > 0:
             s.kin_count -= 1
         e = delta_driver - delta_driver_redundant

@@ -83,6 +83,7 @@ def test_batch_equals_scalar_firmware_on_random_samples(seed: int) -> None:
 
 
 def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
+    from firmware_py import authority as au
     from firmware_py import plausibility as pl
 
     c = spec.parse(WIDE.format(seed=5), "wide.toml")
@@ -92,8 +93,12 @@ def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
     s["mu"][:2] = 0.3
     s["onset"][:] = 0.1
     res = _compare(s, mr.ControllerConfig())
-    assert (res["plausibility_bits"][:2] == pl.PLAUS_DEGRADED).all(), "the spin must reach the fade path"
-    assert res["authority_steps"][:2].min() > 0
+    assert (res["plausibility_bits"][:2] & pl.PLAUS_DEGRADED).all()
+    # the second spin's only report is OUTSIDE_MODEL's DEGRADED: the limiter fades (AUTH_FAULT)
+    # on the monitor's fade with no fault bit, which the equality above then covers
+    ref = reference.run(scenario_for(s.row(1), DURATION), mr.ControllerConfig())
+    assert res["plausibility_bits"][1] == pl.PLAUS_DEGRADED
+    assert (((ref.authority & au.AUTH_FAULT) != 0) & ((ref.bits & pl.PLAUS_FAULT) == 0)).any()
     _compare(s, None)
 
 
@@ -222,20 +227,24 @@ def test_batch_authority_limiter_equals_the_scalar_one_row_by_row() -> None:
     calm = np.arange(steps) % 4 == 0  # periods with no bit set and every request finite (the clean path)
     bits[calm], requests[calm] = 0, walk[calm]
     cuts = (rng.random((steps, rows)) < 0.5).astype(np.int64) * pl.CHECK_STEER_PAIR  # the node's flags & CUT_CHECKS
+    # the node's flags & FADE_CHECKS: OUTSIDE_MODEL comes with DEGRADED (with a cut or not)
+    fades = np.where(((bits & pl.PLAUS_DEGRADED) != 0) & (rng.random((steps, rows)) < 0.3), pl.OUTSIDE_MODEL, 0)
     batch = BatchAuthority(cfg, rows)
     c = au.configure_authority(cfg)
     states = [au.AuthorityState() for _ in range(rows)]
-    seen, cut_rows = 0, np.zeros(rows, dtype=bool)
+    seen, cut_rows, faded = 0, np.zeros(rows, dtype=bool), 0
     for k in range(steps):
-        u = batch.step(requests[k], bits[k], cuts[k])
+        u = batch.step(requests[k], bits[k], cuts[k], fades[k])
         for i, s in enumerate(states):
-            expected = au.authority_step(c, s, float(requests[k, i]), int(bits[k, i]), int(cuts[k, i]))
+            expected = au.authority_step(c, s, float(requests[k, i]), int(bits[k, i]), int(cuts[k, i]),
+                                         int(fades[k, i]))
             assert u[i] == expected and batch.flags[i] == s.flags, (k, i)
             assert batch.engaged[i] == s.engaged and batch.quiet[i] == s.quiet, (k, i)
             seen |= s.flags
+            faded += bool(fades[k, i] and s.flags & au.AUTH_FAULT and not bits[k, i] & pl.PLAUS_FAULT)
         cut_rows |= batch.flags == (au.AUTH_FAULT | au.AUTH_RATE)  # a cut, bound by the rate
     assert seen == au.AUTH_MAGNITUDE | au.AUTH_RATE | au.AUTH_TIME | au.AUTH_FAULT  # every branch ran
-    assert cut_rows.any()
+    assert cut_rows.any() and faded > 100  # the fade without a fault bit ran too
 
 
 def _monitor_inputs(rows: int, steps: int, seed: int) -> dict[str, np.ndarray]:

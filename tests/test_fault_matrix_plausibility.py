@@ -182,13 +182,22 @@ def test_error_series_pairs_the_frames_and_bounds_the_yaw_rate() -> None:
 
 
 def test_a_fault_free_row_must_keep_the_monitor_quiet() -> None:
+    """No fault bit, and no DEGRADED latched to the end (the monitor's OUTSIDE_MODEL); a
+    missing frame's DEGRADED, which comes and goes, is counted, not failed."""
     clean = replace(_row("baseline"), plausibility=0)
-    for bits, alarm in ((0, False), (names.PLAUS_DEGRADED, False), (names.PLAUS_YAW, True)):
+    for bits, alarm in ((0, False), (names.PLAUS_DEGRADED, True), (names.PLAUS_YAW, True)):
         e = evidence(clean, detect=None, status_plaus_quiet=bits)
         fails: list[str] = []
         observed: list[str] = []
         check_quiet_monitor(e, fails, observed)
         assert bool(fails) == alarm and (alarm or "monitor quiet" in observed[0])
+        assert not alarm or "false plausibility alarm" in fails[0]
+    e = evidence(clean, detect=None)
+    e = replace(e, statuses=[replace(s, plausibility=names.PLAUS_DEGRADED) if 0.5 <= s.t < 0.8 else s
+                             for s in e.statuses])
+    fails, observed = [], []
+    check_quiet_monitor(e, fails, observed)
+    assert fails == [] and observed == ["monitor quiet (3 status frames degraded)"]
 
 
 def test_sensor_rows_are_the_issues_kinds() -> None:
@@ -496,6 +505,16 @@ def test_the_lateral_acceleration_row_is_reported_degraded_and_its_command_faded
     assert fails == [], fails
     assert cycles == pytest.approx(0.2 / TS, abs=2)
     assert any("DEGRADED in the status 200 ms" in o for o in observed), observed
+
+
+def test_a_degraded_report_over_a_gap_in_the_redundant_frame_is_no_report() -> None:
+    """The bus does not tell OUTSIDE_MODEL's DEGRADED from a missing frame's: a report after the
+    redundant frame stopped coming is no report of the fault."""
+    e = _lat_accel_evidence(detect=0.2)
+    fid = C.frame_id(names.MSG_REDUNDANT)
+    e = replace(e, frames=[f for f in e.frames if not (f[1] == fid and 1.05 <= f[0] <= 1.2)])
+    fails, _, _ = _judge(e)
+    assert any("gap before the DEGRADED status" in f for f in fails), fails
 
 
 @pytest.mark.parametrize("kwargs,needle", [

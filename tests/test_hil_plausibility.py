@@ -20,14 +20,16 @@ def _traffic(fault_from: int | None, status_every: int = 50, steps: int = 400, p
              wall_scale: float = 0.1) -> list[dict]:
     """One yaw frame and one command per step (a lockstep run whose wall clock runs at
     ``wall_scale`` of simulated time), a status every ``status_every`` steps; from step
-    ``fault_from`` on the commands are FAULT and the statuses carry ``plaus``."""
+    ``fault_from`` on the statuses carry ``plaus`` and, if it has a fault bit, the commands are
+    FAULT (DEGRADED alone leaves them ACTIVE, as the node does)."""
     rows = []
     for k in range(steps):
         t = 1000.0 + k * wall_scale / RATE
         faulted = fault_from is not None and k >= fault_from
         rows.append({"t_s": t, "message": names.MSG_YAW, names.SIG_YAW_RATE: 0.0})
+        fault_state = faulted and plaus & (names.PLAUS_YAW | names.PLAUS_STEER)
         rows.append({"t_s": t, "message": names.MSG_CMD,
-                     names.SIG_CMD_STATE: mr.STATUS_FAULT if faulted else mr.STATUS_ACTIVE})
+                     names.SIG_CMD_STATE: mr.STATUS_FAULT if fault_state else mr.STATUS_ACTIVE})
         if k % status_every == status_every - 1:
             rows.append({"t_s": t, "message": names.MSG_STATUS, names.SIG_STATUS_PLAUS: plaus if faulted else 0})
     return rows
@@ -74,6 +76,16 @@ def test_the_report_is_the_fault_or_the_degraded_state_whichever_came_first() ->
         degraded)
     fault = plausibility_figures(_traffic(fault_from=123), _scenario(0.1), RATE)
     assert fault["reported_s"] == fault["fault_detected_s"] and fault["reported_as"] == "fault"
+    # a missing input's DEGRADED comes and goes: no report, though first_degraded_s shows it
+    transient = _traffic(fault_from=100, plaus=names.PLAUS_DEGRADED)
+    for r in transient[-120:]:
+        if r["message"] == names.MSG_STATUS:
+            r[names.SIG_STATUS_PLAUS] = 0
+    fig = plausibility_figures(transient, _scenario(0.1), RATE)
+    assert fig["first_degraded_s"] == pytest.approx(149 / RATE) and fig["reported_s"] is None
+    # nor does a DEGRADED before the sensor fault's onset that lasts: the report is from the onset
+    late = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), _scenario(0.5), RATE)
+    assert late["reported_s"] == pytest.approx(299 / RATE) and late["latched_degraded_s"] == late["reported_s"]
 
 
 def _steps(n: int, **measured) -> list:

@@ -33,7 +33,7 @@ def _paper(name: str, v: float, mu: float, pairs: bool = True, second_speed: boo
 @pytest.mark.parametrize("v, mu", PAPER_CONDITIONS)
 def test_the_paper_s_scenarios_at_its_six_conditions_raise_nothing(name: str, v: float, mu: float) -> None:
     run = _paper(name, v, mu)
-    assert run.fault_time is None
+    assert run.report_time is None
     assert not (run.bits & pl.PLAUS_DEGRADED).any()
 
 
@@ -42,7 +42,7 @@ def test_figure_9_on_mu_0_3_slides_past_the_model_check_s_bound_which_the_pairs_
     # nominal car would.  Without the second element nothing out-votes the model check, which
     # calls it a yaw-rate fault.
     with_pairs = _paper("paper-fig9", 20.0, 0.3)
-    assert with_pairs.margins["model"] > 1.2 and with_pairs.fault_time is None
+    assert with_pairs.margins["model"] > 1.2 and with_pairs.report_time is None
     alone = _paper("paper-fig9", 20.0, 0.3, pairs=False)
     assert alone.fault_time is not None and alone.fault_time < 1.0
 
@@ -50,7 +50,7 @@ def test_figure_9_on_mu_0_3_slides_past_the_model_check_s_bound_which_the_pairs_
 def test_the_kinematic_family_reaches_mu_min_paired_only_while_the_pair_runs() -> None:
     # Figure 8's unit yaw-rate step on mu 0.3 at 40 m/s: the linear car's side slip grows at the
     # rate of a mu 0.3 car, outside the mu 0.5 family.
-    assert _paper("paper-fig8", 40.0, 0.3).fault_time is None
+    assert _paper("paper-fig8", 40.0, 0.3).report_time is None
     narrow = _paper("paper-fig8", 40.0, 0.3, monitor=pl.PlausibilityConfig(mu_min_paired=0.5))
     # (the element confirms the yaw rate: the trip is the car outside the family, DEGRADED)
     assert narrow.report_time is not None and narrow.fault_time is None
@@ -60,7 +60,7 @@ def test_the_kinematic_family_reaches_mu_min_paired_only_while_the_pair_runs() -
 def test_the_steady_turn_check_gives_way_only_to_an_agreeing_second_speed() -> None:
     # Figure 9 at 30 m/s on mu 0.3: the linear car's side slip still settles seconds after the
     # step, so a_y / r is not the speed there.
-    assert _paper("paper-fig9", 30.0, 0.3).fault_time is None
+    assert _paper("paper-fig9", 30.0, 0.3).report_time is None
     run = _paper("paper-fig9", 30.0, 0.3, second_speed=False)
     assert run.fault_time is not None and run.margins["turn"] > 1.0
 

@@ -238,10 +238,11 @@ def test_no_false_alarm_in_the_fault_free_scenarios(name: str, seed: int) -> Non
 def test_a_realistic_car_past_its_grip_is_degraded_not_a_sensor_fault(name: str, v: float, mu: float) -> None:
     """The paper's Figure 8 (the wheel turned for a dry-road yaw rate of 1 rad/s: 15 m/s^2 of
     a_y at 15 m/s, three times what mu 0.5 gives) and Figure 9 (4000 Nm on mu 0.3) on the
-    realistic car, fault-free: it slides past its grip (side slip beyond 20 deg), where a_y / v and the nominal car part from the yaw rate.  With the
-    yaw rate's second element confirming the yaw rate that is DEGRADED (OUTSIDE_MODEL), never
-    a sensor's fault bit, and the command fades; without the element the same run is the yaw
-    rate's fault, as before (the monitor cannot tell the car from the sensor)."""
+    realistic car, fault-free: it slides past its grip (side slip beyond 20 deg), where a_y / v
+    and the nominal car part from the yaw rate.  With the yaw rate's second element confirming
+    the yaw rate that is DEGRADED (OUTSIDE_MODEL), never a sensor's fault bit, and the command
+    fades; without the element the same run is the yaw rate's fault, as before (the monitor
+    cannot tell the car from the sensor)."""
     sc = scn.load(name).with_overrides(v=v, mu=mu).with_models(plant="nonlinear", actuator="default",
                                                                 sensors="default")
     r = pr.run(sc, controller=LAW, second_yaw=sc.sensor_config, second_speed=True)
@@ -257,7 +258,7 @@ def test_a_realistic_car_past_its_grip_is_degraded_not_a_sensor_fault(name: str,
 @pytest.mark.parametrize("v, mu", [(10.0, 0.3), (20.0, 0.6), (40.0, 1.0)])
 def test_no_false_alarm_steering_into_a_curve(v: float, mu: float) -> None:
     r = pr.run(pr.steady_curve(v, mu, duration=2.0), controller=LAW)
-    assert r.fault_time is None
+    assert r.report_time is None
 
 
 @pytest.mark.parametrize("v, mu, a_y", [(10.0, 1.0, 3.4), (10.0, 0.7, 2.4), (25.0, 1.0, 4.9)])
@@ -268,7 +269,7 @@ def test_a_steering_step_is_no_yaw_rate_error_whatever_the_sensors_lag(v: float,
     (1.2-2.4 times its bound); with it the residual stays under 90 % of the bound."""
     sc = pr.steady_curve(v, mu, a_y=a_y, ramp=0.0, duration=2.0, seed=3)
     r = pr.run(sc, controller=LAW)
-    assert r.fault_time is None and r.margins["kinematic"] < 0.9
+    assert r.report_time is None and r.margins["kinematic"] < 0.9
     no_lag = pr.run(sc, monitor=pl.PlausibilityConfig(sensor_tau=1e-9), controller=LAW)
     assert no_lag.fault_time is not None and no_lag.margins["kinematic"] > 1.0
 
@@ -469,7 +470,7 @@ def test_a_fault_free_turn_whose_side_slip_settles_slowly_is_no_speed_fault(v: f
     while a_y moves, and the first steady one only settles the turn."""
     sc = pr.steady_curve(v, mu, a_y=0.5 * 9.81 * mu, ramp=ramp, duration=5.0, seed=3)
     r = pr.run(sc, controller=LAW, second_yaw=SECOND)
-    assert r.fault_time is None and 0.0 < r.margins["turn"] < 0.5
+    assert r.report_time is None and 0.0 < r.margins["turn"] < 0.5
 
 
 def _campaign_sample(duration: float = 3.0, **values: float) -> scn.Scenario:
@@ -491,7 +492,7 @@ HELD = [dict(disturbance=0, v=20.0, mu=0.5, yaw_moment=3000.0), dict(disturbance
                                               "split-mu-0.6-0.2-7ms2", "split-mu-0.8-0.2-8ms2"])
 def test_a_strong_disturbance_the_controller_holds_is_no_sensor_fault(values: dict[str, float]) -> None:
     r = pr.run(_campaign_sample(**values), controller=LAW)
-    assert r.fault_time is None and r.margins["kinematic"] < 0.8
+    assert r.report_time is None and r.margins["kinematic"] < 0.8
     assert abs(r.beta).max() < D(2.5)  # the command was not faded: the car was held
 
 

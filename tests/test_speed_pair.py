@@ -142,5 +142,5 @@ def test_in_closed_loop_the_pair_finds_a_slow_speed_drift_in_a_gentle_curve() ->
 def test_without_the_pair_the_same_drift_passes_the_caused_yaw_target() -> None:
     # the reason for the pair (docs/controller.md): no other check sees this drift
     twin, run = _drift(False)
-    assert run.fault_time is None
+    assert run.report_time is None
     assert np.abs(run.r_true - twin.r_true).max() > 0.05

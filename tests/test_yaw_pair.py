@@ -181,4 +181,4 @@ def test_in_closed_loop_the_suspicion_lowers_the_yaw_a_stuck_element_causes() ->
 def test_in_closed_loop_the_pair_raises_no_alarm_without_a_fault() -> None:
     second = SensorConfig(seed=99, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=-0.3))
     _, run = _caused(40.0, None, second)
-    assert run.fault_time is None and 0.3 < run.margins["yaw_pair"] < 1.0
+    assert run.report_time is None and 0.3 < run.margins["yaw_pair"] < 1.0

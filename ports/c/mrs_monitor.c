@@ -351,10 +351,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     bound = c->model_margin + c->model_rel * rm;
     s->model_err = e / bound;
     /* out-voted: the yaw rate confirmed by its second element and by a_y / v */
-    confirmed = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW;
-    vouched = confirmed && s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW && lat_ok && s->kin_n >= MRS_KIN_WINDOW &&
-              s->kin_count == 0;
-    /* the yaw rate confirmed by its second element: the car is what the nominal one does not explain */
+    /* the yaw rate confirmed by its second element: valid, the window full, its last samples within the hold */
+    confirmed = yaw_rate_redundant > -1e3 && yaw_rate_redundant < 1e3 && s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW &&
+                s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW;
+    vouched = confirmed && lat_ok && s->kin_n >= MRS_KIN_WINDOW && s->kin_count == 0;
+    /* confirmed: not the yaw rate's error */
     MRS_COUNT(s->model_count, e > bound && !vouched, c->model_steps,
               (confirmed != 0) ? MRS_OUTSIDE_MODEL : MRS_CHECK_MODEL);
     /* 4. yaw-rate pair */
@@ -499,9 +500,10 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             bound += c->side_accel * inv_v; /* the pair checks the yaw rate: allow a side force */
         }
         s->kin_err = e / bound;
-        /* the yaw rate confirmed by its second element: a_y or the car disagrees, not the yaw rate */
+        /* the yaw rate confirmed by its second element (this sample in the window, within the hold) */
         MRS_COUNT(s->kin_count, e > bound, c->yaw_count,
-                  (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW) ? MRS_OUTSIDE_MODEL : MRS_CHECK_KINEMATIC);
+                  (s->yaw_pair_n >= MRS_YAW_PAIR_WINDOW && s->yaw_clear_n >= MRS_YAW_PAIR_WINDOW) ?
+                      MRS_OUTSIDE_MODEL : MRS_CHECK_KINEMATIC);
         e = MRS_MAG(delta_driver - delta_driver_redundant);
         s->pair_err = e * c->inv_steer_bound;
         MRS_COUNT(s->pair_count, e > c->steer_bound, c->steer_count, MRS_CHECK_STEER_PAIR);

@@ -104,11 +104,14 @@ class FaultFigures:
             else:
                 self.moving[channel] = on
 
-    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray) -> None:
-        """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed."""
+    def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
+             flags: np.ndarray | int = 0) -> None:
+        """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed,
+        the monitor's detailed flags (their OUTSIDE_MODEL is a report; a missing input's
+        DEGRADED is not)."""
         after = self.faulted & (self.faults.onset <= k * self.ts)
         self.alarms += (bits != 0) & ~after
-        fault = (bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED)) != 0  # the report: a fault or DEGRADED
+        fault = ((bits & pl.PLAUS_FAULT) != 0) | ((flags & pl.OUTSIDE_MODEL) != 0)  # the report
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)

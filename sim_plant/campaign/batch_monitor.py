@@ -142,9 +142,8 @@ class BatchMonitor:
             self._set("turn_settled", paused, False)
             self._set("started", paused, False)
             paired = self._paired(r2)  # the pair's state before this sample, as the model check reads it
-            confirmed = self._confirmed(r2)
             flags |= self._yaw_pair(act, r, r2)  # before the kinematic check, whose bound reads its window
-            flags |= self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired, confirmed)
+            flags |= self._checks(act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired)
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
@@ -155,7 +154,7 @@ class BatchMonitor:
     # The active rows' part of monitor_step, in its order (model, kinematic and pair at a new
     # redundant sample, frozen); long because it is the scalar's four checks inline.  Returns the
     # steering pair's suspicion (flags, not latched).
-    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired, confirmed) -> np.ndarray:
+    def _checks(self, act, lat_ok, st2_ok, d, d2, r, lat, v, aux, paired) -> np.ndarray:
         c = self.c
         inv_v = 1.0 / v
         r_kin = np.where(lat_ok, lat * inv_v, 0.0)
@@ -177,7 +176,7 @@ class BatchMonitor:
         self._set("model_err", act, e / bound)
         vouched = paired & lat_ok & self._kin_agrees()
         self.model_count, trip = _count(self.model_count, (e > bound) & ~vouched, act, c.model_steps)
-        self.latched |= np.where(trip, np.where(confirmed, pl.OUTSIDE_MODEL, pl.CHECK_MODEL), 0)
+        self.latched |= np.where(trip, np.where(paired, pl.OUTSIDE_MODEL, pl.CHECK_MODEL), 0)
         self._set("since", act & (self.since < 1000000), self.since + 1)
 
         new = act & lat_ok & st2_ok & ((lat != self.lat_prev) | (d2 != self.steer2_prev))
@@ -223,8 +222,8 @@ class BatchMonitor:
         bound = np.where(self.yaw_pair_n >= pl.YAW_PAIR_WINDOW, bound + c.side_accel * inv_v, bound)
         self._set("kin_err", new, e / bound)
         self.kin_count, trip = _count(self.kin_count, e > bound, new, c.yaw_count)
-        self.latched |= np.where(trip, np.where(self.yaw_pair_n >= pl.YAW_PAIR_WINDOW, pl.OUTSIDE_MODEL,
-                                                pl.CHECK_KINEMATIC), 0)
+        confirmed = (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW) & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW)
+        self.latched |= np.where(trip, np.where(confirmed, pl.OUTSIDE_MODEL, pl.CHECK_KINEMATIC), 0)
         e = np.abs(d - d2)
         self._set("pair_err", new, e * c.inv_steer_bound)
         self.pair_count, trip = _count(self.pair_count, e > c.steer_bound, new, c.steer_count)
@@ -288,21 +287,13 @@ class BatchMonitor:
             self._set("turn_n", full, 0)
 
     def _paired(self, r2: np.ndarray | None) -> np.ndarray | bool:
-        """The rows whose yaw rate its second element confirms (``monitor_step``'s half of
-        ``vouched`` from the pair, read before this sample enters the pair's window): the element
+        """The rows whose yaw rate its second element confirms (``monitor_step``'s ``confirmed``,
+        half of ``vouched``, read before this sample enters the pair's window): the element
         valid now, the window full and its last samples within ``yaw_pair_hold``."""
         if r2 is None:
             return False
         return ((-1e3 < r2) & (r2 < 1e3) & (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW)
                 & (self.yaw_clear_n >= pl.YAW_PAIR_WINDOW))
-
-    def _confirmed(self, r2: np.ndarray | None) -> np.ndarray | bool:
-        """The rows whose yaw rate its second element confirms for the trip of the model check
-        (``monitor_step``'s ``confirmed``: the element valid now, the pair's window full before
-        this sample enters it): OUTSIDE_MODEL, not CHECK_MODEL."""
-        if r2 is None:
-            return False
-        return (-1e3 < r2) & (r2 < 1e3) & (self.yaw_pair_n >= pl.YAW_PAIR_WINDOW)
 
     def _kin_agrees(self) -> np.ndarray:
         """The rows whose yaw rate a_y / v confirms (the other half of ``vouched``, with a_y
@@ -394,7 +385,7 @@ class BatchMonitor:
             count = np.minimum(np.maximum(self.model_count + np.where(over, 1, -1), 0), c.model_steps)
             trip = over & (count >= c.model_steps)
             if trip.any():
-                latched |= np.where(trip, np.where(self._confirmed(r2), pl.OUTSIDE_MODEL, pl.CHECK_MODEL), 0)
+                latched |= np.where(trip, np.where(self._paired(r2), pl.OUTSIDE_MODEL, pl.CHECK_MODEL), 0)
         else:
             count = np.maximum(self.model_count - 1, 0)
         self.model_count = count

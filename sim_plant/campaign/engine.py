@@ -66,9 +66,9 @@ METRICS = {
     "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
-    "detection_time": ("s", "first PLAUS_FAULT or PLAUS_DEGRADED less when the fault's error left its bound "
-                            "(plausibility_runs.sensor_bound; either speed's: the speed pair's) for 0.3 s (0: it "
-                            "never did, or was reported before; inf: never reported)"),
+    "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error left "
+                            "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's) for 0.3 s "
+                            "(0: it never did, or was reported before; inf: never reported)"),
     "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
                                 "the fault makes the command cause, its fade included (0 without a fault or a "
                                 "controller)"),
@@ -254,7 +254,7 @@ class _Group:
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
                     if figures is not None:
-                        figures.step(k, sensors.error, bits, r, car.v)
+                        figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags)
                     if self.pairs.size:
                         caused = np.abs(r[self.pairs] - r[self.twins])
                         np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)

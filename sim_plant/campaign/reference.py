@@ -97,7 +97,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     pipeline: collections.deque[float] = collections.deque([0.0])
     n = int(round(sc.duration / ts)) + 1
     r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
-    status, bits_hist, auth = (np.zeros(n, dtype=np.int64) for _ in range(3))
+    status, bits_hist, auth, flags_hist = (np.zeros(n, dtype=np.int64) for _ in range(4))
     error, speed_true, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
     command = 0.0  # the command sent the period before: what acts on the car now
@@ -139,6 +139,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS,
                                   mon.state.flags & pl.FADE_CHECKS)
             state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
+            flags_hist[k] = mon.state.flags
             if (k + 1) % status_every == 0:
                 in_flight = bits
         command = u
@@ -155,12 +156,13 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     if fault is not None and ctrl is not None:
         r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
-                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true, r_clean, yaw_2_seen))
+                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true, r_clean, yaw_2_seen,
+                                       flags_hist))
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
                   error: np.ndarray, v: np.ndarray, r_clean: np.ndarray | None,
-                  yaw_rate_2: np.ndarray) -> tuple[int, float, float]:
+                  yaw_rate_2: np.ndarray, flags: np.ndarray | None = None) -> tuple[int, float, float]:
     """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
     ``MonitorRun.exceeded_time`` against ``sensor_bound`` at the true yaw rate ``r`` and the
     true speed ``v`` (the car has the second speed: ``speed_pair``), the yaw-rate pair running
@@ -172,7 +174,7 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
         return false_alarms, 0.0, 0.0
     cfg = pl.PlausibilityConfig(ts=ts)
     run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"yaw_rate_redundant": yaw_rate_2},
-                     np.zeros(bits.size))
+                     np.zeros(bits.size), flags)
     bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True)
     exceeded, reported = run.exceeded_time(bound), run.report_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)

@@ -11,7 +11,9 @@ It bounds the command's authority a second time, independently of the controller
 item 3; the first is where the command leaves the controller): the same ``firmware_py.authority``
 limiter, at the actuator's own step, on the plausibility bits of the controller's status frame.
 A status older than ``STATUS_STALE_S`` counts as DEGRADED: an intervention then ends at the
-panic window, as it does when the controller says it cannot check its inputs.  A plausibility
+panic window, as it does when the controller says it cannot check its inputs.  That is also all
+this outer bound does on the controller's OUTSIDE_MODEL (DEGRADED on the bus, which does not
+tell it from a missing input's; the controller fades that command itself).  A plausibility
 fault latches here as it does in the controller: until the actuator restarts, the command stays
 faded whatever arrives after it.
 """

@@ -1,8 +1,10 @@
 """What a HIL run's logged traffic says about the plausibility monitor (issue 18): which bits the
 controller reported, when it first reported a plausibility fault (``fault_detected_s``) or the
-degraded state (``first_degraded_s``), the earlier of the two (``reported_s``, ``reported_as``:
-issue 18's report), how long after the scenario's first sensor fault that was, and where the
-command was at the end.  Part of ``summary.json``.
+degraded state (``first_degraded_s``; ``latched_degraded_s``: from the sensor fault's onset on,
+in every status to the end, as OUTSIDE_MODEL's is and a missing input's is not), the earlier of
+the fault and the latched degraded state (``reported_s``, ``reported_as``: issue 18's report),
+how long after the scenario's first sensor fault that was, and where the command was at the
+end.  Part of ``summary.json``.
 
 The detection time is read from the command frames, which come every control period: the first
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
@@ -46,6 +48,7 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
     degraded_s: float | None = None
     run_start: float | None = None  # the current unbroken run of FAULT commands began here
     detected_s: float | None = None
+    statuses: list[tuple[float, int]] = []
     for r in rows:
         msg = r["message"]
         if msg == names.MSG_YAW:
@@ -55,6 +58,7 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
             run_start = (run_start if run_start is not None else (yaw_frames - 1) * ts) if faulted else None
         elif msg == names.MSG_STATUS and names.SIG_STATUS_PLAUS in r and yaw_frames:
             bits = int(r[names.SIG_STATUS_PLAUS])
+            statuses.append(((yaw_frames - 1) * ts, bits))
             seen |= bits
             if bits & names.PLAUS_DEGRADED and degraded_s is None:
                 degraded_s = (yaw_frames - 1) * ts
@@ -64,14 +68,18 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
     over = error_over_bound(steps, sc, 1.0 / rate_hz) if steps and sc.sensor_config.faults else None
     # Issue 18's report is the fault or the degraded state, whichever came first: a lateral
     # acceleration that disagrees with a yaw rate its second element confirms is DEGRADED
-    # (plausibility.OUTSIDE_MODEL), as is a car past its grip.
-    reported = min((t for t in (detected_s, degraded_s) if t is not None), default=None)
+    # (plausibility.OUTSIDE_MODEL), as is a car past its grip.  Only the latched DEGRADED counts
+    # (in every status from there to the end, from the sensor fault's onset on): a missing
+    # input's comes and goes.
+    latched = latched_degraded(statuses, onset or 0.0)
+    reported = min((t for t in (detected_s, latched) if t is not None), default=None)
     return {
         "bits_seen": seen,
         "fault_detected_s": detected_s,
         "first_degraded_s": degraded_s,
         "reported_s": reported,
         "reported_as": None if reported is None else "fault" if reported == detected_s else "degraded",
+        "latched_degraded_s": latched,
         "sensor_fault_onset_s": onset,
         "detection_latency_s": None if reported is None or onset is None else reported - onset,
         "error_over_bound_s": over,
@@ -80,6 +88,17 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
         "sensor_faults": [f"{f.sensor}:{f.kind}" + ("" if f.value is None else f":{f.value:g}") + f"@{f.start:g}"
                           for f in sc.sensor_config.faults],
     }
+
+
+def latched_degraded(statuses: list[tuple[float, int]], start: float) -> float | None:
+    """The first of ``statuses`` ((t, CtrlStatus_Plausibility), in order) at or after ``start``
+    from which every status to the end reports DEGRADED; None if the last does not."""
+    first = None
+    for t, bits in reversed(statuses):
+        if t < start or not bits & names.PLAUS_DEGRADED:
+            break
+        first = t
+    return first
 
 
 def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | None:

@@ -73,6 +73,7 @@ class MonitorRun:
     margins: dict[str, float]  # each check's largest residual over the run / its bound
     held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel (and yaw_rate_redundant)
     beta: np.ndarray
+    flags: np.ndarray | None = None  # the monitor's detailed flags per period (None: not kept)
 
     def caused_yaw(self, start: float, car: VehicleParams) -> float:
         """The peak |r| that the command's excursion from ``start`` on gives the linear ``car``
@@ -93,10 +94,12 @@ class MonitorRun:
 
     @property
     def report_time(self) -> float | None:
-        """When the monitor first reported the fault or the degraded state (issue 18's report:
-        a lateral acceleration that disagrees with a yaw rate its second element confirms is
-        DEGRADED, ``plausibility.OUTSIDE_MODEL``)."""
-        return self.first((self.bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED)) != 0)
+        """When the monitor first reported the fault or the latched degraded state (issue 18's
+        report: a lateral acceleration that disagrees with a yaw rate its second element
+        confirms is DEGRADED, ``plausibility.OUTSIDE_MODEL``); a missing input's DEGRADED is
+        no report.  Without ``flags``, the fault only."""
+        outside = 0 if self.flags is None else (self.flags & pl.OUTSIDE_MODEL) != 0
+        return self.first(((self.bits & pl.PLAUS_FAULT) != 0) | outside)
 
     def exceeded_time(self, bound: float | np.ndarray, hold: float = 0.3) -> float | None:
         """When the sensor's error became larger than ``bound`` to stay so for ``hold`` s (or
@@ -182,7 +185,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     ac = au.configure_authority(authority if authority is not None else au.AuthorityConfig(ts=ts))
     ast = au.AuthorityState()
     n = int(round(sc.duration / ts)) + 1
-    out = {k: np.zeros(n) for k in ("bits", "r", "aux", "err", "beta")}
+    out = {k: np.zeros(n) for k in ("bits", "flags", "r", "aux", "err", "beta")}
     seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant", "speed_redundant")}
     held: dict[str, float] = {"yaw_rate_redundant": math.nan, "speed_redundant": math.nan}
     margins = dict.fromkeys(("kinematic", "steer_pair", "model", "yaw_pair", "turn", "speed_pair"), 0.0)
@@ -228,6 +231,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         pipeline.append(u)
         applied = actuator.step(pipeline.popleft())
         out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
+        out["flags"][k] = mon.state.flags
         for ch in seen:
             seen[ch][k] = held[ch]
         st = mon.state
@@ -240,7 +244,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         if not car.linear:
             scene.v = car.v
     return MonitorRun(np.arange(n) * ts, out["bits"].astype(int), out["r"], out["aux"], out["err"], faulted,
-                     margins, seen, out["beta"])
+                     margins, seen, out["beta"], out["flags"].astype(int))
 
 
 def steady_curve(v: float, mu: float, a_y: float = 2.0, duration: float = 2.5, plant: str = "nonlinear",

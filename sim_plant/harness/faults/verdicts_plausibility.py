@@ -152,13 +152,22 @@ def exceeded_at(series: list[ErrorSample], until: float | None, hold: float = PL
 
 
 def check_quiet_monitor(e: Evidence, fails: list[str], observed: list[str]) -> None:
-    """A fault-free row: no status ever reports a plausibility fault."""
+    """A fault-free row: no status ever reports a plausibility fault, nor DEGRADED in every
+    status of its last 0.3 s or more (latched: OUTSIDE_MODEL; a stalled machine's missing frame
+    comes and goes)."""
     if not e.row.no_fault:
         return
     alarms = [s for s in e.statuses if s.plausibility & PLAUS_FAULT]
+    # DEGRADED to the end is the monitor's latched OUTSIDE_MODEL (a missing frame's comes and goes)
+    tail = next((i for i in range(len(e.statuses), 0, -1) if not e.statuses[i - 1].plausibility & PLAUS_DEGRADED),
+                0)
+    latched = e.statuses[tail:] if tail < len(e.statuses) and e.statuses[-1].t - e.statuses[tail].t >= 0.3 else []
     if alarms:
         fails.append(f"false plausibility alarm: {len(alarms)} status frames with bits "
                  f"{sorted({s.plausibility for s in alarms})}, first {alarms[0].t - e.statuses[0].t:.2f} s in")
+    elif latched:
+        fails.append(f"false plausibility alarm: DEGRADED latched from {latched[0].t - e.statuses[0].t:.2f} s in "
+                     f"to the end (the monitor's OUTSIDE_MODEL)")
     else:
         degraded = sum(1 for s in e.statuses if s.plausibility)
         observed.append("monitor quiet" + (f" ({degraded} status frames degraded)" if degraded else ""))
@@ -257,8 +266,10 @@ def _check_degraded_row(e: Evidence, start: float, fails: list[str], observed: l
     """A row whose report is DEGRADED (a lateral acceleration that disagrees with the yaw rate
     its second element confirms: ``plausibility.OUTSIDE_MODEL``): the first status with the bit
     within 300 ms plus its cycle of the error leaving its bound, every later status with it, no
-    fault bit before it; the command faded as on a fault (from the status's cycle before it,
-    where the monitor may have tripped) and at zero to the end."""
+    plausibility bit before the onset, and the redundant frame arriving on its cycle over the
+    status's cycle before the report (else the DEGRADED may be a missing frame's, which the
+    bus does not tell apart); the command faded as on a fault (from the status's cycle before
+    it, where the monitor may have tripped) and at zero to the end."""
     ts = e.setup.ts
     if any(s.t < start and s.plausibility for s in e.statuses):
         fails.append("plausibility bits reported before the fault's onset")
@@ -268,6 +279,10 @@ def _check_degraded_row(e: Evidence, start: float, fails: list[str], observed: l
     if t_st is None:
         fails.append("no status frame reported DEGRADED")
         return None
+    gap, cycle = redundant_gap(e, max(start, t_st - STATUS_CYCLE), t_st)
+    if gap > 1.5 * cycle:
+        fails.append(f"the redundant frame had a {1e3 * gap:.0f} ms gap before the DEGRADED status: "
+                     f"a missing input's DEGRADED, not the monitor's report")
     ref = over if over is not None else start
     observed.append(f"DEGRADED in the status {1e3 * (t_st - ref):.0f} ms after "
                     + ("its error left the bound" if over is not None else "the onset (before the error left it)"))
@@ -315,15 +330,21 @@ def redundancy_trouble(e: Evidence, start: float, until: float) -> str | None:
     the detection (a sample missing costs the kinematic check 50 ms, a long gap a window):
     status frames DEGRADED (a sample withheld or timed out) and its largest gap on the
     controller's bus over 1.5 of its cycles; ``None`` when neither happened."""
-    c = mrsteer_dbc.load()
-    cycle = c.cycle_time_s(names.MSG_REDUNDANT, e.setup.ts) or e.setup.ts
-    fid = c.frame_id(names.MSG_REDUNDANT)
-    times = [start] + [t for t, f, _ in e.frames if f == fid and start < t <= until] + [until]
-    gap = max(b - a for a, b in zip(times, times[1:]))
+    gap, cycle = redundant_gap(e, start, until)
     degraded = sum(1 for s in e.statuses if start <= s.t <= until and s.plausibility & PLAUS_DEGRADED)
     if not degraded and gap <= 1.5 * cycle:
         return None
     return f"redundant frame before the report: {degraded} status frames DEGRADED, largest gap {1e3 * gap:.0f} ms"
+
+
+def redundant_gap(e: Evidence, start: float, until: float) -> tuple[float, float]:
+    """(the largest gap between ``MRS_RedundantSensors`` frames on the controller's bus from
+    ``start`` to ``until``, the ends counting as frames; the frame's cycle), in s."""
+    c = mrsteer_dbc.load()
+    cycle = c.cycle_time_s(names.MSG_REDUNDANT, e.setup.ts) or e.setup.ts
+    fid = c.frame_id(names.MSG_REDUNDANT)
+    times = [start] + [t for t, f, _ in e.frames if f == fid and start < t <= until] + [until]
+    return max(b - a for a, b in zip(times, times[1:])), cycle
 
 
 def check_report(e: Evidence, fails: list[str], t_cmd: float | None, t_st: float | None) -> None:
