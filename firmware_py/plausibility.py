@@ -150,6 +150,8 @@ SUSPECT_CHECKS = SUSPECT_YAW_PAIR | SUSPECT_STEER_JUMP
 YAW_CHECKS = (CHECK_KINEMATIC | CHECK_MODEL | FROZEN_YAW | FROZEN_LAT | CHECK_YAW_PAIR | CHECK_SPEED | CHECK_TURN
               | CHECK_SPEED_PAIR)
 STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
+#: The degraded states: a redundant input missing, or the car outside the model.
+DEGRADED_CHECKS = MISSING | OUTSIDE_MODEL
 #: The pair checks, which find a fault while the command it drove is still building: the node
 #: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
 CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED | CHECK_SPEED_PAIR
@@ -531,7 +533,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             bits |= PLAUS_YAW
         if flags & STEER_CHECKS:
             bits |= PLAUS_STEER
-        if flags & (MISSING | OUTSIDE_MODEL):
+        if flags & DEGRADED_CHECKS:
             bits |= PLAUS_DEGRADED
         s.flags = flags
         s.bits = bits
@@ -845,7 +847,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         bits |= PLAUS_YAW
     if flags & STEER_CHECKS:
         bits |= PLAUS_STEER
-    if flags & (MISSING | OUTSIDE_MODEL):
+    if flags & DEGRADED_CHECKS:
         bits |= PLAUS_DEGRADED
     s.flags = flags
     s.bits = bits

@@ -10,7 +10,8 @@
  * model_err u auth_flags yaw_pair_err turn_err turn_n turn_settled yaw_hold_n yaw_clear_n
  * speed_pair_err speed_pair_count speed2_seen steer_hold_n" (the limiter cut by the flags'
  * MRS_CUT_CHECKS and faded by their MRS_FADE_CHECKS), every real as %.17g so that a double reads
- * back exactly.  "defaults" alone prints the default configurations instead.  Exit 2 on unreadable input, 3 on an invalid calibration.
+ * back exactly.  "defaults" alone prints the default configurations instead.  Exit 2 on
+ * unreadable input, 3 on an invalid calibration.
  * tests/test_c_monitor.py drives it against firmware_py/plausibility.py. */
 #include <stdio.h>
 #include <stdlib.h>

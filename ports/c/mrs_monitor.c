@@ -230,7 +230,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
         s->flags = (flags);                                                                      \
         s->bits = (uint8_t)((((flags) & MRS_YAW_CHECKS) != 0u ? MRS_PLAUS_YAW : 0u) |            \
                             (((flags) & MRS_STEER_CHECKS) != 0u ? MRS_PLAUS_STEER : 0u) |        \
-                            (((flags) & (MRS_MISSING | MRS_OUTSIDE_MODEL)) != 0u ? MRS_PLAUS_DEGRADED : 0u)); \
+                            (((flags) & MRS_DEGRADED_CHECKS) != 0u ? MRS_PLAUS_DEGRADED : 0u));  \
     } while (0)
 
 uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double delta_driver,

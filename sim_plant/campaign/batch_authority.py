@@ -34,7 +34,9 @@ class BatchAuthority:
         c = self.c
         finite = (-1e3 < u_request) & (u_request < 1e3)  # False for NaN and +-inf
         plaus_fault = (plaus_bits & PLAUS_FAULT) != 0
-        fault = plaus_fault | ~finite if fade is None else plaus_fault | ~finite | (fade != 0)
+        fault = plaus_fault | ~finite
+        if fade is not None:
+            fault |= fade != 0
         timed_out = ~fault & (self.engaged >= c.window_steps) & ((plaus_bits & PLAUS_DEGRADED) != 0)
         fading = fault | timed_out
         flags = np.where(fault, au.AUTH_FAULT, 0) | np.where(timed_out, au.AUTH_TIME, 0)

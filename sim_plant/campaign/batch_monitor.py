@@ -81,8 +81,7 @@ class BatchMonitor:
         #: the CtrlStatus_Plausibility bits of each value of the detailed flags
         self._bits_of = np.array([(pl.PLAUS_YAW if f & pl.YAW_CHECKS else 0) | (pl.PLAUS_STEER if f & pl.STEER_CHECKS
                                                                                else 0)
-                                  | (pl.PLAUS_DEGRADED if f & (pl.MISSING | pl.OUTSIDE_MODEL) else 0)
-                                  for f in range(_FLAG_VALUES)],
+                                  | (pl.PLAUS_DEGRADED if f & pl.DEGRADED_CHECKS else 0) for f in range(_FLAG_VALUES)],
                                  dtype=np.int64)
 
     def _set(self, name: str, rows: np.ndarray, value) -> None:
@@ -147,7 +146,7 @@ class BatchMonitor:
             flags |= self.latched
         bits = (np.where((flags & pl.YAW_CHECKS) != 0, pl.PLAUS_YAW, 0)
                 | np.where((flags & pl.STEER_CHECKS) != 0, pl.PLAUS_STEER, 0)
-                | np.where((flags & (pl.MISSING | pl.OUTSIDE_MODEL)) != 0, pl.PLAUS_DEGRADED, 0))
+                | np.where((flags & pl.DEGRADED_CHECKS) != 0, pl.PLAUS_DEGRADED, 0))
         self.flags, self.bits = flags, bits
         return bits
 

@@ -46,6 +46,7 @@ from mrsteer_dbc import names
 from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET, caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.car.sensors import DBC_SIGNALS
+from sim_plant.harness.hil_plausibility import latched_degraded
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
 from sim_plant.offline.plausibility_runs import sensor_bound
@@ -159,14 +160,13 @@ def check_quiet_monitor(e: Evidence, fails: list[str], observed: list[str]) -> N
         return
     alarms = [s for s in e.statuses if s.plausibility & PLAUS_FAULT]
     # DEGRADED to the end is the monitor's latched OUTSIDE_MODEL (a missing frame's comes and goes)
-    tail = next((i for i in range(len(e.statuses), 0, -1) if not e.statuses[i - 1].plausibility & PLAUS_DEGRADED),
-                0)
-    latched = e.statuses[tail:] if tail < len(e.statuses) and e.statuses[-1].t - e.statuses[tail].t >= 0.3 else []
+    since = latched_degraded([(s.t, s.plausibility) for s in e.statuses], e.statuses[0].t) if e.statuses else None
+    latched = since is not None and e.statuses[-1].t - since >= 0.3
     if alarms:
         fails.append(f"false plausibility alarm: {len(alarms)} status frames with bits "
                  f"{sorted({s.plausibility for s in alarms})}, first {alarms[0].t - e.statuses[0].t:.2f} s in")
     elif latched:
-        fails.append(f"false plausibility alarm: DEGRADED latched from {latched[0].t - e.statuses[0].t:.2f} s in "
+        fails.append(f"false plausibility alarm: DEGRADED latched from {since - e.statuses[0].t:.2f} s in "
                      f"to the end (the monitor's OUTSIDE_MODEL)")
     else:
         degraded = sum(1 for s in e.statuses if s.plausibility)
