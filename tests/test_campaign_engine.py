@@ -70,6 +70,7 @@ def _compare(s: SampleSet, config: mr.ControllerConfig | None) -> dict[str, np.n
         assert res["false_alarms"][i] == ref.false_alarms
         assert res["detection_time"][i] == pytest.approx(ref.detection_time, abs=TOL)
         assert res["fault_yaw_rate"][i] == pytest.approx(ref.fault_yaw_rate, abs=TOL)
+        assert res["twin_yaw_rate"][i] == pytest.approx(ref.twin_yaw_rate, abs=TOL)
     return res
 
 
@@ -553,3 +554,32 @@ def test_batch_law_with_the_monitor_s_hold_equals_the_scalar_one_row_by_row(conf
                 assert abs(expected) <= abs(before[i]) and expected * before[i] >= 0.0, (k, i)
                 held_moves += expected != before[i]
     assert held_moves > 0  # a held command moved toward zero somewhere
+
+
+def test_a_found_faults_fade_is_not_yaw_its_command_caused_but_is_the_twins_difference() -> None:
+    # A 3 m/s speed offset during a 4 kN m yaw moment on mu 0.6: the jump check finds it at
+    # once and the limiter takes the command away, so the car spins as it would without the
+    # controller, which its fault-free twin held.  The command itself never went beyond the
+    # twin's or zero: fault_yaw_rate 0; twin_yaw_rate is the whole cost, the spin.
+    toml = """
+samples = 1
+seed = 1
+sampling = "random"
+duration = 3.0
+calibrations = ["shipped"]
+[parameters]
+v = 20.0
+mu = 0.6
+disturbance = "yaw_moment"
+onset = 0.5
+yaw_moment = 4000.0
+fault_sensor = "speed"
+fault_kind = "offset"
+fault_onset = 1.0
+fault_size = 3.0
+"""
+    s = sampling.samples(spec.parse(toml, "cut.toml"), np.arange(1))
+    res = engine.simulate(s, mr.ControllerConfig(), 3.0)
+    assert res["fault_steps"][0] > 0 and res["detection_time"][0] == 0.0
+    assert res["fault_yaw_rate"][0] == 0.0
+    assert res["twin_yaw_rate"][0] > 1.0 and res["peak_yaw_rate"][0] > 1.0

@@ -79,3 +79,43 @@ def test_the_nonlinear_replay_needs_the_driver_angle_and_the_yaw_moment() -> Non
         excursion_yaw([0.0, 0.01], TS, CAR, "nonlinear")
     with pytest.raises(ValueError, match="plant must be one of"):
         excursion_yaw([0.0, 0.01], TS, CAR, "bicycle")
+
+
+def _with_driver(car: VehicleParams, time_constant: float) -> tuple[list[float], list[float]]:
+    """(num, den) of r - r' per rad of excursion on the continuous linear car whose driver adds
+    the integral of -(r' - r) / (time_constant K_n) (``ScenarioState.driver_angle``'s correction):
+    G T K s / (T K s den + num), G = num / den (eq. 14), K the dry road's K_n(v)."""
+    tf = steering_tf(car)
+    k_n = steering_tf(car.at(mu=1.0)).dc_gain()
+    tk = time_constant * k_n
+    num = [tk * c for c in tf.num] + [0.0]
+    den = [tk * c for c in tf.den] + [0.0]
+    for i, c in enumerate(reversed(tf.num)):
+        den[-1 - i] += c
+    return num, den
+
+
+def test_a_correcting_driver_takes_the_difference_back_on_the_linear_car() -> None:
+    # Half a degree held for 6 s at 20 m/s on mu 0.3, the driver model's 0.5 s correction: the
+    # figure is scipy's continuous closed loop's peak; the driver's integral action ends the
+    # difference, where the car without a correcting driver keeps its steady gain.
+    step, time_constant = math.radians(0.5), 0.5
+    applied = [0.0] + [step] * 3000
+    gain = TS / time_constant / steering_tf(CAR.at(mu=1.0)).dc_gain()
+    num, den = _with_driver(CAR, time_constant)
+    t = [k * TS for k in range(len(applied))]
+    _, r, _ = signal.lsim(signal.lti(num, den), [0.0] + [step] * 3000, t, interp=False)
+    closed = excursion_yaw(applied, TS, CAR, driver_gain=[gain] * len(applied))
+    assert closed == pytest.approx(float(max(abs(r))), rel=1e-2)
+    assert abs(r[-1]) < 0.05 * closed  # (the continuous loop's difference gone by the end)
+    assert closed < 0.9 * excursion_yaw(applied, TS, CAR)
+    assert excursion_yaw(applied, TS, CAR, driver_gain=[0.0] * len(applied)) == excursion_yaw(applied, TS, CAR)
+
+
+def test_the_nonlinear_replay_lets_the_driver_correct_as_the_linear_car_does_where_its_tyres_are_linear() -> None:
+    applied = [0.0] + [math.radians(0.2)] * 2000
+    zeros = [0.0] * len(applied)
+    gains = [TS / 0.5 / steering_tf(CAR.at(mu=1.0)).dc_gain()] * len(applied)
+    nonlinear = excursion_yaw(applied, TS, CAR, "nonlinear", zeros, zeros, driver_gain=gains)
+    assert nonlinear == pytest.approx(excursion_yaw(applied, TS, CAR, driver_gain=gains), rel=5e-3)
+    assert nonlinear < 0.9 * excursion_yaw(applied, TS, CAR, "nonlinear", zeros, zeros)

@@ -12,9 +12,10 @@ from scipy import signal
 
 from firmware_py import model_regulator as mr
 from sim_plant.car import scenario as scn
+from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.car.vehicle import VehicleParams, steering_tf
-from sim_plant.harness.hil_caused_yaw import caused_yaw_figures
+from sim_plant.harness.hil_caused_yaw import caused_yaw_figures, driver_gains
 from sim_plant.harness.hil_steps import Step
 from sim_plant.offline import plausibility_runs
 
@@ -97,3 +98,15 @@ def test_runs_without_a_twin_say_why(twin: list[float]) -> None:
     in_file = replace(in_file, sensors=replace(in_file.sensors, faults=SCENARIO.sensor_faults))
     assert in_file.without_sensor_faults().sensor_config.faults == ()
     assert caused_yaw_figures(steps, in_file, CTRL, RATE)["caused_yaw_rad_s"] == 0.0
+
+
+def test_the_replays_driver_corrects_as_the_scenarios_driver_model_does() -> None:
+    # handover: the 4000 Nm step at 0.5 s, a panic time of 1 s, then the driver model's 0.5 s
+    # correction; paper-fig9's driver holds the wheel.
+    steps = _steps([0.0] * 1000)
+    gains = driver_gains(ScenarioState(scn.load("handover")), steps, TS)
+    k_n = steering_tf(VehicleParams(v=20.0, mu=1.0)).dc_gain()
+    assert gains[100] == pytest.approx(TS / 0.5 / k_n)  # correcting before the hit
+    assert gains[300] == gains[700] == 0.0  # the panic time, 0.5-1.5 s
+    assert gains[800] == pytest.approx(TS / 0.5 / k_n)
+    assert set(driver_gains(ScenarioState(scn.load("paper-fig9")), steps, TS)) == {0.0}

@@ -102,6 +102,24 @@ def test_driver_holds_during_panic_then_steers_back() -> None:
     assert hold.driver_angle(2.0, 0.1, dt) == 0.0  # "hold" never steers
 
 
+def test_the_correction_gain_is_how_far_the_drivers_angle_moves_per_yaw_rate_error() -> None:
+    # Two drivers in the same state see yaw rates 0.01 rad/s apart: their angles differ by the
+    # gain times that, in the panic window by nothing; the "hold" driver never corrects.
+    dt = 0.002
+    for t in (0.2, 0.7, 1.6):  # before the yaw moment, in the panic time, correcting
+        st, other = (ScenarioState(scn.load("handover")) for _ in range(2))
+        for s in (st, other):
+            s.advance_to(t)
+        gain = st.correction_gain(t, dt)
+        difference = st.driver_angle(t, 0.1, dt) - other.driver_angle(t, 0.11, dt)
+        assert difference == pytest.approx(0.01 * gain, rel=1e-9, abs=1e-15)
+        assert (gain == 0.0) == (t == 0.7)
+    assert st.correction_gain(1.6, dt) == pytest.approx(dt / 0.5 / nominal_yaw_gain(st.v))
+    hold = ScenarioState(scn.load("paper-fig9"))
+    hold.advance_to(2.0)
+    assert hold.correction_gain(2.0, dt) == 0.0
+
+
 def test_mu_and_speed_events_change_the_operating_point() -> None:
     sc = scn.Scenario("t", 3.0, events=(scn.Event(1.0, "mu", 0.3), scn.Event(2.0, "speed", 30.0)))
     st = ScenarioState(sc)

@@ -135,7 +135,7 @@ def test_a_suspicion_lets_the_law_s_command_shrink_but_not_grow() -> None:
 
 
 def _caused(v: float, fault: SensorFault | None, second: SensorConfig | None) -> tuple[float, pr.MonitorRun]:
-    """The largest |r - r of the fault-free twin| after the onset (the campaigns' fault_yaw_rate)
+    """The largest |r - r of the fault-free twin| after the onset (the campaigns' twin_yaw_rate)
     in a 2 m/s^2 curve on a dry road, and the faulty run."""
     sensors = SensorConfig(seed=1, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=0.3))
     base = replace(pr.steady_curve(v, 1.0, duration=2.0), sensors=sensors)

@@ -79,7 +79,8 @@ HOLD = 0.3
 class FaultFigures:
     """The figures of a batch's sensor faults, one engine step at a time: ``false_alarms``
     (alarms before the fault's onset, or in the whole run without one) and ``detection_time``
-    (``engine.METRICS``; ``fault_yaw_rate`` is the engine's, from a fault-free twin)."""
+    (``engine.METRICS``; ``fault_yaw_rate`` and ``twin_yaw_rate`` are the engine's, from a
+    fault-free twin)."""
 
     def __init__(self, faults: BatchFaults, n: int, ts: float) -> None:
         rows = faults.onset.size

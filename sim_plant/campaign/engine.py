@@ -69,9 +69,13 @@ METRICS = {
     "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error left "
                             "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's) for 0.3 s "
                             "(0: it never did, or was reported before; inf: never reported)"),
-    "fault_yaw_rate": ("rad/s", "largest |r - r without the fault| from the sensor fault's onset: the yaw rate "
-                                "the fault makes the command cause, its fade included (0 without a fault or a "
-                                "controller)"),
+    "fault_yaw_rate": ("rad/s", "the yaw rate the faulty sensor makes the command cause: largest |r - r'| from "
+                                "the sensor fault's onset, r' the same car without the applied angle's excursion "
+                                "beyond the fault-free twin's and zero (offline.excursion_yaw, as hil run's "
+                                "caused_yaw_rad_s; a fade is not counted; 0 without a fault or a controller)"),
+    "twin_yaw_rate": ("rad/s", "largest |r - r of the fault-free twin| from the sensor fault's onset: the fault's "
+                               "whole cost to the car, the disturbance rejection a fade gives up included (0 "
+                               "without a fault or a controller)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
     "final_yaw_rate": ("rad/s", "r at the end"),
     "final_speed": ("m/s", "v at the end"),
@@ -99,9 +103,13 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
     """Every row in closed loop with ``config`` (None: no controller); ``METRICS`` per row, and
     with ``record`` the traces ``r``, ``beta``, ``command``, ``bits`` (steps x rows) as well.
 
-    A row with a sensor fault runs beside a twin without it (the same sample, noise and all), so
-    that ``fault_yaw_rate`` is the yaw rate the fault makes the command cause: the largest
-    difference of their true yaw rates from the fault's onset."""
+    A row with a sensor fault runs beside a twin without it (the same sample, noise and all), and
+    beside a third car that the row's own angles drive less their *excursion*, the part outside
+    the range from the twin's applied angle to zero (``offline.excursion_yaw.excursion``): from
+    the fault's onset, ``fault_yaw_rate`` is the largest difference of the row's and the third
+    car's true yaw rates (the yaw rate the fault makes the command cause, the figure ``hil run``
+    reports; a fade toward zero is not counted), ``twin_yaw_rate`` the largest of the row's and
+    the twin's (the fault's whole cost, a fade's included)."""
     if config is not None and abs(config.ts - ts) > 1e-15:
         raise ValueError(f"the calibration's step {config.ts:g} s differs from the campaign's {ts:g} s")
     n = len(samples)
@@ -142,6 +150,10 @@ class _Group:
         self.pairs = np.flatnonzero(twin >= 0)  # the rows with a fault-free twin, and their twins
         self.twins = twin[self.pairs]
         self.fault_onset = s["fault_onset"][self.pairs]
+        # the faulted rows' car without their command's excursion (before the onset the row's own)
+        self.shadow = BatchCar(s["v"][self.pairs], s["mu"][self.pairs], s["mass"][self.pairs], ts) \
+            if self.pairs.size else None
+        self.shadow_correction = np.zeros(self.pairs.size)  # its driver's, less the row's driver's
         self.mass = s["mass"]
         n = self.mass.size
         self.car = BatchCar(s["v"], s["mu"], s["mass"], ts)
@@ -195,7 +207,7 @@ class _Group:
         track_speed = figures is not None and speed_faulted
         track_speed2 = figures is not None and "speed_redundant" in tracked
         track_steer2 = figures is not None and "steer_redundant" in tracked
-        fault_yaw = np.zeros(self.pairs.size)
+        fault_yaw, twin_yaw = np.zeros(self.pairs.size), np.zeros(self.pairs.size)
         for k0 in range(0, n, BLOCK):
             t_block = np.arange(k0, min(n, k0 + BLOCK), dtype=float)[:, None] * ts
             block = self.loads.block(t_block)
@@ -255,9 +267,9 @@ class _Group:
                         in_flight = bits
                     if figures is not None:
                         figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags)
-                    if self.pairs.size:
-                        caused = np.abs(r[self.pairs] - r[self.twins])
-                        np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
+                    if self.shadow is not None:
+                        after = self.fault_onset <= t
+                        np.maximum(twin_yaw, np.where(after, np.abs(r[self.pairs] - r[self.twins]), 0.0), out=twin_yaw)
                 else:
                     u, bits = np.zeros(rows), tally.no_bits
                 pending = u
@@ -267,10 +279,16 @@ class _Group:
                         traces[name][k] = value
                 # the car gets the position's mean over the step
                 delta = driver + self.actuator.mean
+                if self.shadow is not None:
+                    self._advance_shadow(driver, block, j, m_z, f_y, tyres, self.fault_onset <= t,
+                                         steering[j][self.pairs] if not all_steering[j] else None, nominal)
                 if self.grip:
                     car.advance(delta, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
                 else:
                     car.advance(delta, m_z, f_y, None, None, car.mu)
+                if self.shadow is not None:  # (as excursion_yaw: each step's end from the onset's on)
+                    caused = np.abs(car.r[self.pairs] - self.shadow.r)
+                    np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
             tally.reduce(t_block.shape[0])
         c = tally.counts
         return {"peak_yaw_rate": tally.peaks[1], "peak_side_slip": np.degrees(tally.peaks[0]),
@@ -280,7 +298,37 @@ class _Group:
                 **(figures.result() if figures is not None else
                    {"false_alarms": c["alarms"].copy(), "detection_time": np.zeros(rows)}),
                 "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
+                "twin_yaw_rate": _scatter(rows, self.pairs, twin_yaw),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+
+
+    def _advance_shadow(self, driver: np.ndarray, block: dict, j: int, m_z: np.ndarray, f_y: np.ndarray | None,
+                        tyres: Tyres | None, after: np.ndarray, steering: np.ndarray | None,
+                        nominal: np.ndarray) -> None:
+        """The third car of each faulted row one step on: the row's loads, the actuator
+        position's mean over the step, from the fault's onset on (``after``) less its excursion
+        beyond [min(0, h), max(0, h)], h the twin's (``excursion_yaw.excursion``), and the row's
+        driver angle plus the correction the driver (where ``steering``; None: every row) would
+        have added for this car's yaw rate (``excursion_yaw``'s ``driver_gain``, at the row's
+        speed).  Before the onset it is the row's own car: the twin's sensors draw their noise
+        apart from the faulted row's, so their commands may differ there by a little."""
+        at, mean = self.pairs, self.actuator.mean
+        shadow = self.shadow
+        assert shadow is not None
+        step = self.gain_step[at] * (shadow.r - self.car.r[at]) / nominal[at]
+        self.shadow_correction -= step if steering is None else np.where(steering, step, 0.0)
+        applied, healthy = mean[at], mean[self.twins]
+        kept = np.clip(applied, np.minimum(healthy, 0.0), np.maximum(healthy, 0.0))
+        delta = np.clip(driver[at] + self.shadow_correction, -DRIVER_LIMIT, DRIVER_LIMIT)
+        delta += np.where(after, kept, applied)
+        m_z = np.broadcast_to(m_z, driver.shape)[at]
+        f_y = None if f_y is None else np.broadcast_to(f_y, driver.shape)[at]
+        if self.grip:
+            assert tyres is not None
+            shadow.advance(delta, m_z, f_y, block["a_x"][j][at], Tyres(tyres.b[..., at], tyres.d[..., at]),
+                           block["mu_max"][j][at])
+        else:
+            shadow.advance(delta, m_z, f_y, None, None, shadow.mu)
 
 
 class _Tally:

@@ -45,13 +45,15 @@ from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.offline.excursion_yaw import excursion_yaw
 from sim_plant.offline.plausibility_runs import MonitorRun, cycles, sensor_bound
 
 
 @dataclass(frozen=True)
 class ReferenceRun:
     """Per step: the true yaw rate and side slip at the step's start, the command sent (after the
-    authority limiter), the reported state, the plausibility bits and the limiter's flags."""
+    authority limiter), the reported state, the plausibility bits and the limiter's flags, and the
+    actuator position's mean over the step (the angle the car got besides the driver's)."""
 
     r: np.ndarray
     beta: np.ndarray
@@ -62,7 +64,9 @@ class ReferenceRun:
     final_speed: float
     false_alarms: int  # steps with a plausibility bit before the sensor fault's onset (all, without one)
     detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun
-    fault_yaw_rate: float
+    fault_yaw_rate: float  # excursion_yaw's figure against the fault-free twin (engine.METRICS)
+    twin_yaw_rate: float  # |r - r of the fault-free twin|, largest from the onset
+    applied: np.ndarray
 
 
 def status_cycle(ts: float) -> int:
@@ -97,6 +101,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     pipeline: collections.deque[float] = collections.deque([0.0])
     n = int(round(sc.duration / ts)) + 1
     r_hist, beta_hist, u_hist = np.empty(n), np.empty(n), np.empty(n)
+    applied, driver_hist, m_z_hist, mu_hist, v_hist, gain_hist = (np.empty(n) for _ in range(6))
+    loads_hist = []
     status, bits_hist, auth, flags_hist = (np.zeros(n, dtype=np.int64) for _ in range(4))
     error, speed_true, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
@@ -149,24 +155,35 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         position.step(handling.applied)
         r_hist[k], beta_hist[k], u_hist[k] = x[1], x[0], u
         status[k], bits_hist[k], auth[k] = state, bits, ast.flags
+        applied[k], driver_hist[k], m_z_hist[k] = position.mean, driver, m_z + car.loads.m_z
+        mu_hist[k], v_hist[k], gain_hist[k] = scene.params().mu, car.v, scene.correction_gain(t, ts)
+        loads_hist.append(car.loads)
         car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
-    # the yaw rate the fault makes the command cause: against the same run without it
-    r_clean = None
+    caused, clean = 0.0, None
     if fault is not None and ctrl is not None:
-        r_clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts).r
-    return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v,
-                        *fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true, r_clean, yaw_2_seen,
-                                       flags_hist))
+        # the yaw rate the fault makes the command cause: the excursion beyond the same run
+        # without it, replayed on the car from the onset (as hil run's figure)
+        clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts)
+        k0 = int(np.argmax(np.arange(n) * ts >= fault.start))
+        car_at_onset = replace(scene.params(), v=float(v_hist[k0]), mu=float(mu_hist[k0]))
+        caused = excursion_yaw(applied[k0:], ts, car_at_onset, sc.plant, driver_hist[k0:], m_z_hist[k0:],
+                               float(beta_hist[k0]), float(r_hist[k0]), healthy=clean.applied[k0:],
+                               mu=mu_hist[k0:], loads=loads_hist[k0:], driver_gain=gain_hist[k0:])
+    figures = fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true,
+                            None if clean is None else clean.r, yaw_2_seen, flags_hist)
+    return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v, figures[0], figures[1],
+                        caused, figures[2], applied)
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
                   error: np.ndarray, v: np.ndarray, r_clean: np.ndarray | None,
                   yaw_rate_2: np.ndarray, flags: np.ndarray | None = None) -> tuple[int, float, float]:
-    """(false_alarms, detection_time, fault_yaw_rate) of a run, by ``plausibility_runs``'
+    """(false_alarms, detection_time, twin_yaw_rate) of a run, by ``plausibility_runs``'
     ``MonitorRun.exceeded_time`` against ``sensor_bound`` at the true yaw rate ``r`` and the
     true speed ``v`` (the car has the second speed: ``speed_pair``), the yaw-rate pair running
-    while ``yaw_rate_2`` (what the monitor saw) is there."""
+    while ``yaw_rate_2`` (what the monitor saw) is there; twin_yaw_rate the largest |r -
+    ``r_clean``| from the onset (0 without ``r_clean``)."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
     false_alarms = int(np.count_nonzero((bits != 0) & ~after))
@@ -178,5 +195,5 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True)
     exceeded, reported = run.exceeded_time(bound), run.report_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
-    caused = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
-    return false_alarms, detection, caused
+    twin = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
+    return false_alarms, detection, twin

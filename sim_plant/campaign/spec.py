@@ -48,7 +48,7 @@ SAMPLINGS = ("lhs", "random")
 DISTRIBUTIONS = ("uniform", "loguniform", "choice")
 NAMED_CALIBRATIONS = ("shipped", "paper", "previous", "none")
 CRITERIA = ("peak_yaw_rate", "peak_side_slip", "time_at_limit", "fault_steps", "false_alarms", "detection_time",
-            "fault_yaw_rate")
+            "fault_yaw_rate", "twin_yaw_rate")
 #: the parameters of a sensor fault besides fault_sensor (meaningless while it is always none)
 FAULT_PARAMETERS = ("fault_kind", "fault_onset", "fault_size")
 MAX_SAMPLES = 10**8

@@ -53,6 +53,16 @@ class ScenarioState:
                 self.panic_until = e.t + self.sc.driver.reaction_time
         return changed
 
+    def correction_gain(self, t: float, dt: float) -> float:
+        """How far the driver's correction moves in a step of ``dt`` at t per rad/s of yaw-rate
+        error (``driver_angle``'s integrator; rad per rad/s): dt / (time_constant K_n(v)) while
+        the driver corrects (``model`` mode, past the panic time), else 0.  A replay of a run
+        under another command (``offline.excursion_yaw``) lets its driver correct its own car."""
+        if self.sc.driver.mode == "model" and t >= self.panic_until:
+            return dt / self.sc.driver.time_constant / steering_tf(
+                VehicleParams(v=self.v, mu=1.0, mass=self.sc.mass)).dc_gain()
+        return 0.0
+
     def loads(self, t: float) -> dist.Loads:
         """What the physical disturbances do to the car at t (``disturbances.NO_LOADS`` if none)."""
         return dist.sum_loads(self._loads, t) if self._loads else dist.NO_LOADS

@@ -12,7 +12,10 @@ twin's or beyond zero counts (``offline.excursion_yaw``): the healthy controller
 disturbance or to the driver after the onset is not the fault's, and neither is a fade to zero
 (fading out a command that rejects a disturbance lets the car yaw, but that is the car without
 the controller, issue 18's safe state). The excursion is replayed on the run's car from its
-state at the onset, with the scenario's loads (side force, braking, grip) at each step.
+state at the onset, with the scenario's loads (side force, braking, grip) at each step, and
+with the scenario's driver model correcting the car without the excursion for its own yaw rate
+(``driver_gains``; a driver who holds the wheel corrects nothing). A campaign's
+``fault_yaw_rate`` is the same figure (docs/campaigns.md, "What the command caused").
 
 Before the onset the twin and the run are the same run; their largest difference there is the
 figure's floor (``caused_yaw_twin_mismatch_deg``: the bus carries the measurements quantised to
@@ -93,8 +96,19 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
     figure = excursion_yaw([s.aux_applied_rad for s in run], 1.0 / rate_hz, car, sc.plant,
                            [s.driver_angle_rad for s in run], [s.m_z_nm for s in run], run[0].beta_rad,
                            run[0].yaw_rate_rad_s, healthy=healthy[k0:n], mu=[s.mu for s in run],
-                           loads=[scene.loads(s.t_s) for s in run])
+                           loads=[scene.loads(s.t_s) for s in run], driver_gain=driver_gains(scene, run, 1.0 / rate_hz))
     return {"caused_yaw_rad_s": figure,
             "caused_yaw_note": f"the excursion beyond a fault-free twin's command, replayed on the {sc.plant} car"
                                + ("" if checked else " (the twin unchecked: the command did not move before the onset)"),
             "caused_yaw_twin_mismatch_deg": math.degrees(mismatch)}
+
+
+def driver_gains(scene: ScenarioState, steps: list[Step], ts: float) -> list[float]:
+    """Each step's ``ScenarioState.correction_gain`` (the scenario's events played up to it, at
+    the trace's speed): how the driver model corrects a replayed car (``excursion_yaw``)."""
+    gains = []
+    for s in steps:
+        scene.advance_to(s.t_s)
+        scene.v = s.v_m_s
+        gains.append(scene.correction_gain(s.t_s, ts))
+    return gains

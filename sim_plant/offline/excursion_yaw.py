@@ -11,10 +11,17 @@ counted either).
 
 The figure is the peak over the run of |r - r'|, where r is the car's yaw rate under the
 applied angles and r' under the same angles without their excursion, both from the state at
-the onset with the same driver angle, yaw moment, friction and loads:
+the onset with the same driver angle, yaw moment, friction and loads. Where the run's driver
+corrects the yaw rate (the scenario's driver model, ``ScenarioState.correction_gain``), the
+replay without the excursion has that driver correct its own car: its angle is the recorded one
+plus the correction the difference r' - r would have added since the onset (``driver_gain``;
+clamped as the driver's). Replayed open-loop, the recorded corrections (made for the car that
+had the excursion) would drive the other car off by themselves: on a low-mu road under a yaw
+moment, into a spin that no command caused.
 
 * the paper's linear car (eqs. 14/16, exact ZOH): by superposition r - r' is the car's
-  response to the excursion alone from rest, computed so; exact for that car.
+  response to the excursion alone from rest (less the driver's correction of the difference),
+  computed so; exact for that car.
 * the nonlinear car (``sim_plant.car.nonlinear``, magic-formula tyres): the two runs, each from
   the onset's side slip, yaw rate and speed, with the side force, deceleration and grip of each
   step when given (``loads``; a trace records only the yaw moment). Near the grip limit the
@@ -36,6 +43,9 @@ from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
+#: The driver's front-wheel angle stays within this (rad; ``ScenarioState.driver_angle``'s clamp).
+DRIVER_LIMIT = 0.6
+
 
 def excursion(a: float, h: float) -> float:
     """The part of the applied angle ``a`` outside [min(0, h), max(0, h)] (rad)."""
@@ -45,7 +55,8 @@ def excursion(a: float, h: float) -> float:
 def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind: str = LINEAR,
                   driver: Sequence[float] | None = None, m_z: Sequence[float] | None = None,
                   beta0: float = 0.0, r0: float = 0.0, *, healthy: Sequence[float] | None = None,
-                  mu: Sequence[float] | None = None, loads: Sequence[Loads] | None = None) -> float:
+                  mu: Sequence[float] | None = None, loads: Sequence[Loads] | None = None,
+                  driver_gain: Sequence[float] | None = None) -> float:
     """The peak |r - r'| (rad/s; the module's docstring) over ``applied``, the angles applied
     from the onset's step on, each held over one step of ``ts`` s, on the car ``kind``
     (``sim_plant.car.plants.PLANTS``) at ``car``'s speed and friction. ``healthy`` is the
@@ -53,26 +64,31 @@ def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind:
     onset); ``mu`` the road's friction of each step (default ``car.mu`` throughout). The
     nonlinear car also needs the driver's front-wheel angle and the yaw moment of each step
     (``driver``, ``m_z``), the onset's state (``beta0``, ``r0``) and, where they act, the loads
-    of each step (their side force, deceleration and grip; their yaw moment is ``m_z``'s). Every
-    sequence has ``applied``'s length. The linear car's figure depends only on the angles, the
-    friction and the car."""
+    of each step (their side force, deceleration and grip; their yaw moment is ``m_z``'s).
+    ``driver_gain``: how far the driver's correction moves in each step per rad/s of the yaw
+    rate's difference (``ScenarioState.correction_gain``; default none: a driver who does not
+    correct). Every sequence has ``applied``'s length. The linear car's figure depends only on
+    the angles, the friction, the driver's gains and the car."""
     if kind not in PLANTS:
         raise ValueError(f"plant must be one of {', '.join(PLANTS)}, got {kind!r}")
     n = len(applied)
-    for name, seq in (("healthy", healthy), ("mu", mu), ("loads", loads)):
+    for name, seq in (("healthy", healthy), ("mu", mu), ("loads", loads), ("driver_gain", driver_gain)):
         if seq is not None and len(seq) != n:
             raise ValueError(f"{name} has {len(seq)} steps, the applied angles {n}")
     if not n:
         return 0.0
     held = healthy if healthy is not None else [applied[0]] * n
     road = mu if mu is not None else [car.mu] * n
+    gains = driver_gain if driver_gain is not None else [0.0] * n
     peak = 0.0
+    correction = 0.0  # what the driver without the excursion has added to the recorded angle
     if kind == LINEAR:
-        plant = DiscretePlant(car, ts)
-        for a, h, m in zip(applied, held, road):
+        plant = DiscretePlant(car, ts)  # r - r' from rest: the excursion less the correction
+        for a, h, m, g in zip(applied, held, road, gains):
             if m != plant.params.mu:
                 plant.set_params(plant.params.at(mu=m))
-            plant.advance(excursion(a, h), 0.0)
+            correction += g * float(plant.x[1])  # (r' - r = -(r - r'))
+            plant.advance(excursion(a, h) - correction, 0.0)
             peak = max(peak, abs(float(plant.x[1])))
         return peak
     assert kind == NONLINEAR
@@ -82,6 +98,8 @@ def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind:
     for plant in (actual, without):
         plant.set_state(beta0, r0, driver[0] + applied[0])
     for k, (a, h, d, m) in enumerate(zip(applied, held, driver, m_z)):
+        correction -= gains[k] * float(without.x[1] - actual.x[1])
+        d_without = max(-DRIVER_LIMIT, min(DRIVER_LIMIT, d + correction)) if correction else d
         load = loads[k] if loads is not None else None
         for plant in (actual, without):
             if road[k] != plant.params.mu:
@@ -90,6 +108,6 @@ def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind:
                 plant.set_grip(load.grip)
         f_y, a_x = (load.f_y, load.a_x) if load is not None else (0.0, 0.0)
         actual.advance(d + a, m, f_y, a_x)
-        without.advance(d + a - excursion(a, h), m, f_y, a_x)
+        without.advance(d_without + a - excursion(a, h), m, f_y, a_x)
         peak = max(peak, abs(float(actual.x[1] - without.x[1])))
     return peak

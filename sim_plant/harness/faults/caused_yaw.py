@@ -19,10 +19,11 @@ sensor rows' only loads: the matrix's scenarios carry no side force, braking or 
 ``settings.scenario_toml`` refuses them). The trace's applied angle is the actuator's position, so an actuator with
 its own dynamics is in it.
 
-This is not the campaign's ``fault_yaw_rate``, which is |r − r of the fault-free twin| and so
-counts the fade and any backing-off as well (docs/campaigns.md). On a straight road with no
-disturbance the two are the same. The matrix judges the figure on every sensor row at every
-rate (``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
+A campaign's ``fault_yaw_rate`` is this figure against its fault-free twin's angle at each step,
+as ``hil run``'s; its ``twin_yaw_rate``, |r − r of the fault-free twin|, counts the fade and any
+backing-off as well (docs/campaigns.md). On a straight road with no disturbance they agree. The
+matrix judges the figure on every sensor row at every rate
+(``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
 """
 
 from __future__ import annotations
