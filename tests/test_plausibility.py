@@ -359,11 +359,14 @@ def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays(
     for sensor in ("speed", "speed_redundant"):
         assert pr.sensor_bound(sensor, cfg, 0.4, 20.0, False, speed_pair=True) == pytest.approx(
             1.0 + 0.05 * 20.0 + 0.15 * 1.05)
-    r, v, pair = np.array([-0.3, 0.0, 0.1]), np.array([10.0, 25.0, 40.0]), np.array([True, False, True])
-    for sensor in ("yaw_rate", "lat_accel", "speed"):
+    r, v, pair = np.array([-0.3, 0.0, 0.1, 0.1]), np.array([10.0, 25.0, 40.0, 4.9]), np.array([True, False, True, True])
+    for sensor in ("yaw_rate", "lat_accel", "speed", "steer", "yaw_rate_redundant"):
         rows = pr.sensor_bound(sensor, cfg, r, v, pair, speed_pair=True)
         assert rows.tolist() == [pr.sensor_bound(sensor, cfg, float(a), float(b), bool(c), True)
                                  for a, b, c in zip(r, v, pair)]
+        # below speed_min (5 m/s) the checks pause and the law is off: no bound to pass
+        assert rows[-1] == math.inf and np.isfinite(rows[:-1]).all()
+        assert pr.sensor_bound(sensor, cfg, 0.0, cfg.speed_min, True, True) < math.inf
 
 
 @pytest.mark.parametrize("kind, value", [("scale", 0.5), ("stuck", 5.5), ("bias", 3.0), ("stuck", 33.0)])

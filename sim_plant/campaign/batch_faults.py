@@ -91,19 +91,10 @@ class FaultFigures:
         self.reported = np.zeros(rows, dtype=bool)
         self.report_step = np.full(rows, -1, dtype=np.int64)
         self.alarms = np.zeros(rows, dtype=np.int64)
-        # Each faulted channel's bound (a campaign's car has the yaw-rate sensor's second element,
-        # so the pair runs, and the second speed): those that do not move with the state (both
-        # steering channels, the yaw element: a float for any r and v) once here, the others (yaw
-        # rate, a_y, either speed) each step at the true r and v.
-        probe = np.zeros(rows)
-        self.fixed_bound = np.full(rows, np.inf)
-        self.moving: dict[str, np.ndarray] = {}
-        for channel, on in faults.rows.items():
-            b = sensor_bound(channel, self.cfg, probe, probe, True, speed_pair=True)
-            if np.ndim(b) == 0:
-                self.fixed_bound[on] = b
-            else:
-                self.moving[channel] = on
+        # Each faulted channel's bound, each step at the true r and v (a campaign's car has the
+        # yaw-rate sensor's second element, so the pair runs, and the second speed; below the
+        # monitor's speed_min every bound is infinite).
+        self.channels = dict(faults.rows)
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
              flags: np.ndarray | int = 0) -> None:
@@ -116,8 +107,8 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        bound = self.fixed_bound
-        for channel, on in self.moving.items():
+        bound = np.full(error.shape, np.inf)
+        for channel, on in self.channels.items():
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True), bound)
         self.tracker.step(k, np.abs(error) > bound, first)
 

@@ -67,7 +67,8 @@ METRICS = {
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
     "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error left "
-                            "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's) for 0.3 s "
+                            "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's; none below "
+                            "speed_min) for 0.3 s "
                             "(0: it never did, or was reported before; inf: never reported)"),
     "fault_yaw_rate": ("rad/s", "the yaw rate the faulty sensor makes the command cause: largest |r - r'| from "
                                 "the sensor fault's onset, r' the same car without the applied angle's excursion "

@@ -132,7 +132,17 @@ def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray,
     ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound`` (only the pair
     check sees it), and on a car with the second speed (``speed_pair``) either speed's
     ``speed_pair_bound``.  Without the second speed a speed has none (its checks bound its
-    jumps, not its error): ValueError."""
+    jumps, not its error): ValueError.  Below the monitor's ``speed_min`` (at the true speed
+    ``v``) every bound is infinite: the checks pause there and the law is inactive, so an error
+    there is not one the monitor could report (a car braked to a stop with the fault)."""
+    bound = _sensor_bound(sensor, cfg, r, v, pair, speed_pair)
+    if np.ndim(v) == 0:
+        return math.inf if v < cfg.speed_min else bound
+    return np.where(np.asarray(v) < cfg.speed_min, np.inf, bound)
+
+
+def _sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray, v: float | np.ndarray,
+                  pair: bool | np.ndarray, speed_pair: bool) -> float | np.ndarray:
     if sensor in ("steer", "steer_redundant"):
         return cfg.steer_bound
     if sensor == "yaw_rate_redundant":
