@@ -583,3 +583,45 @@ fault_size = 3.0
     assert res["fault_steps"][0] > 0 and res["detection_time"][0] == 0.0
     assert res["fault_yaw_rate"][0] == 0.0
     assert res["twin_yaw_rate"][0] > 1.0 and res["peak_yaw_rate"][0] > 1.0
+
+
+STEER_DRIFTS = """
+samples = 100
+seed = 5
+sampling = "random"
+duration = 3.0
+calibrations = ["shipped"]
+[parameters]
+v = { uniform = [15.0, 35.0] }
+mu = { uniform = [0.4, 1.0] }
+disturbance = { choice = ["yaw_moment", "split_mu_braking", "side_wind", "blowout"] }
+onset = { uniform = [0.2, 0.5] }
+yaw_moment = { uniform = [-4000.0, 4000.0] }
+wind_force = { uniform = [-2500.0, 2500.0] }
+reaction_time = 0.5
+driver_time_constant = 0.3
+fault_sensor = "steer"
+fault_kind = "drift"
+fault_onset = { uniform = [0.8, 1.2] }
+fault_size = { uniform = [-1.0, 1.0] }
+"""
+
+
+def test_the_caused_yaw_equals_the_replays_where_the_driver_corrects_and_without_a_controller() -> None:
+    # Steering drifts under each disturbance, the driver correcting from 0.5 s after it with a
+    # quick 0.3 s: the third car's driver then corrects it, as excursion_yaw's replay does (the
+    # engine without that correction fails here).  Without a controller nothing is reported or
+    # caused.
+    c = spec.parse(STEER_DRIFTS, "steer-drifts.toml")
+    s = sampling.samples(c, np.arange(4))
+    for config in (mr.ControllerConfig(), None):
+        res = engine.simulate(s, config, 3.0)
+        for i in range(len(s)):
+            ref = reference.run(scenario_for(s.row(i), 3.0), config)
+            assert res["fault_yaw_rate"][i] == pytest.approx(ref.fault_yaw_rate, abs=TOL)
+            assert res["twin_yaw_rate"][i] == pytest.approx(ref.twin_yaw_rate, abs=TOL)
+            assert res["detection_time"][i] == ref.detection_time
+        if config is None:
+            assert not res["fault_yaw_rate"].any() and not res["detection_time"].any()
+        else:
+            assert (res["fault_yaw_rate"] > 1e-3).any()

@@ -119,3 +119,25 @@ def test_the_nonlinear_replay_lets_the_driver_correct_as_the_linear_car_does_whe
     nonlinear = excursion_yaw(applied, TS, CAR, "nonlinear", zeros, zeros, driver_gain=gains)
     assert nonlinear == pytest.approx(excursion_yaw(applied, TS, CAR, driver_gain=gains), rel=5e-3)
     assert nonlinear < 0.9 * excursion_yaw(applied, TS, CAR, "nonlinear", zeros, zeros)
+
+
+def test_the_replayed_drivers_correction_stops_at_the_drivers_clamp() -> None:
+    # The recorded driver at his 0.6 rad clamp (at 3 m/s, a_y 2 m/s^2: the tyres on their slope)
+    # and an excursion further the same way: the correction would steer the car without it
+    # further still, past the clamp, so it adds nothing and the figure is the uncorrected one;
+    # off the clamp it does add.
+    from sim_plant.car.scenario_play import DRIVER_LIMIT
+
+    car = VehicleParams(v=3.0, mu=1.0)
+    applied = [0.0] + [math.radians(0.5)] * 1500
+    gains = [TS / 0.5 / steering_tf(car.at(mu=1.0)).dc_gain()] * len(applied)
+    zeros = [0.0] * len(applied)
+    for driver, clamped in ((DRIVER_LIMIT, True), (0.1, False)):
+        angles = [driver] * len(applied)
+        plant = NonlinearPlant(car, TS)
+        for _ in range(2500):  # the steady turn at the driver's angle
+            plant.advance(driver, 0.0)
+        beta, r = (float(x) for x in plant.x[:2])
+        corrected = excursion_yaw(applied, TS, car, "nonlinear", angles, zeros, beta, r, driver_gain=gains)
+        uncorrected = excursion_yaw(applied, TS, car, "nonlinear", angles, zeros, beta, r)
+        assert (corrected == uncorrected) == clamped

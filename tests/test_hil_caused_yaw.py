@@ -110,3 +110,24 @@ def test_the_replays_driver_corrects_as_the_scenarios_driver_model_does() -> Non
     assert gains[300] == gains[700] == 0.0  # the panic time, 0.5-1.5 s
     assert gains[800] == pytest.approx(TS / 0.5 / k_n)
     assert set(driver_gains(ScenarioState(scn.load("paper-fig9")), steps, TS)) == {0.0}
+
+
+def test_the_figure_lets_the_scenarios_driver_correct_the_car_without_the_excursion() -> None:
+    # handover's driver corrects from 1.5 s: an excursion of 0.3 deg held for 0.8 s from 2 s is
+    # partly taken back by the driver of the car without it, so the figure is below the
+    # uncorrected replay's, and equal to the replay with the scenario's gains.
+    from sim_plant.offline.excursion_yaw import excursion_yaw
+
+    sc = scn.load("handover").with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.8, 0.01),))
+    twin = [float(a) for a in plausibility_runs.run(sc.without_sensor_faults(), TS, controller=CTRL,
+                                                     second_yaw=sc.sensor_config, second_speed=True).aux]
+    applied = [a + (math.copysign(math.radians(0.3), a) if 2.0 <= k * TS < 2.8 else 0.0) for k, a in enumerate(twin)]
+    steps = _steps(applied)
+    k0 = round(1.8 / TS)
+    figure = caused_yaw_figures(steps, sc, CTRL, RATE)["caused_yaw_rad_s"]
+    car = VehicleParams(v=20.0, mu=1.0, mass=sc.mass)
+    gains = driver_gains(ScenarioState(sc), steps[k0:], TS)
+    assert set(gains) == {TS / 0.5 / steering_tf(car).dc_gain()}
+    corrected = excursion_yaw(applied[k0:], TS, car, healthy=twin[k0:], driver_gain=gains)
+    assert figure == pytest.approx(corrected, rel=1e-12)
+    assert figure < 0.9 * excursion_yaw(applied[k0:], TS, car, healthy=twin[k0:])

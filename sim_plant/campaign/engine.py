@@ -53,6 +53,7 @@ from sim_plant.campaign.batch_monitor import BatchMonitor
 from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
+from sim_plant.car.scenario_play import DRIVER_LIMIT
 from sim_plant.offline.plausibility_runs import cycles
 
 #: Per-row results: name -> unit, description.
@@ -69,19 +70,19 @@ METRICS = {
     "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error left "
                             "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's; none below "
                             "speed_min) for 0.3 s "
-                            "(0: it never did, or was reported before; inf: never reported)"),
+                            "(0: it never did, or was reported before, or no controller; inf: never reported)"),
     "fault_yaw_rate": ("rad/s", "the yaw rate the faulty sensor makes the command cause: largest |r - r'| from "
                                 "the sensor fault's onset, r' the same car without the applied angle's excursion "
                                 "beyond the fault-free twin's and zero (offline.excursion_yaw, as hil run's "
                                 "caused_yaw_rad_s; a fade is not counted; 0 without a fault or a controller)"),
-    "twin_yaw_rate": ("rad/s", "largest |r - r of the fault-free twin| from the sensor fault's onset: the fault's "
+    "twin_yaw_rate": ("rad/s", "largest |r - r of the fault-free twin| (each at its step's start) from the sensor "
+                               "fault's onset: the fault's "
                                "whole cost to the car, the disturbance rejection a fade gives up included (0 "
                                "without a fault or a controller)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
     "final_yaw_rate": ("rad/s", "r at the end"),
     "final_speed": ("m/s", "v at the end"),
 }
-DRIVER_LIMIT = 0.6  # ScenarioState.driver_angle's clamp, rad
 ACTUATOR_LIMIT_DEG = 3.0
 
 
@@ -218,6 +219,7 @@ class _Group:
             for j in range(t_block.shape[0]):
                 k = k0 + j
                 t = k * ts
+                after = self.fault_onset <= t  # the faulted rows' faults have begun
                 r = car.r  # (a view: read before the car advances)
                 tally.state(j, car.x)
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
@@ -269,8 +271,8 @@ class _Group:
                     if figures is not None:
                         figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags)
                     if self.shadow is not None:
-                        after = self.fault_onset <= t
-                        np.maximum(twin_yaw, np.where(after, np.abs(r[self.pairs] - r[self.twins]), 0.0), out=twin_yaw)
+                        whole = np.abs(r[self.pairs] - r[self.twins])
+                        np.maximum(twin_yaw, np.where(after, whole, 0.0), out=twin_yaw)
                 else:
                     u, bits = np.zeros(rows), tally.no_bits
                 pending = u
@@ -281,7 +283,7 @@ class _Group:
                 # the car gets the position's mean over the step
                 delta = driver + self.actuator.mean
                 if self.shadow is not None:
-                    self._advance_shadow(driver, block, j, m_z, f_y, tyres, self.fault_onset <= t,
+                    self._advance_shadow(driver, block, j, m_z, f_y, tyres, after,
                                          steering[j][self.pairs] if not all_steering[j] else None, nominal)
                 if self.grip:
                     car.advance(delta, m_z, f_y, block["a_x"][j], tyres, block["mu_max"][j])
@@ -289,7 +291,7 @@ class _Group:
                     car.advance(delta, m_z, f_y, None, None, car.mu)
                 if self.shadow is not None:  # (as excursion_yaw: each step's end from the onset's on)
                     caused = np.abs(car.r[self.pairs] - self.shadow.r)
-                    np.maximum(fault_yaw, np.where(self.fault_onset <= t, caused, 0.0), out=fault_yaw)
+                    np.maximum(fault_yaw, np.where(after, caused, 0.0), out=fault_yaw)
             tally.reduce(t_block.shape[0])
         c = tally.counts
         return {"peak_yaw_rate": tally.peaks[1], "peak_side_slip": np.degrees(tally.peaks[0]),
@@ -302,17 +304,17 @@ class _Group:
                 "twin_yaw_rate": _scatter(rows, self.pairs, twin_yaw),
                 "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
 
-
     def _advance_shadow(self, driver: np.ndarray, block: dict, j: int, m_z: np.ndarray, f_y: np.ndarray | None,
                         tyres: Tyres | None, after: np.ndarray, steering: np.ndarray | None,
                         nominal: np.ndarray) -> None:
-        """The third car of each faulted row one step on: the row's loads, the actuator
-        position's mean over the step, from the fault's onset on (``after``) less its excursion
-        beyond [min(0, h), max(0, h)], h the twin's (``excursion_yaw.excursion``), and the row's
-        driver angle plus the correction the driver (where ``steering``; None: every row) would
-        have added for this car's yaw rate (``excursion_yaw``'s ``driver_gain``, at the row's
-        speed).  Before the onset it is the row's own car: the twin's sensors draw their noise
-        apart from the faulted row's, so their commands may differ there by a little."""
+        """The third car of each faulted row one step on: the row's loads; the actuator position's
+        mean over the step, from the fault's onset on (``after``) less its excursion beyond
+        [min(0, h), max(0, h)], h the twin's (``excursion_yaw.excursion``); the row's driver angle
+        plus the correction the driver (where ``steering``; None: every row) would have added for
+        this car's yaw rate (``excursion_yaw``'s ``driver_gain``, at the row's speed; clamped on
+        the row's clamped angle, as the replay).  Before the onset it is the row's own car: the
+        twin's sensors draw their noise apart from the faulted row's, so their commands may differ
+        there by a little."""
         at, mean = self.pairs, self.actuator.mean
         shadow = self.shadow
         assert shadow is not None

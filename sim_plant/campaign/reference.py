@@ -170,7 +170,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         caused = excursion_yaw(applied[k0:], ts, car_at_onset, sc.plant, driver_hist[k0:], m_z_hist[k0:],
                                float(beta_hist[k0]), float(r_hist[k0]), healthy=clean.applied[k0:],
                                mu=mu_hist[k0:], loads=loads_hist[k0:], driver_gain=gain_hist[k0:])
-    figures = fault_figures(fault, ts, bits_hist, r_hist, u_hist, error, speed_true,
+    # (without a controller nothing is reported or caused: no fault figures, as the engine's)
+    figures = fault_figures(fault if ctrl is not None else None, ts, bits_hist, r_hist, u_hist, error, speed_true,
                             None if clean is None else clean.r, yaw_2_seen, flags_hist)
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v, figures[0], figures[1],
                         caused, figures[2], applied)

@@ -10,6 +10,9 @@ from sim_plant.car import disturbances as dist
 from sim_plant.car.scenario import Scenario
 from sim_plant.car.vehicle import VehicleParams, steering_tf
 
+#: The driver's front-wheel angle stays within this, rad (``ScenarioState.driver_angle``).
+DRIVER_LIMIT = 0.6
+
 
 class ScenarioState:
     """Plays a scenario: what the road, the car and the driver do at time t."""
@@ -76,4 +79,4 @@ class ScenarioState:
             error = yaw_rate - nominal * self.steer_intent
             self.correction -= dt / self.sc.driver.time_constant * error / nominal
         angle = self.steer_intent + self.correction
-        return max(-0.6, min(0.6, angle))
+        return max(-DRIVER_LIMIT, min(DRIVER_LIMIT, angle))

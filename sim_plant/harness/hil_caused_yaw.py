@@ -96,7 +96,8 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
     figure = excursion_yaw([s.aux_applied_rad for s in run], 1.0 / rate_hz, car, sc.plant,
                            [s.driver_angle_rad for s in run], [s.m_z_nm for s in run], run[0].beta_rad,
                            run[0].yaw_rate_rad_s, healthy=healthy[k0:n], mu=[s.mu for s in run],
-                           loads=[scene.loads(s.t_s) for s in run], driver_gain=driver_gains(scene, run, 1.0 / rate_hz))
+                           loads=[scene.loads(s.t_s) for s in run],
+                           driver_gain=driver_gains(scene, run, 1.0 / rate_hz))
     return {"caused_yaw_rad_s": figure,
             "caused_yaw_note": f"the excursion beyond a fault-free twin's command, replayed on the {sc.plant} car"
                                + ("" if checked else " (the twin unchecked: the command did not move before the onset)"),

@@ -12,12 +12,13 @@ counted either).
 The figure is the peak over the run of |r - r'|, where r is the car's yaw rate under the
 applied angles and r' under the same angles without their excursion, both from the state at
 the onset with the same driver angle, yaw moment, friction and loads. Where the run's driver
-corrects the yaw rate (the scenario's driver model, ``ScenarioState.correction_gain``), the
-replay without the excursion has that driver correct its own car: its angle is the recorded one
-plus the correction the difference r' - r would have added since the onset (``driver_gain``;
-clamped as the driver's). Replayed open-loop, the recorded corrections (made for the car that
-had the excursion) would drive the other car off by themselves: on a low-mu road under a yaw
-moment, into a spin that no command caused.
+corrects the yaw rate (the scenario's driver model, ``ScenarioState.correction_gain``), the replay
+without the excursion has that driver correct its own car: its angle is the recorded one plus the
+correction the difference r' - r would have added since the onset (``driver_gain``; clamped as the
+driver's, on the recorded angle: the driver model clamps its whole integral, which differs only
+while the recorded angle sits at the clamp). Replayed open-loop, the recorded corrections (made for
+the car that had the excursion) would drive the other car off by themselves: on a low-mu road under
+a yaw moment, into a spin that no command caused.
 
 * the paper's linear car (eqs. 14/16, exact ZOH): by superposition r - r' is the car's
   response to the excursion alone from rest (less the driver's correction of the difference),
@@ -41,10 +42,8 @@ from collections.abc import Sequence
 from sim_plant.car.disturbances import Loads
 from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS
+from sim_plant.car.scenario_play import DRIVER_LIMIT
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
-
-#: The driver's front-wheel angle stays within this (rad; ``ScenarioState.driver_angle``'s clamp).
-DRIVER_LIMIT = 0.6
 
 
 def excursion(a: float, h: float) -> float:
