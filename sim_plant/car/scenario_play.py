@@ -61,10 +61,7 @@ class ScenarioState:
         error (``driver_angle``'s integrator; rad per rad/s): dt / (time_constant K_n(v)) while
         the driver corrects (``model`` mode, past the panic time), else 0.  A replay of a run
         under another command (``offline.excursion_yaw``) lets its driver correct its own car."""
-        if self.sc.driver.mode == "model" and t >= self.panic_until:
-            return dt / self.sc.driver.time_constant / steering_tf(
-                VehicleParams(v=self.v, mu=1.0, mass=self.sc.mass)).dc_gain()
-        return 0.0
+        return dt / self.sc.driver.time_constant / self._nominal_gain() if self._correcting(t) else 0.0
 
     def loads(self, t: float) -> dist.Loads:
         """What the physical disturbances do to the car at t (``disturbances.NO_LOADS`` if none)."""
@@ -74,9 +71,17 @@ class ScenarioState:
         """The driver's front-wheel angle: the scripted intent plus, in ``model`` mode, a slow
         integrating correction that drives the yaw rate back to what the intent asks for on a
         dry road, frozen during the panic reaction time after each disturbance."""
-        if self.sc.driver.mode == "model" and t >= self.panic_until:
-            nominal = steering_tf(VehicleParams(v=self.v, mu=1.0, mass=self.sc.mass)).dc_gain()
+        if self._correcting(t):
+            nominal = self._nominal_gain()
             error = yaw_rate - nominal * self.steer_intent
             self.correction -= dt / self.sc.driver.time_constant * error / nominal
         angle = self.steer_intent + self.correction
         return max(-DRIVER_LIMIT, min(DRIVER_LIMIT, angle))
+
+    def _correcting(self, t: float) -> bool:
+        """The driver model corrects the yaw rate at t (``model`` mode, past the panic time)."""
+        return self.sc.driver.mode == "model" and t >= self.panic_until
+
+    def _nominal_gain(self) -> float:
+        """K_n(v) at the current speed: the dry road's steady yaw rate per rad of steering."""
+        return steering_tf(VehicleParams(v=self.v, mu=1.0, mass=self.sc.mass)).dc_gain()

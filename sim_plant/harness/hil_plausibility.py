@@ -20,9 +20,9 @@ steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bou
 speed the speed pair's ``speed_pair_bound + speed_pair_rel v`` when the car has the second speed,
 else none (the speed's other checks look at its jumps, ``speed_step``, and in a steady turn at
 a_y / r over half-second blocks, ``CHECK_TURN``, not at its error); none of these while the
-true speed is below the monitor's ``speed_min`` (5 m/s: its checks pause, the law is off).  Times are the scenario's,
-counted in yaw-rate frames (one per plant step): in lockstep the log's wall-clock stamps are not
-simulated time."""
+true speed is below the monitor's ``speed_min`` (5 m/s: its checks pause, the law is off).
+Times are the scenario's, counted in yaw-rate frames (one per plant step): in lockstep the log's
+wall-clock stamps are not simulated time."""
 
 from __future__ import annotations
 

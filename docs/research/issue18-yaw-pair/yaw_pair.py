@@ -14,8 +14,8 @@ rate bound ``rate_max`` instead of the 30 deg/s fault fade, because a stuck chan
 within tens of ms, while the command it drove is still acting on the car.
 
 The figure is the campaigns' ``fault_yaw_rate`` (since 5 December 2026 ``twin_yaw_rate``): the
-largest |r - r of the fault-free twin| after the onset (the fade included).  Each row's twin runs the same sensors without the fault, so a
-false alarm shows as a fault bit in the twin.
+largest |r - r of the fault-free twin| after the onset (the fade included).  Each row's twin
+runs the same sensors without the fault, so a false alarm shows as a fault bit in the twin.
 
 Run from the repository root with the project's interpreter:
 

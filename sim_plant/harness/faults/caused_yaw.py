@@ -22,8 +22,8 @@ its own dynamics is in it.
 A campaign's ``fault_yaw_rate`` is this figure against its fault-free twin's angle at each step,
 as ``hil run``'s; its ``twin_yaw_rate``, |r − r of the fault-free twin|, counts the fade and any
 backing-off as well (docs/campaigns.md), even on a straight road: the fade of the little the twin
-holds against the sensors' bias and noise. The matrix judges the figure on every sensor row at every rate
-(``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
+holds against the sensors' bias and noise. The matrix judges the figure on every sensor row at
+every rate (``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
 """
 
 from __future__ import annotations
