@@ -33,7 +33,7 @@ from firmware_py.controller import node as rt
 from mrsteer_dbc import names
 from conftest import lockstep_traffic
 from sim_plant.harness import hil, launch, replay_c
-from sim_plant.harness.replay import replay
+from sim_plant.harness.replay import ReplaySettings, replay
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE_HZ = 500.0
@@ -75,6 +75,9 @@ class Drive:
     jitter: bool = False  # every 3rd redundant frame 10 periods late, the yaw frame of every 4th's period lost
     slow: int = 1  # the sender steps once every `slow` control periods (a plant behind real time)
     burst: int = 0  # every 2nd redundant frame comes in one drain with the frames of the `burst` periods before it
+    burst_after: int = 0  # every 2nd redundant frame comes in one drain with the `burst_after` periods' after it
+    weave: tuple[float, float] = (0.01, 0.5)  # the driver's angle: amplitude (rad) and frequency (Hz) of its sine
+    steer_2_offset: float = 0.0  # rad the second steering channel reads above the first from STUCK_T
     second_yaw: bool = False  # the yaw-rate frames carry the sensor's second element (the car's r); else SNA
     second_yaw_lost: float = math.inf  # s from which the second element is SNA (the element failed)
     second_yaw_offset: float = 0.0  # rad/s the second element reads below the car's r
@@ -92,11 +95,12 @@ class Drive:
         out = []
         for k in range(int(self.seconds * RATE_HZ)):
             t = k / RATE_HZ
-            delta = 0.01 * math.sin(2 * math.pi * 0.5 * t)
+            delta = self.weave[0] * math.sin(2 * math.pi * self.weave[1] * t)
             r = gain * delta + (DISTURBANCE if t >= DIST_T else 0.0)
             r_meas = STUCK if self.stuck_yaw and t >= STUCK_T else r
             values = {names.MSG_STEER: {names.SIG_STEER_ANGLE: delta}, names.MSG_SPEED: {names.SIG_SPEED: V},
-                      names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta,
+                      names.MSG_REDUNDANT: {names.SIG_LAT_ACCEL: V * r, names.SIG_STEER_ANGLE_2: delta
+                                            + (self.steer_2_offset if t >= STUCK_T else 0.0),
                                             names.SIG_SPEED_2: self.second_speed
                                             + self.second_speed_drift * max(0.0, t - STUCK_T)
                                             if t < self.second_speed_lost else math.nan},
@@ -123,6 +127,10 @@ class Drive:
             stalled = [f for period in out[k - self.burst:k] for f in period]
             out[k - self.burst:k] = [[] for _ in range(self.burst)]
             out[k] = stalled + out[k]
+        for k in range(n, len(out) - self.burst_after, 2 * n) if self.burst_after else ():  # the skew: a
+            stalled = [f for period in out[k:k + self.burst_after] for f in period]  # stall from the frame on
+            out[k:k + self.burst_after] = [[] for _ in range(self.burst_after)]
+            out[k + self.burst_after] = stalled + out[k + self.burst_after]
         return out
 
 
@@ -329,6 +337,63 @@ def test_a_redundant_frame_drained_in_a_burst_with_the_samples_before_it_stays_i
     plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
     assert set(plaus[1:]) == {0}
     assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
+
+
+HAND = (0.04, 4.0)  # a weave of 0.04 rad at 4 Hz: 1 rad/s of wheel angle at its fastest, a fast hand
+SKEW = 10  # periods of a stall that begins with a redundant frame (20 ms: the yaw rate times out after 24)
+
+
+def test_a_redundant_frame_drained_ahead_of_the_drivers_angle_is_paired_with_its_own_as_in_python(
+        secoc_check: Path) -> None:
+    # The frames of a stall that begins at a redundant frame come at once: the newest driver's
+    # angle is 20 ms younger than the second channel's, 0.02 rad apart at this hand, five times
+    # the steering pair's 0.004 rad.  Compared with the newest angle, the pair found a steering
+    # fault in 0.17 s; with the angle that came with the redundant frame, nothing.
+    cmds, statuses = _run(secoc_check, Drive(seconds=2.0, burst_after=SKEW, weave=HAND))
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    assert set(plaus[1:]) == {0}
+    assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
+
+
+def test_a_steering_channel_offset_is_still_found_in_the_skewed_bursts_as_in_python(secoc_check: Path) -> None:
+    # 0.006 rad, 1.5 times the pair's bound: found at the first redundant sample after the onset
+    # the node steps over (the drain that ends the stall begun at it, SKEW periods on)
+    _, statuses = _run(secoc_check, Drive(seconds=2.0, burst_after=SKEW, weave=HAND, steer_2_offset=0.006))
+    status_period = 0.1  # s, MRS_CtrlStatus's DBC cycle
+    plaus = [int(s[names.SIG_STATUS_PLAUS]) for s in statuses]
+    found = (next(i for i, p in enumerate(plaus) if p & pl.PLAUS_STEER) + 1) * status_period  # sent at its end
+    assert STUCK_T < found <= STUCK_T + 0.05 + SKEW / RATE_HZ + status_period
+    assert set(plaus[1:int(STUCK_T / status_period)]) == {0}
+
+
+def test_a_log_with_the_skewed_bursts_replays_to_its_commands_in_python_and_in_c(tmp_path: Path) -> None:
+    # The skewed drive with a steering channel offset, as a clocked controller's candump log:
+    # each period's received frames, then what the Python node sent.  Both replays must give the
+    # recorded commands, so each must pair the burst's redundant sample with its own angle.
+    contract = mrsteer_dbc.load()
+    periods = Drive(seconds=2.0, burst_after=SKEW, weave=HAND, steer_2_offset=0.006).frames(contract)
+    node = rt.ControllerNode(_Recorder(), rt.RuntimeConfig(rate_hz=RATE_HZ))  # type: ignore[arg-type]
+    sent: list[can.Message] = node.bus.sent  # type: ignore[attr-defined]
+    lines = []
+    for k, period in enumerate(periods):
+        t = 1e6 + k / RATE_HZ
+        lines += [f"({t:.6f}) vcan0 {fid:03X}#{data.hex().upper()}" for fid, data in period]
+        for fid, data in period:
+            node.receive(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        before = len(sent)
+        if k + 1 < len(periods):
+            node.control()
+        else:
+            node.finish()  # the log ends on the shutdown's command
+        lines += [f"({t + 1e-4:.6f}) vcan0 {m.arbitration_id:03X}#{bytes(m.data).hex().upper()}" for m in sent[before:]]
+    log = tmp_path / "skewed.log"
+    log.write_text("\n".join(lines) + "\n")
+    result = replay(log, ReplaySettings(rate_hz=RATE_HZ, trigger="clock"))
+    c_result = replay_c.replay_c(result)
+    assert result.agrees and c_result.agrees, (result.mismatches[:3], c_result.mismatches[:3])
+    paired = [s for s in result.steps if s.kind != "final" and s.monitor_driver != s.inputs[0]]
+    assert len(paired) >= 5  # a burst's pairing took the older angle (one per skewed redundant frame)
+    assert any(s.out.state == mr.STATUS_FAULT for s in c_result.steps)  # the offset found
 
 
 STUCK_SCENARIO = """

@@ -17,11 +17,12 @@ Each cycle, in this order (the scheduling contract a port must keep):
    cycle without one; with the yaw rate timed out it steps once to pause.  So a sender slower
    than the loop (a plant that cannot keep real time) does not stretch its filters, windows
    and derivatives, and a burst or a lost frame does not shorten them.  A redundant sample goes
-   to the monitor with the next yaw-rate sample (the plant sends the two in the same step), and
-   the monitor differentiates over the yaw-rate samples between two of them, so a sample is
-   withheld (NaN until the next one) when it arrived more than ``REDUNDANT_JITTER_CYCLES``
-   (``sample_clock``) yaw-rate samples away from what its alive counter says elapsed (delta x
-   50 ms): a stalled sender or receiver, whose bursts would read as a side slip.  The
+   to the monitor with the next yaw-rate sample (the plant sends the two in the same step) and
+   the driver's angle that came with it (``monitor_driver_angle``, for a burst), and the monitor
+   differentiates over the yaw-rate samples between two of them, so a sample is withheld (NaN
+   until the next one) when it arrived more than ``REDUNDANT_JITTER_CYCLES`` (``sample_clock``)
+   yaw-rate samples away from what its alive counter says elapsed (delta x 50 ms): a stalled
+   sender or receiver, whose bursts would read as a side slip.  The
    authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
    and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
    with ``CAUSE_PLAUSIBILITY``;
@@ -166,6 +167,10 @@ class ControllerNode:
         self._was_fault = False
         self._answers = MEAS_NONE
         self._yaw_stamp = 0.0  # bus timestamp (epoch s) of the newest accepted yaw-rate frame
+        # The driver's angle when the newest redundant frame arrived (the plant sends it first in
+        # the same step), and whether the monitor has yet to step over that redundant sample.
+        self._steer_at_redundant = math.nan
+        self._redundant_unstepped = False
 
     # ---------------------------------------------------------------- receive
 
@@ -204,6 +209,8 @@ class ControllerNode:
             inp.extra[i] = got.signals[name]
         if frame_id == self.redundant_id:
             self.clock.redundant_frame(got.counter)
+            self._steer_at_redundant = self._steer.value
+            self._redundant_unstepped = True
         inp.last_counter = got.counter
         inp.age = 0
         if frame_id == self.yaw_id:
@@ -221,6 +228,16 @@ class ControllerNode:
         if self.clock.redundant_in_time and red.valid(self.cfg.e2e_fail_max):
             return red.value, red.extra[0], red.extra[1]
         return math.nan, math.nan, math.nan
+
+    def monitor_driver_angle(self, delta_driver: float) -> float:
+        """The driver's angle for the monitor's first step this cycle, given the valid newest one
+        (NaN: invalid): the angle that came with a redundant sample the monitor has not stepped
+        over yet (the plant sends the two in the same step), else ``delta_driver``.  Drained in a
+        burst, the newest angle is several samples younger than the redundant sample, and the
+        steering pair would read the driver's movement since as the channels' disagreement.  Pure."""
+        if self._redundant_unstepped and not math.isnan(delta_driver) and not math.isnan(self._steer_at_redundant):
+            return self._steer_at_redundant
+        return delta_driver
 
     def monitor_steps(self) -> int:
         """How many yaw-rate samples the plausibility monitor steps over in this cycle: those
@@ -262,9 +279,13 @@ class ControllerNode:
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
         yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.extra[0]  # NaN: SNA, no element
         bits = self.plausibility  # held between yaw-rate samples
+        steer = self.monitor_driver_angle(values[0])  # the first step's: a new redundant sample's
+        if steps:
+            self._redundant_unstepped = False
         for _ in range(steps):  # a sample lost on the way is held at the newest values
-            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, values[0], steer_2, values[1], lat,
+            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, steer, steer_2, values[1], lat,
                                    values[2], self.command, yaw_2, speed_2)
+            steer = values[0]
         # before the law: the monitor's suspicion of the yaw rate holds the law's command
         u = mr.step(self.coeffs, self.state, values[0], values[1], values[2],
                     (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)

@@ -97,6 +97,8 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         n->red_expected = ((rm->control_loop || rm->cycle_s == 0.0) ? n->period : rm->cycle_s) / n->period;
     }
     n->red_counter = -1;
+    n->steer_at_red = NAN;
+    n->red_unstepped = 0;
     n->yaw_counter = -1;
     n->yaw_samples = 0;
     return 0;
@@ -237,6 +239,7 @@ int mrs_node_control(mrs_node_t *n)
     const long samples = n->yaw_samples < yaw->limit ? n->yaw_samples : yaw->limit;
     const long steps = samples > 0 ? samples : (valid(n, yaw) ? 0 : 1);
     long k;
+    double steer;
     if (fresh(n, red) && n->red_usable) {
         lat = red->value;
         steer2 = red->extra[0];
@@ -260,9 +263,20 @@ int mrs_node_control(mrs_node_t *n)
     /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
      * pauses the pair check. */
     yaw2 = isnan(values[1]) ? (double)NAN : yaw->extra[0];
+    /* The step that takes a new redundant sample (the first) gets the driver's angle that came
+     * with it: drained in a burst, the newest angle is several samples younger, and the steering
+     * pair would read the driver's movement since as the channels' disagreement. */
+    steer = (double)values[0];
+    if ((steps > 0) && n->red_unstepped) {
+        n->red_unstepped = 0;
+        if (!isnan(steer) && !isnan(n->steer_at_red)) {
+            steer = n->steer_at_red;
+        }
+    }
     for (k = 0; k < steps; ++k) {
-        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, (double)values[0], steer2, (double)values[1], lat,
+        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, steer, steer2, (double)values[1], lat,
                                     (double)values[2], n->command, yaw2, speed2);
+        steer = (double)values[0];
     }
     u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2],
                              (uint8_t)((n->mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));

@@ -83,6 +83,8 @@ typedef struct {
     long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
     int red_usable; /* the held redundant sample arrived in time (SampleClock.redundant_in_time) */
+    double steer_at_red; /* the driver's angle when the newest redundant frame arrived (node.py) */
+    int red_unstepped; /* the monitor has yet to step over that redundant sample */
     int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
     long yaw_samples; /* yaw-rate samples since the last period, by that counter */
     unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */

@@ -5,14 +5,18 @@
  *
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
  * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
- * is one controller cycle, "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2 [SPEED_2]]]]"
+ * is one controller cycle,
+ * "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2 [SPEED_2 [DELTA_DRIVER_MONITOR]]]]]"
  * (rad, rad/s, m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant
  * pair absent counts as invalid; STEPS the monitor's steps in the cycle, 0 to MRS_REPLAY_MAX_STEPS:
  * node.py's monitor_steps, 0 when it holds its verdict; absent counts as 1; YAW_RATE_2 the yaw-rate
- * sensor's second element, absent or nan when there is none; SPEED_2 the second speed, likewise), as
+ * sensor's second element, absent or nan when there is none; SPEED_2 the second speed, likewise;
+ * DELTA_DRIVER_MONITOR the driver's angle of the monitor's first step, the one that came with a new
+ * redundant sample (node.py's monitor_driver_angle), absent: DELTA_DRIVER), as
  * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
- * does: the monitor (STEPS times) on the inputs and the previous line's command, u_req =
- * mrs_step(..., its suspicion of the yaw rate), the limiter on u_req; each output line is
+ * does: the monitor (STEPS times, the first with DELTA_DRIVER_MONITOR) on the inputs and the
+ * previous line's command, u_req = mrs_step(..., its suspicion of the yaw rate), the limiter on
+ * u_req; each output line is
  * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
  * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
  * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
@@ -81,17 +85,17 @@ int main(int argc, char **argv)
     }
     mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
-        double v[8] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN};
+        double v[9] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN, NAN};
         char *p = line, *end;
         int k;
         double u_req;
         unsigned state;
         ++n;
-        for (k = 0; k < 8; ++k) {
+        for (k = 0; k < 9; ++k) {
             const double x = strtod(p, &end);
             if (end == p) {
                 if (k < 3) {
-                    fprintf(stderr, "mrs_replay: line %ld: expected three, five, six, seven or eight numbers\n", n);
+                    fprintf(stderr, "mrs_replay: line %ld: expected three or five to nine numbers\n", n);
                     return 2;
                 }
                 break;
@@ -100,11 +104,15 @@ int main(int argc, char **argv)
             p = end;
         }
         if (k == 4 || !(v[5] >= 0.0 && v[5] <= (double)MRS_REPLAY_MAX_STEPS && v[5] == floor(v[5]))) {
-            fprintf(stderr, "mrs_replay: line %ld: expected three, five, six, seven or eight numbers (the sixth a count of steps)\n", n);
+            fprintf(stderr,
+                    "mrs_replay: line %ld: expected three or five to nine numbers (the sixth a count of steps)\n", n);
             return 2;
         }
+        if (k < 9) {
+            v[8] = v[0];
+        }
         for (k = 0; k < (int)v[5]; ++k) {
-            plaus = mrs_monitor_step(&mon_c, &mon_s, v[0], v[4], v[1], v[3], v[2], u_prev, v[6], v[7]);
+            plaus = mrs_monitor_step(&mon_c, &mon_s, k == 0 ? v[8] : v[0], v[4], v[1], v[3], v[2], u_prev, v[6], v[7]);
         }
         u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
                                  (uint8_t)((mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));

@@ -120,6 +120,9 @@ class Step:
     recorded: Out | None = None
     recorded_status: StatusOut | None = None
     monitor_steps: int = 1  # yaw-rate samples the monitor stepped over (0: its verdict held)
+    # the driver's angle of the monitor's first step (``ControllerNode.monitor_driver_angle``: the
+    # one that came with a new redundant sample, else delta_driver); the replay sets it every cycle
+    monitor_driver: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -221,15 +224,17 @@ class _Replayer:
         yaw_2 = math.nan if math.isnan(vals[1]) else self.node.input(MSG_YAW).extra[0]
         return vals[0], vals[1], vals[2], lat, steer_2, yaw_2, speed_2
 
-    def _shadow(self, inputs: tuple[float, float, float, float, float, float, float], monitor_steps: int) -> float:
+    def _shadow(self, inputs: tuple[float, float, float, float, float, float, float], monitor_steps: int,
+                monitor_driver: float) -> float:
         """The command the node should send for ``inputs``: the monitor's ``monitor_steps`` steps
-        (none: its held bits), step() with its suspicion of the yaw rate and the authority
-        limiter, run on copies of the node's states."""
+        (none: its held bits; the first with ``monitor_driver``), step() with its suspicion of the
+        yaw rate and the authority limiter, run on copies of the node's states."""
         node = self.node
         d, r, v, lat, d2, r2, v2 = inputs
         bits, monitor = node.plausibility, copy.deepcopy(node.monitor)
-        for _ in range(monitor_steps):
-            bits = pl.monitor_step(node.monitor_coeffs, monitor, d, d2, r, lat, v, node.command, r2, v2)
+        for k in range(monitor_steps):
+            bits = pl.monitor_step(node.monitor_coeffs, monitor, monitor_driver if k == 0 else d, d2, r, lat, v,
+                                   node.command, r2, v2)
         u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v, (monitor.flags & pl.SUSPECT_CHECKS) != 0)
         return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
                                  monitor.flags & pl.CUT_CHECKS, monitor.flags & pl.FADE_CHECKS)
@@ -238,7 +243,8 @@ class _Replayer:
         node = self.node
         inputs = self._inputs()
         monitor_steps = node.monitor_steps()
-        shadow = self._shadow(inputs, monitor_steps)
+        monitor_driver = node.monitor_driver_angle(inputs[0])
+        shadow = self._shadow(inputs, monitor_steps, monitor_driver)
         before = len(self.bus.sent)
         if kind == "final":
             node.finish()
@@ -254,7 +260,7 @@ class _Replayer:
                 status = self._status(msg, line, t)
         assert out is not None
         step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status,
-                    monitor_steps=monitor_steps)
+                    monitor_steps=monitor_steps, monitor_driver=monitor_driver)
         self.steps.append(step)
         return step
 

@@ -53,8 +53,8 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int, int]]:
     """(u, reported state, fault_flags, plausibility bits) of the C port at every non-final step
     of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {s.monitor_steps} {r2!r} {v2!r}\n" for s in result.steps
-                     if s.kind != "final" for d, r, v, lat, d2, r2, v2 in [s.inputs])
+    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {s.monitor_steps} {r2!r} {v2!r} {s.monitor_driver!r}\n"
+                     for s in result.steps if s.kind != "final" for d, r, v, lat, d2, r2, v2 in [s.inputs])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"
         cfg.write_text(calibration_file.dumps(result.config))

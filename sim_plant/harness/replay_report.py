@@ -102,13 +102,14 @@ def steps_csv(steps: Sequence[Step], new: Sequence[Step] | None = None) -> str:
     f = io.StringIO()
     w = csv.writer(f, lineterminator="\n")
     w.writerow(["step", "kind", "line", "t", "delta_driver", "yaw_rate", "speed", "lat_accel", "delta_driver_2",
-                "yaw_rate_2", "speed_2", "monitor_steps", "replayed_angle", "replayed_state",
+                "yaw_rate_2", "speed_2", "monitor_steps", "monitor_driver", "replayed_angle", "replayed_state",
                 "recorded_angle", "recorded_state", *(["new_angle", "new_state"] if new is not None else [])])
     for i, s in enumerate(steps):
         rec = s.recorded
         extra = [repr(new[i].out.angle), new[i].out.state] if new is not None and i < len(new) else []
-        w.writerow([s.index, s.kind, s.line, f"{s.t:.6f}", *(repr(x) for x in s.inputs), s.monitor_steps, repr(s.out.angle),
-                    s.out.state, "" if rec is None else repr(rec.angle), "" if rec is None else rec.state, *extra])
+        w.writerow([s.index, s.kind, s.line, f"{s.t:.6f}", *(repr(x) for x in s.inputs), s.monitor_steps,
+                    repr(s.monitor_driver), repr(s.out.angle), s.out.state, "" if rec is None else repr(rec.angle),
+                    "" if rec is None else rec.state, *extra])
     return f.getvalue()
 
 
