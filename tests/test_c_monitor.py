@@ -462,3 +462,37 @@ def test_the_c_law_s_hold_is_bit_identical_to_python_through_the_replay_driver(t
         py_u.append(u_prev)
     assert c_u == py_u
     assert held[1] > 0 and held[-1] > 0  # both branches of the hold compared
+
+
+def test_the_replay_driver_s_ninth_number_is_the_angle_of_the_monitor_s_first_step(tmp_path: Path) -> None:
+    """``mrs_replay``'s ``DELTA_DRIVER_MONITOR``: the steering pair judges a redundant sample
+    against it (the driver's angle that came with the sample, ``monitor_driver_angle``), later
+    steps and ``mrs_step`` take ``DELTA_DRIVER``; more than nine numbers is an error."""
+    from firmware_py import calibration_file
+    from firmware_py import model_regulator as mr
+    from sim_plant.harness import replay_c
+
+    exe = replay_c.build()
+    path = tmp_path / "replay.cfg"
+    path.write_text(calibration_file.dumps(mr.ControllerConfig()))
+    v, d = 20.0, 0.01
+    r = v / (2.54 + 0.0023 * v * v) * d  # about the nominal car's steady state: no other check moves
+
+    def run(ninth: bool) -> set[int]:
+        lines = []
+        for k in range(200):
+            moved = d + (0.008 if k >= 150 else 0.0)  # the newest angle, 2 pair bounds on from line 150
+            lat = v * r + (0.001 if (k // 25) % 2 else 0.0)  # a new redundant sample every 25 lines
+            d2 = d if k <= 150 else moved  # line 150's sample was taken before the driver moved
+            tail = f" {d!r}" if ninth and k == 150 else ""
+            lines.append(f"{moved!r} {r!r} {v!r} {lat!r} {d2!r} 1 nan nan{tail}\n")
+        proc = subprocess.run([str(exe), str(path)], input="".join(lines), capture_output=True, text=True,
+                              timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        return {int(line.split()[3]) for line in proc.stdout.splitlines()}
+
+    assert run(ninth=False) == {0, pl.PLAUS_STEER}  # paired with the newest angle: a steering fault
+    assert run(ninth=True) == {0}
+    for bad in ("0.01 0.1 20 1 0.01 1 nan nan 0.01 5\n", "0.01 0.1 20 x\n"):
+        proc = subprocess.run([str(exe), str(path)], input=bad, capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2 and "text after the numbers" in proc.stderr

@@ -209,7 +209,8 @@ class ControllerNode:
             inp.extra[i] = got.signals[name]
         if frame_id == self.redundant_id:
             self.clock.redundant_frame(got.counter)
-            self._steer_at_redundant = self._steer.value
+            # a timed-out angle is no pair for it
+            self._steer_at_redundant = self._steer.value if self._steer.valid(self.cfg.e2e_fail_max) else math.nan
             self._redundant_unstepped = True
         inp.last_counter = got.counter
         inp.age = 0

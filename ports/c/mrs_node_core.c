@@ -217,6 +217,15 @@ static int valid(const mrs_node_t *n, const mrs_input_t *in)
     return in->age <= in->limit && in->rejects < n->e2e_fail_max;
 }
 
+/* The plant sends the driver's angle first in the step of a redundant sample: the angle held when
+ * the redundant frame is accepted is the one sampled with it (NaN when that input is not valid:
+ * a timed-out angle is no pair for it), kept for the monitor's first step after the frame. */
+void mrs_node_keep_redundant_angle(mrs_node_t *n)
+{
+    n->steer_at_red = valid(n, &n->in[0]) ? n->in[0].value : (double)NAN;
+    n->red_unstepped = 1;
+}
+
 /* valid(), then the input ages by one period. */
 static int fresh(mrs_node_t *n, mrs_input_t *in)
 {
@@ -270,7 +279,7 @@ int mrs_node_control(mrs_node_t *n)
     if ((steps > 0) && n->red_unstepped) {
         n->red_unstepped = 0;
         if (!isnan(steer) && !isnan(n->steer_at_red)) {
-            steer = n->steer_at_red;
+            steer = (double)(mrs_real_t)n->steer_at_red; /* the precision of values[] */
         }
     }
     for (k = 0; k < steps; ++k) {

@@ -134,6 +134,9 @@ int mrs_node_receive(mrs_node_t *n, const mrs_frame_t *f);
 /* The redundant sample's timing and the yaw-rate sample count (mrs_node_core.c: the monitor's
  * clock), for the receive chain on each accepted frame of that message. */
 void mrs_node_time_redundant(mrs_node_t *n, unsigned counter);
+/* The driver's angle held when a redundant frame is accepted (NaN when that input is not valid),
+ * for the monitor's first step after it (mrs_node_core.c; node.py's monitor_driver_angle). */
+void mrs_node_keep_redundant_angle(mrs_node_t *n);
 void mrs_node_count_yaw(mrs_node_t *n, unsigned counter);
 
 /* Freshness, step, plausibility monitor, authority limiter, command (and status at its cycle),

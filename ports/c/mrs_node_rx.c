@@ -146,8 +146,7 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
         in->age = 0;
         if (in->msg == MRS_MSG_REDUNDANT) {
             mrs_node_time_redundant(n, in->last_counter);
-            n->steer_at_red = n->in[0].value;
-            n->red_unstepped = 1;
+            mrs_node_keep_redundant_angle(n);
         }
         if (in->msg == MRS_MSG_YAW) {
             n->yaw_stamp = stamp;

@@ -108,6 +108,10 @@ int main(int argc, char **argv)
                     "mrs_replay: line %ld: expected three or five to nine numbers (the sixth a count of steps)\n", n);
             return 2;
         }
+        if (strspn(p, " \t\r\n") != strlen(p)) {
+            fprintf(stderr, "mrs_replay: line %ld: text after the numbers (at most nine)\n", n);
+            return 2;
+        }
         if (k < 9) {
             v[8] = v[0];
         }
