@@ -526,3 +526,19 @@ def test_a_degraded_report_over_a_gap_in_the_redundant_frame_is_no_report() -> N
 def test_the_lateral_acceleration_rows_broken_promises_fail(kwargs: dict, needle: str) -> None:
     fails, _, _ = _judge(_lat_accel_evidence(**kwargs))
     assert any(needle in f for f in fails), fails
+
+
+def test_a_degraded_row_excuses_only_the_leading_statuses_sent_before_the_inputs_came() -> None:
+    # A node started ahead of the plant sends its first status with every input missing: DEGRADED
+    # by its missing inputs (cause 7), not by the monitor, and no bit before the onset.
+    row = _row("lateral acceleration offset +2 m/s^2")
+    e = evidence(row)
+    missing = names.CAUSE_STEER_MISSING | names.CAUSE_YAW_MISSING | names.CAUSE_SPEED_MISSING
+    early = "plausibility bits reported before the fault's onset"
+    for first, later, fails_early in ((missing, 0, False), (0, 0, True), (missing, missing, True)):
+        statuses = [Status(-0.1, mr.STATUS_INACTIVE, names.PLAUS_DEGRADED, first),
+                    Status(-0.05, mr.STATUS_INACTIVE, names.PLAUS_DEGRADED if later else 0, later),
+                    Status(0.0, mr.STATUS_ACTIVE, names.PLAUS_DEGRADED, 0) if later else e.statuses[0],
+                    *e.statuses[1:]]
+        fails, _, _ = _judge(replace(e, statuses=statuses))
+        assert (early in fails) is fails_early, (first, later, fails)

@@ -51,6 +51,8 @@ from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAU
 from sim_plant.nodes.candump_log import Frame
 from sim_plant.offline.plausibility_runs import sensor_bound
 
+_MISSING = names.CAUSE_STEER_MISSING | names.CAUSE_YAW_MISSING | names.CAUSE_SPEED_MISSING
+
 #: A sample of the falsified signal as the controller got it: (t, error, bound).
 ErrorSample = tuple[float, float, float]
 
@@ -266,12 +268,16 @@ def _check_degraded_row(e: Evidence, start: float, fails: list[str], observed: l
     """A row whose report is DEGRADED (a lateral acceleration that disagrees with the yaw rate
     its second element confirms: ``plausibility.OUTSIDE_MODEL``): the first status with the bit
     within 300 ms plus its cycle of the error leaving its bound, every later status with it, no
-    plausibility bit before the onset, and the redundant frame arriving on its cycle over the
+    plausibility bit before the onset (but in the leading statuses that name a missing input:
+    a node started ahead of the plant), and the redundant frame arriving on its cycle over the
     status's cycle before the report (else the DEGRADED may be a missing frame's, which the
     bus does not tell apart); the command faded as on a fault (from the status's cycle before
     it, where the monitor may have tripped) and at zero to the end."""
     ts = e.setup.ts
-    if any(s.t < start and s.plausibility for s in e.statuses):
+    # The leading statuses that name a missing input were sent before the plant's first frames (a
+    # node started ahead of it): their DEGRADED is the missing inputs', which their cause says.
+    first = next((i for i, s in enumerate(e.statuses) if not s.cause & _MISSING), len(e.statuses))
+    if any(s.t < start and s.plausibility for s in e.statuses[first:]):
         fails.append("plausibility bits reported before the fault's onset")
     t_st = next((s.t for s in e.statuses if s.t >= start and s.plausibility & PLAUS_DEGRADED), None)
     series = [x for x in error_series(e) if x[0] >= start]
