@@ -156,13 +156,33 @@ def test_demo_overlays_both_runs_and_tells_a_held_wheel_story(tmp_path: Path) ->
         assert len(read_steps_csv(tmp_path / run / "steps.csv")) == on["steps"]
 
 
+def _timing_held(hil: dict) -> bool:
+    """Whether a realtime run stayed the fixed-delay loop the offline comparison assumes: every
+    command within its 5 ms period, no overrun, and no status but ACTIVE (a sample withheld in a
+    stall makes the monitor DEGRADED, which opens the panic window and changes the law's output)."""
+    period = 1.0 / hil["rate_hz"]
+    return (hil["latency_p99_s"] < period and hil["loop"]["controller"]["overruns"] == 0
+            and hil["loop"]["plant"]["overruns"] == 0 and hil["plausibility"]["first_degraded_s"] is None)
+
+
 def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:
     # A gentler tuning that stays stable with the 1-3 samples of delay a free-running
     # Python loop sees (the paper's K=10, tau=6 ms needs exactly one sample at 1 kHz).
-    proc = mrsteer("hil", "run", "--scenario", "paper-fig9", "--mode", "realtime", "--rate-hz", "200", "--k", "3",
-                   "--tau", "0.05", "--v", "22", "--mu", "1", "--out", str(tmp_path), "--json")
-    assert proc.returncode == 0, proc.stderr
-    hil = json.loads(proc.stdout)
+    # A starved machine can stall either process for more than a period; such a run measures
+    # the machine, not the loop, so it is run again (at most three runs) and reported if none held.
+    runs = []
+    for attempt in range(3):
+        out = tmp_path / f"run{attempt}"
+        proc = mrsteer("hil", "run", "--scenario", "paper-fig9", "--mode", "realtime", "--rate-hz", "200", "--k",
+                       "3", "--tau", "0.05", "--v", "22", "--mu", "1", "--out", str(out), "--json")
+        assert proc.returncode == 0, proc.stderr
+        hil = json.loads(proc.stdout)
+        runs.append(hil)
+        if _timing_held(hil):
+            break
+    else:
+        pytest.skip("no realtime run held its 5 ms timing on this machine: p99 latencies "
+                    + ", ".join(f"{r['latency_p99_s'] * 1e3:.1f} ms" for r in runs))
     assert hil["mode"] == "realtime" and hil["delay_steps"] >= 1
     offline = _offline("--mz", "4000", "--v", "22", "--mu", "1", "--ts", "0.005", "--delay-steps",
                        str(hil["delay_steps"]), "--k", "3", "--tau", "0.05")
