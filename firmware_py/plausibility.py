@@ -75,7 +75,10 @@ The checks (thresholds and their reasoning: docs/controller.md, "Plausibility mo
    ``speed_pair_bound`` + ``speed_pair_rel`` min(v, v_2), counted as the model check, trips at
    ``speed_pair_time``.  A drift, however slow and wherever the car is, is found once it has
    carried the speed that far; NaN (a sender without it) pauses the check, and the source lost
-   after it was received is DEGRADED, as for the yaw-rate pair.
+   after it was received is DEGRADED, as for the yaw-rate pair.  While the car brakes (the
+   speed, lagged by ``speed_brake_tau``, above it by what a fall at ``speed_brake_decel``
+   leaves) a second speed *below* the speed may be ``speed_slip_rel`` min(v, v_2) further off:
+   the braked wheels' slip, which ABS holds at 10-20 %.
 
 Each of 1 and 3 counts up by one on a sample over its bound and down by one (to 0) on a sample
 within it, and trips at ``*_count``; 2 and 8 likewise per control period, tripping at
@@ -252,6 +255,14 @@ class PlausibilityConfig:
     # that a car sliding on it is not taken for an a_y or yaw-rate error.  Without the pair the
     # kinematic check is the yaw rate's and mu_min keeps it sharp (docs/controller.md, "Out-voted")
     mu_min_paired: float = 0.3
+    # While the speed falls at speed_brake_decel (m/s^2) or more (seen through a first-order lag
+    # of speed_brake_tau, s), a second speed below the speed may be speed_slip_rel min(v, v_2)
+    # further off: braked wheels slip, 10-20 % under ABS, and the second speed is wheel speeds.
+    # 0.5 m/s^2 is under the deceleration at which ABS acts on any road of mu >= 0.1; 0.25 is
+    # ABS's slip with its cycle's dips (docs/controller.md, "Braking: the wheels' slip")
+    speed_brake_decel: float = 0.5
+    speed_brake_tau: float = 0.05
+    speed_slip_rel: float = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -298,6 +309,9 @@ class MonitorCoefficients:
     speed_pair_bound: float
     speed_pair_rel: float
     speed_pair_steps: int
+    speed_brake_alpha: float  # the speed's lag per period: 1 - exp(-ts / speed_brake_tau)
+    speed_brake_lag: float  # how far that lag stays above a speed falling at speed_brake_decel
+    speed_slip_rel: float
     steer_jump: float
 
 
@@ -313,7 +327,7 @@ class MonitorState:
                  "yaw_hold_n", "yaw_clear_n",
                  "yaw2_seen", "delta_lag", "kin_sensor", "lag_beta_prev", "speed_last", "speed_seen",
                  "turn_n", "turn_settled", "turn_r0", "turn_a0", "turn_res", "turn_r", "turn_err",
-                 "speed2_seen", "speed_pair_count", "speed_pair_err",
+                 "speed2_seen", "speed_pair_count", "speed_pair_err", "speed_lag",
                  "jump_prev", "jump_ok", "steer_hold_n")
 
     def __init__(self) -> None:
@@ -363,6 +377,7 @@ def reset_monitor(s: MonitorState) -> None:
     s.kin_sensor = [0.0] * KIN_WINDOW  # how much that lag moves the nominal car's beta' (C: double[4])
     s.lag_beta_prev = 0.0
     s.speed_last = 0.0  # the last valid speed (speed_seen: since the speed was last invalid)
+    s.speed_lag = 0.0  # the speed through speed_brake_tau's lag (since speed_seen)
     s.speed_seen = False
     s.turn_n = 0  # samples in the steady-turn check's current block
     s.turn_settled = False  # the block before the current one was steady: the side slip has settled
@@ -380,13 +395,13 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
                           "nominal_mass", "nominal_c_f", "nominal_c_r", "kin_gap", "actuator_tau",
                           "yaw_pair_bound", "yaw_pair_hold", "sensor_tau", "speed_step", "turn_yaw_min",
                           "turn_yaw_tol", "turn_lat_tol", "turn_speed_rel", "speed_pair_bound", "speed_pair_time",
-                          "steer_jump"))
+                          "steer_jump", "speed_brake_decel", "speed_brake_tau"))
     for name in ("mu_min", "mu_min_paired"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.05 <= value <= 1.0):
             raise ValueError(f"{name} must be in [0.05, 1], got {value!r}")
     for name in ("model_rel", "yaw_rel", "side_accel", "turn_lat_rel", "turn_yaw_bias", "turn_lat_bias",
-                 "speed_pair_rel"):
+                 "speed_pair_rel", "speed_slip_rel"):
         value = getattr(cfg, name)
         if not (isinstance(value, float | int) and 0.0 <= value < 1e3):
             raise ValueError(f"{name} must be in [0, 1000), got {value!r}")
@@ -403,6 +418,8 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
             raise ValueError(f"{name} must be an integer in [1, 100], got {value!r}")
     wheelbase = cfg.nominal_l_f + cfg.nominal_l_r
+    # A first-order lag follows a ramp falling at a per period (1 - alpha) a / alpha above it.
+    brake_alpha = 1.0 - math.exp(-cfg.ts / cfg.speed_brake_tau)
     k_us = ((cfg.nominal_c_r * cfg.nominal_l_r - cfg.nominal_c_f * cfg.nominal_l_f) * cfg.nominal_mass
             / (cfg.nominal_c_f * cfg.nominal_c_r * wheelbase))
     return MonitorCoefficients(
@@ -425,7 +442,9 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         turn_yaw_tol=cfg.turn_yaw_tol, turn_lat_tol=cfg.turn_lat_tol, turn_lat_rel=cfg.turn_lat_rel,
         turn_speed_rel=cfg.turn_speed_rel, turn_yaw_bias=cfg.turn_yaw_bias, turn_lat_bias=cfg.turn_lat_bias,
         speed_pair_bound=cfg.speed_pair_bound, speed_pair_rel=cfg.speed_pair_rel,
-        speed_pair_steps=steps_of(cfg.speed_pair_time, cfg.ts), steer_jump=cfg.steer_jump)
+        speed_pair_steps=steps_of(cfg.speed_pair_time, cfg.ts), speed_brake_alpha=brake_alpha,
+        speed_brake_lag=(1.0 - brake_alpha) * cfg.speed_brake_decel * cfg.ts / brake_alpha,
+        speed_slip_rel=cfg.speed_slip_rel, steer_jump=cfg.steer_jump)
 
 
 def steps_of(t: float, ts: float) -> int:
@@ -465,6 +484,10 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             e = -e if e < 0.0 else e
             if e > c.speed_step:
                 s.latched |= CHECK_SPEED
+        if s.speed_seen:
+            s.speed_lag += c.speed_brake_alpha * (speed - s.speed_lag)
+        else:
+            s.speed_lag = speed
         s.speed_last = speed
         s.speed_seen = True
     else:
@@ -480,6 +503,8 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             e = -e if e < 0.0 else e
             x = speed if speed < speed_redundant else speed_redundant
             bound = c.speed_pair_bound + c.speed_pair_rel * x
+            if speed_redundant < speed and s.speed_lag - speed > c.speed_brake_lag:
+                bound += c.speed_slip_rel * x  # braking: the wheels the second speed is read from slip
             s.speed_pair_err = e / bound
             if e > bound:
                 s.speed_pair_count += 1

@@ -188,6 +188,23 @@ def _random_speed_pair_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]
     return out
 
 
+def _stops(slips: tuple[float, ...], seed: int = 9, n: int = 600) -> list[tuple[float, ...]]:
+    """Straight-line stops, one after another, from 30 m/s at 0.3-7 m/s^2 (the speed in 20 ms
+    frames), whose second speed (in its 50 ms frame) reads each stop's slip below the speed from
+    its onset: the braking allowance opening, holding and closing as the speed's lag follows."""
+    rng = random.Random(seed)
+    out = []
+    for slip in slips:
+        decel, v, v2 = rng.uniform(0.3, 7.0), 30.0, 30.0
+        for k in range(n):
+            if k % 10 == 0:
+                v = round(max(3.0, 30.0 - decel * 0.002 * max(0, k - 50)) / 0.002) * 0.002
+            if k % SPEED2_EVERY == 0:
+                v2 = round(v * (1.0 - (slip if k >= 50 else 0.0)) / SPEED2_LSB) * SPEED2_LSB
+            out.append((0.0, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v2))
+    return out
+
+
 CASES = {
     "split-mu, fault-free": lambda: _run_rows(pr.scn.load("split-mu")),
     "yaw bias in a curve": lambda: _run_rows(pr.steady_curve(20.0, 1.0).with_sensor_faults(
@@ -228,6 +245,9 @@ CASES = {
     "the second speed lost half way (DEGRADED), with the speed missing and under speed_min": lambda: _lost_second_speed(
         _with_second_speed(_run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5)))),
     "random inputs with a second speed, NaN and inf": lambda: _random_speed_pair_rows(11),
+    "stops whose wheels slip 0-20 % then one whose second speed reads high (trips)":
+        lambda: _stops((0.15, 0.2, 0.05, 0.0, 0.1, -0.08)),
+    "a stop whose second speed reads 35 % low (the pair trips through the allowance)": lambda: _stops((0.35,)),
     "the paper's Figure 9 at 30 m/s on mu 0.3, both pairs in the loop (the model and steady-turn checks out-voted)":
         lambda: _with_second_speed(_run_rows(pr.scn.load("paper-fig9").with_overrides(v=30.0, mu=0.3),
                                              SensorConfig(seed=9))),
@@ -365,7 +385,7 @@ def test_the_defaults_and_coefficients_agree(runner: Path) -> None:
                 mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
                 mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
                 mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, mc.speed_pair_steps,
-                mc.steer_jump, mc.lat_span_paired]
+                mc.steer_jump, mc.lat_span_paired, mc.speed_brake_alpha, mc.speed_brake_lag, mc.speed_slip_rel]
     assert [float(x) for x in first[1:]] == [float(x) for x in expected]
 
 
@@ -379,7 +399,7 @@ def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str,
     m, a = dataclasses.replace(pl.PlausibilityConfig(), **changed), au.AuthorityConfig()
     first = subprocess.run([str(runner)], input=_config_lines(m, a), capture_output=True, text=True,
                            check=True).stdout.split()
-    assert int(first[-3]) == pl.configure(m).speed_pair_steps == steps
+    assert int(first[32]) == pl.configure(m).speed_pair_steps == steps
 
 
 @pytest.mark.parametrize("bad", [{"yaw_bound": -1.0}, {"turn_yaw_tol": 0.2}, {"turn_lat_bias": -0.01},

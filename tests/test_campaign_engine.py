@@ -381,6 +381,46 @@ def test_batch_plausibility_monitor_equals_the_scalar_one_row_by_row(held: bool)
                                                                                  batch.steady_periods)
 
 
+def test_batch_speed_checks_equal_the_scalar_ones_while_cars_brake_and_their_wheels_slip() -> None:
+    """``SpeedChecks`` (checks 6 and 8) against ``monitor_step`` per row and period while cars
+    stop at 0.2-6 m/s^2 and their second speed reads 0-35 % below (or above) the speed, with the
+    speed held for its 20 ms frame and the second speed for its 50 ms one as the engine passes
+    them (the same arrays between frames): the speed's lag, the pair's count and residual and
+    the trips.  The rows cover the braking allowance acting, not acting (too little deceleration,
+    the second speed above) and exceeded."""
+    from firmware_py import plausibility as pl
+    from sim_plant.campaign.batch_speed_checks import SpeedChecks
+
+    rng = np.random.default_rng(11)
+    rows, steps = 40, 700
+    cfg = pl.PlausibilityConfig(ts=0.002)
+    c = pl.configure(cfg)
+    checks, latched = SpeedChecks(c, rows), np.zeros(rows, dtype=np.int64)
+    states = [pl.MonitorState() for _ in range(rows)]
+    v0, decel = rng.uniform(10.0, 40.0, rows), rng.uniform(0.2, 6.0, rows)
+    slip = np.where(np.arange(rows) % 4 == 3, -0.1, rng.uniform(0.0, 0.35, rows))
+    onset = rng.integers(0, 200, rows)
+    v = v2 = None
+    allowed = 0
+    for k in range(steps):
+        braked = np.maximum(k - onset, 0) * cfg.ts
+        true_v = np.maximum(v0 - decel * braked, 3.0)
+        if k % 10 == 0:
+            v = np.round(true_v / 0.002) * 0.002
+        if k % 25 == 0:
+            v2 = np.round(true_v * (1.0 - np.where(k >= onset, slip, 0.0)) / 0.3) * 0.3
+        checks.step(v, v2, latched)
+        for i, s in enumerate(states):
+            pl.monitor_step(c, s, 0.0, 0.0, 0.0, 0.0, float(v[i]), 0.0, 0.0, float(v2[i]))
+            assert checks.speed_lag[i] == s.speed_lag, (k, i)
+            assert checks.speed_pair_count[i] == s.speed_pair_count, (k, i)
+            assert checks.speed_pair_err[i] == s.speed_pair_err, (k, i)
+            assert latched[i] == s.latched & (pl.CHECK_SPEED | pl.CHECK_SPEED_PAIR), (k, i)
+            allowed += v2[i] < v[i] and s.speed_lag - v[i] > c.speed_brake_lag
+    tripped = (latched & pl.CHECK_SPEED_PAIR) != 0
+    assert allowed > 0 and tripped.any() and not tripped.all()
+
+
 def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_models() -> None:
     """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
     ``BatchSensors``' lateral acceleration, second steering channel and yaw rate (both elements) against

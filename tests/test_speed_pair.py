@@ -77,6 +77,52 @@ def test_a_second_speed_that_agrees_or_is_absent_changes_no_other_result() -> No
     assert monitors[2].state.speed_pair_err > 0.0 and monitors[0].state.speed_pair_err == 0.0
 
 
+def _braking(decel: float, slip: float, v0: float = 25.0, periods: int = 1000, speed_every: int = 10,
+             slip_from: int = 0) -> list[tuple[float, float]]:
+    """A stop from v0 at ``decel`` m/s^2 whose second speed (wheel speeds) reads (1 - slip) v
+    from period ``slip_from`` on: the speed frame every ``speed_every`` periods, the second
+    speed every 25 (its 50 ms frame)."""
+    out = []
+    for k in range(periods):
+        v = v0 - decel * CFG.ts * (k - k % speed_every)
+        held = k - k % 25
+        s = slip if held >= slip_from else 0.0
+        out.append((v, round((1.0 - s) * (v0 - decel * CFG.ts * held) / 0.3) * 0.3))
+    return out
+
+
+@pytest.mark.parametrize("speed_every", [1, 10])
+def test_braking_allows_the_wheels_slip_below_the_speed_only(speed_every: int) -> None:
+    # ABS holds a braked wheel at 10-20 % slip: at 25 m/s a second speed 15 % low is 3.75 m/s off,
+    # over the plain bound (1.0 + 0.05 v_2 = 2.06) and within the braking one (+ 0.25 v_2 = 6.3)
+    still = [(25.0, round(0.85 * 25.0 / 0.3) * 0.3)] * 300
+    assert any(_run(still)[0])  # without braking the same difference is a fault
+    assert not any(_run(_braking(4.0, 0.15, speed_every=speed_every))[0])
+    assert any(_run(_braking(4.0, 0.33, speed_every=speed_every))[0])  # beyond the slip ABS allows
+    assert any(_run(_braking(4.0, -0.15, speed_every=speed_every))[0])  # a second speed above: no allowance
+
+
+def test_the_braking_allowance_opens_at_speed_brake_decel() -> None:
+    # A first-order lag follows a falling ramp (1 - alpha) a ts / alpha above it: the allowance
+    # opens where that passes the same at speed_brake_decel, here a ramp in every period (the
+    # slip from 0.5 s, when the lag has settled to within 10^-4 of its final value).
+    slip = 0.12  # 3 m/s at 25 m/s: over the plain bound, within the braking one
+    for scale, trips in ((0.95, True), (1.05, False)):
+        speeds = _braking(scale * CFG.speed_brake_decel, slip, speed_every=1, periods=1500, slip_from=250)
+        assert any(_run(speeds)[0]) == trips, scale
+    c = pl.configure(CFG)
+    assert c.speed_brake_lag == pytest.approx(CFG.speed_brake_decel * CFG.speed_brake_tau, rel=0.03)
+
+
+def test_a_speed_stuck_while_the_car_brakes_is_still_found() -> None:
+    # The speed held at 25 m/s while the car (and its second speed) slows at 4 m/s^2: the stuck
+    # speed does not fall, so the allowance stays shut and the pair finds it once the true
+    # speed is 1.0 + 0.05 v_2 below: at about 2.2 m/s, 0.55 s in, plus speed_pair_time
+    speeds = [(25.0, v2) for _, v2 in _braking(4.0, 0.0)]
+    flags = _run(speeds)[0]
+    assert 0.5 / CFG.ts < flags.index(pl.CHECK_SPEED_PAIR) < (0.6 + CFG.speed_pair_time) / CFG.ts + 25
+
+
 @pytest.mark.parametrize("field, value", [("speed_pair_bound", 0.0), ("speed_pair_time", -1.0),
                                           ("speed_pair_rel", -0.1), ("speed_pair_bound", math.inf)])
 def test_a_bad_calibration_is_refused_by_name(field: str, value: float) -> None:
@@ -144,3 +190,4 @@ def test_without_the_pair_the_same_drift_passes_the_caused_yaw_target() -> None:
     twin, run = _drift(False)
     assert run.report_time is None
     assert np.abs(run.r_true - twin.r_true).max() > 0.05
+

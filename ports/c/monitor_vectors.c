@@ -2,7 +2,7 @@
  *
  *   monitor_vectors < INPUT
  *
- * INPUT: a line "monitor" + the 40 mrs_monitor_config_t numbers in struct order, a line
+ * INPUT: a line "monitor" + the 43 mrs_monitor_config_t numbers in struct order, a line
  * "authority" + the 8 mrs_authority_config_t numbers, then one line per control period:
  * "delta_driver delta_driver_redundant yaw_rate lat_accel speed aux_cmd_applied u_request
  * yaw_rate_redundant speed_redundant" (nan for a missing input).  OUTPUT: a line "coeffs" + the
@@ -43,13 +43,14 @@ static void print_defaults(void)
     mrs_authority_default_config(&a);
     printf("monitor %.17g %.17g %.17g %.17g %d %.17g %.17g %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
            "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g %.17g %.17g %.17g %.17g\n",
+           "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n",
            m.ts, m.speed_min, m.yaw_bound, m.yaw_rel, m.yaw_count, m.yaw_raw_fraction, m.steer_bound, m.steer_count, m.model_margin, m.model_rel,
            m.model_tau, m.model_time, m.frozen_time, m.frozen_move_yaw, m.frozen_move_steer, m.nominal_l_f,
            m.nominal_l_r, m.nominal_mass, m.nominal_c_f, m.nominal_c_r, m.kin_gap, m.mu_min, m.actuator_tau,
            m.yaw_pair_bound, m.sensor_tau, m.side_accel, m.speed_step, m.turn_yaw_min, m.turn_yaw_tol, m.turn_lat_tol,
            m.turn_lat_rel, m.turn_speed_rel, m.turn_yaw_bias, m.turn_lat_bias, m.yaw_pair_hold, m.speed_pair_bound,
-           m.speed_pair_rel, m.speed_pair_time, m.steer_jump, m.mu_min_paired);
+           m.speed_pair_rel, m.speed_pair_time, m.steer_jump, m.mu_min_paired, m.speed_brake_decel, m.speed_brake_tau,
+           m.speed_slip_rel);
     printf("authority %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", a.ts, a.u_max, a.rate_max, a.fade_rate,
            a.fault_fade_rate, a.panic_window, a.engage, a.rearm_time);
 }
@@ -57,7 +58,7 @@ static void print_defaults(void)
 int main(void)
 {
     char line[LINE_MAX_LEN];
-    double v[40];
+    double v[43];
     mrs_monitor_config_t mg;
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
@@ -72,7 +73,7 @@ int main(void)
         print_defaults();
         return 0;
     }
-    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 40) != 0) {
+    if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 43) != 0) {
         return 2;
     }
     mg.ts = v[0];
@@ -115,6 +116,9 @@ int main(void)
     mg.speed_pair_time = v[37];
     mg.steer_jump = v[38];
     mg.mu_min_paired = v[39];
+    mg.speed_brake_decel = v[40];
+    mg.speed_brake_tau = v[41];
+    mg.speed_slip_rel = v[42];
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 8) != 0) {
         return 2;
@@ -131,13 +135,13 @@ int main(void)
         return 3;
     }
     printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g %.17g %d %.17g %.17g\n",
+           "%.17g %.17g %d %.17g %.17g %.17g %.17g %.17g\n",
            mc.model_alpha, mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m,
            mc.moment_m, mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps,
            (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
            mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
            mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, (int)mc.speed_pair_steps,
-           mc.steer_jump, mc.lat_span_paired);
+           mc.steer_jump, mc.lat_span_paired, mc.speed_brake_alpha, mc.speed_brake_lag, mc.speed_slip_rel);
     mrs_monitor_reset(&ms);
     mrs_authority_reset(&as);
     while (fgets(line, sizeof line, stdin) != NULL) {

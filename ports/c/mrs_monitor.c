@@ -47,6 +47,9 @@ void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
     cfg->speed_pair_time = 0.1;
     cfg->steer_jump = 0.015;
     cfg->mu_min_paired = 0.3;
+    cfg->speed_brake_decel = 0.5;
+    cfg->speed_brake_tau = 0.05;
+    cfg->speed_slip_rel = 0.25;
 }
 
 static int positive(double x)
@@ -68,7 +71,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
                         g->nominal_l_r, g->nominal_mass, g->nominal_c_f, g->nominal_c_r, g->kin_gap, g->actuator_tau,
                         g->yaw_pair_bound, g->sensor_tau, g->speed_step, g->turn_yaw_min, g->turn_yaw_tol,
                         g->turn_lat_tol, g->turn_speed_rel, g->yaw_pair_hold, g->speed_pair_bound,
-                        g->speed_pair_time, g->steer_jump};
+                        g->speed_pair_time, g->steer_jump, g->speed_brake_decel, g->speed_brake_tau};
     size_t i;
     double wheelbase;
     for (i = 0u; i < sizeof p / sizeof p[0]; ++i) {
@@ -82,6 +85,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
         !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
         !(g->speed_pair_rel >= 0.0 && g->speed_pair_rel < 1e3) ||
+        !(g->speed_slip_rel >= 0.0 && g->speed_slip_rel < 1e3) ||
         !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min) || !(g->yaw_pair_hold <= g->yaw_pair_bound)) {
         return -1;
     }
@@ -129,6 +133,10 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
     c->speed_pair_steps = steps_of(g->speed_pair_time, g->ts);
     c->steer_jump = g->steer_jump;
     c->lat_span_paired = 1.0 / g->mu_min_paired - 1.0;
+    /* a first-order lag follows a ramp falling at a per period (1 - alpha) a / alpha above it */
+    c->speed_brake_alpha = 1.0 - exp(-g->ts / g->speed_brake_tau);
+    c->speed_brake_lag = (1.0 - c->speed_brake_alpha) * g->speed_brake_decel * g->ts / c->speed_brake_alpha;
+    c->speed_slip_rel = g->speed_slip_rel;
     return 0;
 }
 
@@ -176,6 +184,7 @@ void mrs_monitor_reset(mrs_monitor_state_t *s)
     s->yaw_clear_n = 0;
     s->yaw2_seen = 0u;
     s->speed_last = 0.0;
+    s->speed_lag = 0.0;
     s->speed_seen = 0u;
     s->turn_n = 0;
     s->turn_settled = 0u;
@@ -255,6 +264,11 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
                 s->latched |= MRS_CHECK_SPEED;
             }
         }
+        if (s->speed_seen) {
+            s->speed_lag += c->speed_brake_alpha * (speed - s->speed_lag);
+        } else {
+            s->speed_lag = speed;
+        }
         s->speed_last = speed;
         s->speed_seen = 1u;
     } else {
@@ -268,6 +282,9 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             e = MRS_MAG(speed - speed_redundant);
             rm = speed < speed_redundant ? speed : speed_redundant; /* min(v, v_2) */
             bound = c->speed_pair_bound + c->speed_pair_rel * rm;
+            if (speed_redundant < speed && s->speed_lag - speed > c->speed_brake_lag) {
+                bound += c->speed_slip_rel * rm; /* braking: the wheels the second speed is read from slip */
+            }
             s->speed_pair_err = e / bound;
             MRS_COUNT(s->speed_pair_count, e > bound, c->speed_pair_steps, MRS_CHECK_SPEED_PAIR);
             speed_vouched = s->speed_pair_count == 0;

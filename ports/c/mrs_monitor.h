@@ -91,6 +91,9 @@ typedef struct {
     /* rad the driver's angle may move in one sample before the steering pair suspects it */
     double steer_jump;
     double mu_min_paired; /* the family's lowest friction while the yaw-rate pair runs */
+    /* braking (the speed, lagged by speed_brake_tau s, falling at speed_brake_decel m/s^2 or more):
+     * a second speed below the speed may be speed_slip_rel min(v, v_2) further off (wheel slip) */
+    double speed_brake_decel, speed_brake_tau, speed_slip_rel;
 } mrs_monitor_config_t;
 
 typedef struct {
@@ -111,6 +114,9 @@ typedef struct {
     int32_t speed_pair_steps;
     double steer_jump;
     double lat_span_paired; /* 1 / mu_min_paired - 1 */
+    double speed_brake_alpha; /* 1 - exp(-ts / speed_brake_tau) */
+    double speed_brake_lag; /* how far that lag stays above a speed falling at speed_brake_decel */
+    double speed_slip_rel;
 } mrs_monitor_coeffs_t;
 
 typedef struct {
@@ -133,6 +139,7 @@ typedef struct {
     double delta_lag; /* the wheel angle through the sensors' lag */
     double lag_beta_prev, kin_sensor[MRS_KIN_WINDOW]; /* what that lag moves the nominal car's beta' */
     double speed_last;
+    double speed_lag; /* the speed through speed_brake_tau's lag (since speed_seen) */
     double turn_r0, turn_a0, turn_res, turn_r, turn_err; /* the block's first r, a_y; sums of r v - a_y, r */
     int32_t speed_pair_count; /* the speed pair's up/down counter (trips at speed_pair_steps) */
     double speed_pair_err;

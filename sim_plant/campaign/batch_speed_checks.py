@@ -17,17 +17,19 @@ from firmware_py import plausibility as pl
 
 
 class SpeedChecks:
-    """``MonitorState``'s speed slots for N rows (``speed_seen``, ``speed_last``, ``speed2_seen``,
-    ``speed_pair_count``, ``speed_pair_err``) and the two checks on them."""
+    """``MonitorState``'s speed slots for N rows (``speed_seen``, ``speed_last``, ``speed_lag``,
+    ``speed2_seen``, ``speed_pair_count``, ``speed_pair_err``) and the two checks on them."""
 
     def __init__(self, c: pl.MonitorCoefficients, n: int) -> None:
         self.c = c
-        self.speed_last, self.speed_pair_err = np.zeros(n), np.zeros(n)
+        self.speed_last, self.speed_pair_err, self.speed_lag = np.zeros(n), np.zeros(n), np.zeros(n)
         self.speed_seen, self.speed2_seen = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         self.speed_pair_count = np.zeros(n, dtype=np.int64)
         self._v_checked: np.ndarray | None = None  # the speed array the jump check last saw
         self._pair_of: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # (v, v2) the pair's masks are of
-        self._both = self._over = np.zeros(n, dtype=bool)
+        self._both = self._over = self._low = self._over_braking = np.zeros(n, dtype=bool)
+        self._err = self._err_braking = np.zeros(n)
+        self._slipped = False  # some row's allowance acted in the period before
         self._lost: np.ndarray | bool = False
         self._has_pair = False  # this period's second speed was an array (not None)
 
@@ -36,8 +38,20 @@ class SpeedChecks:
         every row, a car without it), their trips OR-ed into ``latched`` in place; returns the
         rows whose second speed is lost (``monitor_step``'s MISSING: it was received since the
         reset, it is missing now, the speed is valid), or False for none."""
+        braking = self._lag(v)
         self._jump(v, latched)
-        return self._pair(v, v2, latched)
+        return self._pair(v, v2, latched, braking)
+
+    def _lag(self, v: np.ndarray) -> np.ndarray:
+        """The speed through ``speed_brake_tau``'s lag, every period (it moves while the speed is
+        held); returns the rows where it stays above the speed by a fall at ``speed_brake_decel``
+        or more (``monitor_step``'s braking)."""
+        with np.errstate(invalid="ignore"):
+            ok = (0.0 <= v) & (v < 1e3)
+            lag = self.speed_lag
+            moved = lag + self.c.speed_brake_alpha * (v - lag)
+            self.speed_lag = np.where(ok, np.where(self.speed_seen, moved, v), lag)
+            return ok & (self.speed_lag - v > self.c.speed_brake_lag)
 
     def _jump(self, v: np.ndarray, latched: np.ndarray) -> None:
         """Check 6, the speed's jump; nothing to do for the very array it last saw (the speed held)."""
@@ -51,11 +65,14 @@ class SpeedChecks:
         self.speed_last = np.where(ok, v, self.speed_last)
         self.speed_seen = ok
 
-    def _pair(self, v: np.ndarray, v2: np.ndarray | None, latched: np.ndarray) -> np.ndarray | bool:
-        """Check 8: |v - v2| over ``speed_pair_bound + speed_pair_rel min(v, v2)`` counted up, else
-        down, per period (trips at ``speed_pair_steps``); the count 0 where either speed is
-        missing.  Both speeds are held for several periods: their masks are formed once per
-        pair of arrays, the count moves every period."""
+    def _pair(self, v: np.ndarray, v2: np.ndarray | None, latched: np.ndarray,
+              braking: np.ndarray) -> np.ndarray | bool:
+        """Check 8: |v - v2| over ``speed_pair_bound + speed_pair_rel min(v, v2)`` (plus
+        ``speed_slip_rel min(v, v2)`` in the ``braking`` rows whose second speed is the lower)
+        counted up, else down, per period (trips at ``speed_pair_steps``); the count 0 where
+        either speed is missing.  Both speeds are held for several periods: their masks are
+        formed once per pair of arrays (with and without the braking allowance), the count
+        moves every period."""
         c = self.c
         self._has_pair = v2 is not None
         if v2 is None:
@@ -73,10 +90,24 @@ class SpeedChecks:
                 self.speed2_seen = self.speed2_seen | ok2
                 both = ok2 & ok
                 e = np.abs(v - v2)
-                bound = c.speed_pair_bound + c.speed_pair_rel * np.where(v < v2, v, v2)
-                self.speed_pair_err = np.where(both, e / bound, self.speed_pair_err)
+                x = np.where(v < v2, v, v2)
+                bound = c.speed_pair_bound + c.speed_pair_rel * x
+                wide = bound + c.speed_slip_rel * x  # monitor_step's bound += speed_slip_rel x
+                self._err, self._err_braking = e / bound, e / wide
+                self.speed_pair_err = np.where(both, self._err, self.speed_pair_err)
                 self._both, self._over = both, both & (e > bound)
-        count, over = self.speed_pair_count, self._over
+                self._low, self._over_braking = both & (v2 < v), both & (e > wide)
+        over = self._over
+        slipping = braking & self._low
+        if slipping.any():
+            over = np.where(slipping, self._over_braking, over)
+            err = np.where(slipping, self._err_braking, self._err)
+            self.speed_pair_err = np.where(self._both, err, self.speed_pair_err)
+            self._slipped = True
+        elif self._slipped:  # the allowance ended: the plain bound's fractions again
+            self.speed_pair_err = np.where(self._both, self._err, self.speed_pair_err)
+            self._slipped = False
+        count = self.speed_pair_count
         if over.any():
             count = np.where(over, count + 1, np.where(count > 0, count - 1, count))
             trip = over & (count >= c.speed_pair_steps)
