@@ -48,3 +48,26 @@ def test_settled_blocks_are_the_formulas_values() -> None:
                 expected = expected[k0:k0 + BLOCK] if expected.shape[0] == steps else expected
                 assert np.array_equal(value, expected), (name, k0)
         assert settled > steps // BLOCK // 3  # most blocks after the last ramp's end
+
+
+def test_the_split_mu_rows_wheel_slip_is_the_scalar_disturbance_s() -> None:
+    """``GripLoads``' ``wheel_slip`` (the second speed's braked wheels) against
+    ``SplitMuBraking.wheel_slip`` of each row's stop, through the pressure ramp and after; 0 in
+    the blow-out rows."""
+    from sim_plant.car.disturbances import SplitMuBraking
+
+    c = spec.parse(CAMPAIGN.replace('"yaw_moment", ', "").replace('"side_wind", ', ""), "loads.toml")
+    s = sampling.samples(c, np.arange(c.samples))
+    t = np.arange(700, dtype=float)[:, None] * 0.002
+    slip = GripLoads(s, BatchCar(s["v"], s["mu"], s["mass"], 0.002)).block(t)["wheel_slip"]
+    split = np.flatnonzero(s["disturbance"] == SPLIT)
+    assert split.size > 10 and not slip[:, s["disturbance"] == BLOWOUT].any()
+    abs_seen = 0
+    for i in split:
+        stop = SplitMuBraking(t_start=float(s["onset"][i]), mu_left=float(s["mu"][i]),
+                              mu_right=float(s["mu_split"][i]), deceleration=float(s["deceleration"][i]),
+                              mass=float(s["mass"][i]))
+        expected = [stop.at(float(x)).wheel_slip for x in t[:, 0]]
+        assert np.allclose(slip[:, i], expected, rtol=1e-12, atol=1e-15), i  # numpy's cos against math's
+        abs_seen += max(expected) >= stop.abs_slip / 2
+    assert abs_seen > 0  # some stop reaches ABS on a side

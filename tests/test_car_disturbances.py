@@ -31,6 +31,19 @@ def test_split_mu_full_braking_is_limited_by_each_side_and_decelerates():
     assert b.brake_forces(0.5 + 0.075)[0] == pytest.approx(0.5 * M * 10.0 / 2, rel=1e-12)
 
 
+def test_split_mu_braking_slips_the_wheels_by_their_stiffness_or_at_abs_slip():
+    # full braking: ABS holds both sides at its slip
+    assert SplitMuBraking().at(2.0).wheel_slip == pytest.approx(0.15, rel=1e-12)
+    # a gentle stop (1.5 m/s^2) under both caps: 0.05 per unit of force over load, a / g
+    assert SplitMuBraking(deceleration=1.5).at(2.0).wheel_slip == pytest.approx(0.05 * 1.5 / GRAV, rel=1e-12)
+    # the built-in scenario's 5 m/s^2 on 1.0 / 0.2: the ice side in ABS, the dry side rolling on
+    assert SplitMuBraking(deceleration=5.0).at(2.0).wheel_slip == pytest.approx(
+        0.5 * (0.05 * 5.0 / GRAV + 0.15), rel=1e-12)
+    assert SplitMuBraking().at(0.49).wheel_slip == 0.0  # before the stop
+    both = sum_loads([SplitMuBraking(t_start=0.0), TyreBlowout(t_start=0.0, wheel="fr")], 2.0)
+    assert both.wheel_slip == SplitMuBraking(t_start=0.0).wheel_slip(2.0)  # a blow-out adds none
+
+
 def test_split_mu_braking_slows_the_car_and_yaws_it_left():
     plant = NonlinearPlant(VehicleParams(v=25.0), 0.002)
     b = SplitMuBraking(t_start=0.0)

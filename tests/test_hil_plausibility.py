@@ -190,3 +190,36 @@ def test_the_command_line_says_early_or_late_against_the_bound() -> None:
     assert plausibility_line(faulted | {"caused_yaw_rad_s": 0.07}).endswith("0.0700 rad/s of yaw (target 0.05: NOT met)")
     assert plausibility_line(faulted | {"caused_yaw_rad_s": None, "caused_yaw_note": "a realtime run"}).endswith(
         "; caused yaw not estimated: a realtime run")
+
+
+def test_a_second_speed_fault_while_the_car_brakes_is_judged_on_the_braked_wheels() -> None:
+    # The built-in split-mu stop (5 m/s^2 asked on 1.0 / 0.2 from 0.5 s, settled by 0.65 s: the car
+    # slows at 3.48 m/s^2, its rear wheels 8.8 % slow) with ideal sensors and a second speed 2.5 m/s
+    # low from 1.0 s: the error is the fault's 2.5 m/s, not the slip's, and while the car brakes
+    # it is judged against the bound widened by speed_slip_rel v, so it never passes it; the same
+    # 2.5 m/s on a car that does not brake passes the plain bound (2.16 m/s at 20 m/s) at its onset.
+    from dataclasses import replace
+
+    from firmware_py import plausibility as pl
+    from sim_plant.car.disturbances import sum_loads
+
+    base = replace(scn.load("split-mu"), sensors=SensorConfig.ideal())
+    cfg, fault = pl.PlausibilityConfig(), SensorFault("speed_redundant", "bias", 1.0, -2.5)
+    slip = [sum_loads(base.disturbances, k / RATE).wheel_slip for k in range(800)]
+    assert slip[0] == 0.0 and slip[-1] == pytest.approx(0.5 * (0.05 * 5.0 / 9.81 + 0.15))
+
+    def v(t: float) -> float:
+        return 25.0 - 3.48 * max(0.0, t - 0.5)
+
+    def wheels(t: float) -> float:
+        return v(t) * (1.0 - slip[round(t * RATE)]) - (2.5 if t >= 1.0 else 0.0)
+
+    braking = [replace(s, v_m_s=v(s.t_s)) for s in _steps(800, speed_redundant_measured_m_s=wheels)]
+    fig = plausibility_figures(_traffic(fault_from=None, steps=800), base.with_sensor_faults((fault,)), RATE, braking)
+    assert fig["error_over_bound_s"] is None
+    assert 2.5 < cfg.speed_pair_bound + (cfg.speed_pair_rel + cfg.speed_slip_rel) * v(1.0)
+    rolling = replace(scn.load("side-wind"), sensors=SensorConfig.ideal())  # no stop: the wheels roll
+    still = _steps(800, speed_redundant_measured_m_s=lambda t: 20.0 - (2.5 if t >= 1.0 else 0.0))
+    fig = plausibility_figures(_traffic(fault_from=None, steps=800), rolling.with_sensor_faults((fault,)), RATE,
+                               still)
+    assert fig["error_over_bound_s"] == pytest.approx(1.0)

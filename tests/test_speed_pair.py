@@ -191,3 +191,22 @@ def test_without_the_pair_the_same_drift_passes_the_caused_yaw_target() -> None:
     assert run.report_time is None
     assert np.abs(run.r_true - twin.r_true).max() > 0.05
 
+
+def _split_mu_stop(v: float, mu_right: float):
+    from dataclasses import replace
+
+    sc = pr.scn.load("split-mu").with_overrides(v=v)  # 5 m/s^2 asked: the icy side in ABS
+    return replace(sc, events=tuple(replace(e, load=replace(e.load, mu_right=mu_right)) if e.load is not None
+                                    else e for e in sc.events))
+
+
+def test_a_split_mu_stop_s_wheel_slip_is_no_fault_with_the_braking_allowance_and_one_without() -> None:
+    # The realistic car's split-mu stop at 35 m/s on 1.0 / 0.2 (3.5 m/s^2): the icy side's wheels
+    # at ABS's 15 % slip, the dry side's at 2.5 %, the second speed 8.8 % (3.1 m/s) under the
+    # speed, over the plain bound (1.0 + 0.05 v_2 = 2.6 m/s)
+    sc = _split_mu_stop(35.0, 0.2)
+    run = pr.run(sc, second_speed=True)
+    assert run.report_time is None and not np.any(run.bits)
+    assert 0.3 < run.margins["speed_pair"] < 1.5  # the slip seen, within the braking bound
+    without = pr.run(sc, monitor=pl.PlausibilityConfig(speed_slip_rel=0.0), second_speed=True)
+    assert without.report_time is not None and np.any(without.flags & pl.CHECK_SPEED_PAIR)

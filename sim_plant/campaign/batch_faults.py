@@ -95,6 +95,7 @@ class FaultFigures:
         # yaw-rate sensor's second element, so the pair runs, and the second speed; below the
         # monitor's speed_min every bound is infinite).
         self.channels = dict(faults.rows)
+        self.v_prev: np.ndarray | None = None  # the true speed the step before (braking_of's test)
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
              flags: np.ndarray | int = 0) -> None:
@@ -107,9 +108,12 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
+        braking = False if self.v_prev is None else self.v_prev - v_true >= self.cfg.speed_brake_decel * self.ts
+        self.v_prev = v_true.copy()
         bound = np.full(error.shape, np.inf)
         for channel, on in self.channels.items():
-            bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True), bound)
+            bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,
+                                              braking=braking), bound)
         self.tracker.step(k, np.abs(error) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

@@ -244,14 +244,17 @@ class _Group:
                 sensors.at(k)
                 yaw = sensors.yaw_rate(r)
                 lat = sensors.lat_filtered(car.lat_accel(driver + self.actuator.position, f_y, tyres))
+                if k % red_every == 0 or track_speed2:
+                    # the second speed reads the braked rear wheels (GripLoads' wheel_slip)
+                    wheels = car.v if "wheel_slip" not in block else car.v * (1.0 - block["wheel_slip"][j])
                 if k % red_every == 0:
                     held["lat"], held["steer2"] = sensors.quantised_lat(lat), sensors.steer_redundant(driver)
-                    held["speed2"] = sensors.speed_redundant(car.v)
+                    held["speed2"] = sensors.speed_redundant(wheels)
                 else:
                     if track_steer2:
                         sensors.steer_redundant(driver)  # its error, every step
                     if track_speed2:
-                        sensors.speed_redundant(car.v)
+                        sensors.speed_redundant(wheels)
                 # (the intact rows' speed is constant, but for a faulted speed sensor's reading)
                 if k % speed_every == 0 and (self.grip or k == 0 or speed_faulted):
                     held["speed"] = sensors.speed(car.v)

@@ -130,6 +130,10 @@ class GripLoads(_Settling):
         f_l = np.minimum(demand, self.mu * side_load)
         f_r = np.minimum(demand, self.mu_right * side_load)
         split_on = on & self.split
+        # SplitMuBraking.wheel_slip: ABS's slip on a side it caps, else the tyre's stiffness
+        slip_l = np.where(demand > self.mu * side_load, sp.abs_slip, sp.slip_per_force * demand / side_load)
+        slip_r = np.where(demand > self.mu_right * side_load, sp.abs_slip, sp.slip_per_force * demand / side_load)
+        wheel_slip = np.where(split_on, 0.5 * (slip_l + slip_r), 0.0)
         m_split = np.where(split_on, (f_l - f_r) * sp.track_width / 2.0, 0.0)
         a_split = np.where(split_on, (f_l + f_r) / self.mass, 0.0)
         k = np.where(self.blow, ramp(t, self.onset, bl.deflation_time), 0.0)
@@ -143,7 +147,7 @@ class GripLoads(_Settling):
         mu_right = np.where(split_on, self.mu_right, self.mu)
         car, steps = self.car, t.shape[0]
         common = {"m_z": 0.0 + (m_split + m_blow), "f_y": None, "a_x": 0.0 + (a_split + a_blow),
-                  "mu_max": np.maximum(self.mu, mu_right)}
+                  "mu_max": np.maximum(self.mu, mu_right), "wheel_slip": wheel_slip}
         if self.shared:  # B stiffness / peak with both fractions 1 is B itself
             b = np.stack([car.b_f, car.b_r])[None, :, None]  # (1, axle, 1, rows)
             d = np.empty((steps, 2, 2, self.mu.size))  # (step, axle, wheel, rows)

@@ -46,7 +46,7 @@ from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.offline.excursion_yaw import excursion_yaw
-from sim_plant.offline.plausibility_runs import MonitorRun, cycles, sensor_bound
+from sim_plant.offline.plausibility_runs import MonitorRun, braking_of, cycles, sensor_bound
 
 
 @dataclass(frozen=True)
@@ -127,8 +127,9 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
         yaw_rate_2 = read["yaw_rate_redundant"] = sensors.yaw_rate_redundant(truth["yaw_rate"])  # every period
         # the second speed: read every step (the plant's sensor), sent in MRS_RedundantSensors
-        read[SPEED_REDUNDANT] = sensors.speed_redundant(scene.v)
-        truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], scene.v
+        wheels = scene.v * (1.0 - car.loads.wheel_slip)  # the non-driven wheels' speed, slip and all
+        read[SPEED_REDUNDANT] = sensors.speed_redundant(wheels)
+        truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], wheels
         if fault is not None and clean is not None:
             clean.at(t)
             error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
@@ -193,7 +194,8 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     cfg = pl.PlausibilityConfig(ts=ts)
     run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"yaw_rate_redundant": yaw_rate_2},
                      np.zeros(bits.size), flags)
-    bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True)
+    bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True,
+                         braking=braking_of(v, ts, cfg))
     exceeded, reported = run.exceeded_time(bound), run.report_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
     twin = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))

@@ -3,7 +3,9 @@
 Each disturbance is a frozen dataclass with ``at(t) -> Loads``: what it does to the car at time
 t (s) as an extra yaw moment M_z (Nm, about the CG, positive turning left), a lateral force at
 the CG F_y (N, positive to the left), a longitudinal deceleration a_x (m/s^2, positive slows
-the car) and the wheels' grip (``tyres.Grip``).  ``sum_loads`` adds several.  Axes are ISO 8855
+the car), the wheels' grip (``tyres.Grip``) and the braked rear wheels' mean longitudinal slip
+(``wheel_slip``: the second speed reads the non-driven wheels, v (1 - slip)).  ``sum_loads``
+adds several.  Axes are ISO 8855
 (x forward, y left, z up); a longitudinal force F_x at lateral position y gives M_z = -y F_x.
 
 * ``SplitMuBraking``: a stop with the left wheels on mu_l and the right on mu_r.  Both sides
@@ -13,6 +15,10 @@ the car) and the wheels' grip (``tyres.Grip``).  ``sum_loads`` adds several.  Ax
 
       M_z = (F_l - F_r) t / 2,     a_x = (F_l + F_r) / m.
 
+  The wheels slip as they brake: a side whose brake force is under its cap by a tyre's
+  longitudinal slip stiffness, about 20 F_z per unit slip (slip = 0.05 F / F_z), a side that
+  ABS caps at the slip ABS holds, 10-20 % (``abs_slip`` 0.15; ABS's pressure cycle around it is
+  not modelled); ``wheel_slip`` is the mean of the two sides (the rear axle's two wheels).
   The speed does **not** stay constant: a panic stop on mu 1.0 / 0.2 decelerates at 5.9 m/s^2
   (``nonlinear.NonlinearPlant`` integrates v).  With the paper's car, t = 1.5 m and full
   braking the moment is 0.8 * 1296 * 9.81 / 2 * 0.75 = 3814 Nm, close to the paper's 4000 Nm
@@ -49,9 +55,11 @@ class Loads:
     f_y: float = 0.0
     a_x: float = 0.0
     grip: Grip = INTACT
+    wheel_slip: float = 0.0  # the braked rear wheels' mean longitudinal slip (0: rolling freely)
 
     def __add__(self, other: "Loads") -> "Loads":
-        return Loads(self.m_z + other.m_z, self.f_y + other.f_y, self.a_x + other.a_x, self.grip.then(other.grip))
+        return Loads(self.m_z + other.m_z, self.f_y + other.f_y, self.a_x + other.a_x, self.grip.then(other.grip),
+                     self.wheel_slip + other.wheel_slip)
 
 
 NO_LOADS = Loads()
@@ -95,6 +103,14 @@ class SplitMuBraking:
     ramp: float = 0.15
     track_width: float = TRACK_WIDTH
     mass: float = PAPER_MASS
+    #: The slip ABS holds a wheel at: the middle of the 10-20 % in which a tyre's brake force
+    #: peaks and ABS controls it (a standard figure of ABS design; the cycle around it is not
+    #: modelled).
+    abs_slip: float = 0.15
+    #: A wheel's slip per unit of brake force over load below the cap: the inverse of a tyre's
+    #: longitudinal slip stiffness, about 20 F_z per unit slip for a passenger tyre (B C D of
+    #: TUMFTM's sim_vehicle_dynamics tyre, 18.8; an assumption, not a measurement).
+    slip_per_force: float = 0.05
 
     def __post_init__(self) -> None:
         _in_range(self, "t_start", 0.0, 600.0)
@@ -104,6 +120,8 @@ class SplitMuBraking:
         _in_range(self, "ramp", 0.0, 2.0)
         _in_range(self, "track_width", 0.5, 3.0)
         _in_range(self, "mass", 300.0, 1e4)
+        _in_range(self, "abs_slip", 0.0, 0.5)
+        _in_range(self, "slip_per_force", 0.0, 0.5)
 
     def brake_forces(self, t: float) -> tuple[float, float]:
         """(F_left, F_right) in N, each side's brake force after ABS."""
@@ -111,13 +129,22 @@ class SplitMuBraking:
         side_load = 0.5 * self.mass * G
         return min(demand, self.mu_left * side_load), min(demand, self.mu_right * side_load)
 
+    def wheel_slip(self, t: float) -> float:
+        """The mean slip of the two rear wheels: ``abs_slip`` on a side ABS caps (its pressure
+        asks for more than its road gives), else ``slip_per_force`` times its force over its load."""
+        demand = 0.5 * self.mass * self.deceleration * _ramp(t, self.t_start, self.ramp)
+        side_load = 0.5 * self.mass * G
+        left = self.abs_slip if demand > self.mu_left * side_load else self.slip_per_force * demand / side_load
+        right = self.abs_slip if demand > self.mu_right * side_load else self.slip_per_force * demand / side_load
+        return 0.5 * (left + right)
+
     def at(self, t: float) -> Loads:
         if t < self.t_start:
             return NO_LOADS
         f_l, f_r = self.brake_forces(t)
         left, right = WheelGrip(mu=self.mu_left), WheelGrip(mu=self.mu_right)
         return Loads(m_z=(f_l - f_r) * self.track_width / 2.0, a_x=(f_l + f_r) / self.mass,
-                     grip=Grip(left, right, left, right))
+                     grip=Grip(left, right, left, right), wheel_slip=self.wheel_slip(t))
 
 
 @dataclass(frozen=True)

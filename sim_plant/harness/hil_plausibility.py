@@ -17,9 +17,12 @@ fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pa
 error passes 0.03 rad/s, and may never reach the kinematic 0.035); for the lateral acceleration
 the kinematic bound times v, plus ``side_accel`` when the car has the second element; for a
 steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; for either
-speed the speed pair's ``speed_pair_bound + speed_pair_rel v`` when the car has the second speed,
-else none (the speed's other checks look at its jumps, ``speed_step``, and in a steady turn at
-a_y / r over half-second blocks, ``CHECK_TURN``, not at its error); none of these while the
+speed the speed pair's ``speed_pair_bound + speed_pair_rel v`` when the car has the second speed
+(plus ``speed_slip_rel v`` in a step where the car slows at ``speed_brake_decel`` or more: the
+braked wheels' slip, which the second speed reads and the monitor allows; the second speed's
+own error is against the braked wheels' speed), else none (the speed's other checks look at its
+jumps, ``speed_step``, and in a steady turn at a_y / r over half-second blocks, ``CHECK_TURN``,
+not at its error); none of these while the
 true speed is below the monitor's ``speed_min`` (5 m/s: its checks pause, the law is off).
 Times are the scenario's, counted in yaw-rate frames (one per plant step): in lockstep the log's
 wall-clock stamps are not simulated time."""
@@ -32,6 +35,7 @@ from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
+from sim_plant.car.disturbances import sum_loads
 from sim_plant.car.sensors import Sensors, dormant_faults
 from sim_plant.harness.hil_steps import Step
 from sim_plant.offline.plausibility_runs import sensor_bound
@@ -116,20 +120,26 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
         f.sensor == "yaw_rate_redundant" for f in sc.sensor_config.faults)
     speed_pair = sc.sensor_config.speed_redundant_present
 
-    def bound(s: Step) -> float:
+    def bound(s: Step, v_before: float) -> float:
         if sensor == "yaw_rate":  # the constant bounds of the module's docstring
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
-        return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair))
+        braking = v_before - s.v_m_s >= cfg.speed_brake_decel * ts  # plausibility_runs.braking_of
+        return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair, braking))
 
     if sensor in ("speed", "speed_redundant") and not speed_pair:
         return None
     measured, truth = _READINGS[sensor]
     clean = Sensors(dormant_faults(sc.sensor_config), ts)
     read = getattr(clean, sensor)
+    v_before = steps[0].v_m_s if steps else 0.0
     for s in steps:
         clean.at(s.t_s)
-        if abs(getattr(s, measured) - read(getattr(s, truth))) > bound(s):
+        true_value = getattr(s, truth)
+        if sensor == "speed_redundant":  # the second speed reads the braked wheels, slip and all
+            true_value *= 1.0 - sum_loads(sc.disturbances, s.t_s).wheel_slip
+        if abs(getattr(s, measured) - read(true_value)) > bound(s, v_before):
             return s.t_s
+        v_before = s.v_m_s
     return None
 
 

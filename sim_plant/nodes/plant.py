@@ -239,7 +239,7 @@ class PlantNode:
         measured = {SIG_STEER_ANGLE: sensors.steer(driver), SIG_SPEED: sensors.speed(self.scene.v),
                     SIG_LAT_ACCEL: sensors.lat_accel(float(y[2])), SIG_STEER_ANGLE_2: sensors.steer_redundant(driver),
                     SIG_YAW_RATE: sensors.yaw_rate(float(y[0])), SIG_YAW_RATE_2: sensors.yaw_rate_redundant(float(y[0])),
-                    SIG_SPEED_2: sensors.speed_redundant(self.scene.v)}
+                    SIG_SPEED_2: sensors.speed_redundant(self.scene.v * (1.0 - self.plant.loads.wheel_slip))}
         measured_yaw = measured[SIG_YAW_RATE]
         yaw_counter = self._publish(k, measured)
 

@@ -124,31 +124,33 @@ class MonitorRun:
 
 
 def sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray, v: float | np.ndarray,
-                 pair: bool | np.ndarray, speed_pair: bool = False) -> float | np.ndarray:
+                 pair: bool | np.ndarray, speed_pair: bool = False,
+                 braking: bool | np.ndarray = False) -> float | np.ndarray:
     """The plausibility bound a sensor's error is judged against (floats, or arrays per period
     or per row): the yaw rate's ``yaw_bound + yaw_rel |r|`` (r the true yaw rate), the lateral
     acceleration's the same times v (the kinematic check's residual) plus ``side_accel`` while
     the yaw-rate pair runs (``pair``: the check allows a side force then), a steering channel's
     ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound`` (only the pair
     check sees it), and on a car with the second speed (``speed_pair``) either speed's
-    ``speed_pair_bound``.  Without the second speed a speed has none (its checks bound its
+    ``speed_pair_bound`` (wider while the car brakes: ``braking``, see ``speed_pair_bound``).
+    Without the second speed a speed has none (its checks bound its
     jumps, not its error): ValueError.  Below the monitor's ``speed_min`` (at the true speed
     ``v``) every bound is infinite: the checks pause there and the law is inactive, so an error
     there is not one the monitor could report (a car braked to a stop with the fault)."""
-    bound = _sensor_bound(sensor, cfg, r, v, pair, speed_pair)
+    bound = _sensor_bound(sensor, cfg, r, v, pair, speed_pair, braking)
     if np.ndim(v) == 0:
         return math.inf if v < cfg.speed_min else bound
     return np.where(np.asarray(v) < cfg.speed_min, np.inf, bound)
 
 
 def _sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray, v: float | np.ndarray,
-                  pair: bool | np.ndarray, speed_pair: bool) -> float | np.ndarray:
+                  pair: bool | np.ndarray, speed_pair: bool, braking: bool | np.ndarray) -> float | np.ndarray:
     if sensor in ("steer", "steer_redundant"):
         return cfg.steer_bound
     if sensor == "yaw_rate_redundant":
         return cfg.yaw_pair_bound
     if sensor in ("speed", "speed_redundant") and speed_pair:
-        return speed_pair_bound(cfg, v)
+        return speed_pair_bound(cfg, v, braking)
     if sensor not in ("yaw_rate", "lat_accel"):
         raise ValueError(f"no plausibility bound for the sensor {sensor!r}"
                          + (" on a car without the second speed" if sensor.startswith("speed") else ""))
@@ -160,13 +162,29 @@ def _sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray
 _SPEED2_HALF_LSB = 0.5 * dbc_resolution("speed_redundant")
 
 
-def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray) -> float | np.ndarray:
+def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray,
+                     braking: bool | np.ndarray = False) -> float | np.ndarray:
     """The bound a speed error (either speed's) is judged against on a car with the second
     speed: the speed pair's ``speed_pair_bound + speed_pair_rel v`` at the true speed ``v``, plus
     what the second speed's rounding (half its 0.3 m/s LSB) may add to the difference the
     monitor sees, with its share of the relative term: the monitor compares with the reading,
-    not the truth, so a rising error may reach its bound that much later than the truth's."""
-    return cfg.speed_pair_bound + cfg.speed_pair_rel * v + _SPEED2_HALF_LSB * (1.0 + cfg.speed_pair_rel)
+    not the truth, so a rising error may reach its bound that much later than the truth's.
+    While the car brakes (``braking``: ``braking_of``) plus ``speed_slip_rel v``, the slip the
+    monitor then allows a second speed below the speed, for an error of either sign: the braked
+    wheels' own slip (up to ABS's 10-20 %) moves the difference the monitor sees by as much, and
+    which way the fault's error adds to it depends on the slip the judge does not know."""
+    bound = cfg.speed_pair_bound + cfg.speed_pair_rel * v + _SPEED2_HALF_LSB * (1.0 + cfg.speed_pair_rel)
+    return bound + np.where(braking, cfg.speed_slip_rel * v, 0.0) if np.any(braking) else bound
+
+
+def braking_of(v: np.ndarray, ts: float, cfg: pl.PlausibilityConfig) -> np.ndarray:
+    """The periods (rows of ``v``, a true speed every ``ts`` s, one run or a column per run) in
+    which the car slows at ``speed_brake_decel`` or more: where the monitor allows the second
+    speed the wheels' slip.  The first period is not."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape, dtype=bool)
+    out[1:] = v[:-1] - v[1:] >= cfg.speed_brake_decel * ts
+    return out
 
 
 def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> float | np.ndarray:
@@ -214,12 +232,13 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         sensors.at(t)
         clean.at(t)
         read = {ch: getattr(sensors, ch)(truth[ch]) for ch in CHANNELS}
+        wheels = scene.v * (1.0 - car.loads.wheel_slip)  # the non-driven wheels' speed, slip and all
         if second_speed:
-            read["speed_redundant"] = sensors.speed_redundant(scene.v)
+            read["speed_redundant"] = sensors.speed_redundant(wheels)
             if k % every["speed_redundant"] == 0:
                 held["speed_redundant"] = read["speed_redundant"]
         if faulted is not None:
-            true_value = scene.v if faulted == "speed_redundant" else truth[faulted]
+            true_value = wheels if faulted == "speed_redundant" else truth[faulted]
             out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value)
         if second is not None:
             second.at(t)
