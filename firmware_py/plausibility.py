@@ -413,6 +413,9 @@ def configure(cfg: PlausibilityConfig) -> MonitorCoefficients:
         # a block's r all on one side, so that its sum of r is never 0 (check 7 divides by it)
         raise ValueError(f"turn_yaw_tol must be below 2 turn_yaw_min, got {cfg.turn_yaw_tol!r} and "
                          f"{cfg.turn_yaw_min!r}")
+    if not cfg.speed_brake_tau <= 10.0:
+        # a longer lag sees no braking (and its 1 - exp(-ts / tau) rounds to 0 from 1e15 s)
+        raise ValueError(f"speed_brake_tau must be at most 10 s, got {cfg.speed_brake_tau!r}")
     for name in ("yaw_count", "steer_count"):
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 100:
@@ -503,6 +506,9 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             e = -e if e < 0.0 else e
             x = speed if speed < speed_redundant else speed_redundant
             bound = c.speed_pair_bound + c.speed_pair_rel * x
+            # it vouches for the speed (out-votes check 7) only within the plain bound: the slip
+            # it allows while braking would hide a speed reading that much high from check 7 too
+            within = e <= bound
             if speed_redundant < speed and s.speed_lag - speed > c.speed_brake_lag:
                 bound += c.speed_slip_rel * x  # braking: the wheels the second speed is read from slip
             s.speed_pair_err = e / bound
@@ -513,7 +519,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                     s.latched |= CHECK_SPEED_PAIR
             elif s.speed_pair_count > 0:
                 s.speed_pair_count -= 1
-            speed_vouched = s.speed_pair_count == 0
+            speed_vouched = s.speed_pair_count == 0 and within
         else:
             s.speed_pair_count = 0
     else:

@@ -49,7 +49,7 @@ def _python(m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list[tuple[fl
         u_out = au.authority_step(ac, ast, u, bits, ms.flags & pl.CUT_CHECKS, ms.flags & pl.FADE_CHECKS)
         out.append((bits, ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u_out, ast.flags, ms.yaw_pair_err,
                     ms.turn_err, ms.turn_n, int(ms.turn_settled), ms.yaw_hold_n, ms.yaw_clear_n, ms.speed_pair_err,
-                    ms.speed_pair_count, int(ms.speed2_seen), ms.steer_hold_n))
+                    ms.speed_pair_count, int(ms.speed2_seen), ms.steer_hold_n, ms.speed_lag))
     return out
 
 
@@ -64,7 +64,7 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
         f = line.split()
         out.append((int(f[0]), int(f[1]), float(f[2]), float(f[3]), float(f[4]), float(f[5]), int(f[6]), float(f[7]),
                     float(f[8]), int(f[9]), int(f[10]), int(f[11]), int(f[12]), float(f[13]), int(f[14]), int(f[15]),
-                    int(f[16])))
+                    int(f[16]), float(f[17])))
     return out
 
 
@@ -189,13 +189,15 @@ def _random_speed_pair_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]
 
 
 def _stops(slips: tuple[float, ...], seed: int = 9, n: int = 600) -> list[tuple[float, ...]]:
-    """Straight-line stops, one after another, from 30 m/s at 0.3-7 m/s^2 (the speed in 20 ms
+    """Straight-line stops, one after another, from 30 m/s at 1-7 m/s^2 (the speed in 20 ms
     frames), whose second speed (in its 50 ms frame) reads each stop's slip below the speed from
-    its onset: the braking allowance opening, holding and closing as the speed's lag follows."""
+    its onset: the braking allowance opening, holding and closing as the speed's lag follows.
+    Between stops the speed is missing for a period (no jump back to 30 m/s: check 6)."""
     rng = random.Random(seed)
     out = []
     for slip in slips:
-        decel, v, v2 = rng.uniform(0.3, 7.0), 30.0, 30.0
+        out.append((0.0, 0.0, 0.0, 0.0, math.nan, 0.0, 0.0, 0.0, math.nan))
+        decel, v, v2 = rng.uniform(1.0, 7.0), 30.0, 30.0
         for k in range(n):
             if k % 10 == 0:
                 v = round(max(3.0, 30.0 - decel * 0.002 * max(0, k - 50)) / 0.002) * 0.002
@@ -203,6 +205,19 @@ def _stops(slips: tuple[float, ...], seed: int = 9, n: int = 600) -> list[tuple[
                 v2 = round(v * (1.0 - (slip if k >= 50 else 0.0)) / SPEED2_LSB) * SPEED2_LSB
             out.append((0.0, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v2))
     return out
+
+
+def _braking_turn_rows() -> list[tuple[float, ...]]:
+    """test_speed_pair's braking turn whose speed drifts up: the second speed agrees only through
+    the braking allowance, which must not out-vote the steady-turn check."""
+    from test_speed_pair import braking_turn_with_a_speed_drift
+
+    r = braking_turn_with_a_speed_drift()
+    h = r.held
+    aux = np.concatenate([[0.0], r.aux[:-1]])
+    return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"], h["lat_accel"],
+                                                        h["speed"], aux, r.aux, h["yaw_rate_redundant"],
+                                                        h["speed_redundant"])]
 
 
 CASES = {
@@ -246,8 +261,9 @@ CASES = {
         _with_second_speed(_run_rows(pr.steady_curve(20.0, 1.0), SensorConfig(seed=5)))),
     "random inputs with a second speed, NaN and inf": lambda: _random_speed_pair_rows(11),
     "stops whose wheels slip 0-20 % then one whose second speed reads high (trips)":
-        lambda: _stops((0.15, 0.2, 0.05, 0.0, 0.1, -0.08)),
+        lambda: _stops((0.15, 0.2, 0.05, 0.0, 0.1, -0.12)),
     "a stop whose second speed reads 35 % low (the pair trips through the allowance)": lambda: _stops((0.35,)),
+    "a braking turn whose speed drifts up (found by the turn check)": _braking_turn_rows,
     "the paper's Figure 9 at 30 m/s on mu 0.3, both pairs in the loop (the model and steady-turn checks out-voted)":
         lambda: _with_second_speed(_run_rows(pr.scn.load("paper-fig9").with_overrides(v=30.0, mu=0.3),
                                              SensorConfig(seed=9))),
@@ -407,7 +423,10 @@ def test_the_speed_pair_s_steps_round_as_python(runner: Path, changed: dict[str,
                                  {"speed_pair_time": -0.1}, {"speed_pair_time": math.inf},
                                  {"speed_pair_rel": -0.01}, {"speed_pair_rel": 1e3}, {"speed_pair_rel": math.nan},
                                  {"steer_jump": 0.0}, {"steer_jump": math.inf}, {"mu_min_paired": 0.04},
-                                 {"mu_min_paired": 1.01}, {"mu_min_paired": math.nan}])
+                                 {"mu_min_paired": 1.01}, {"mu_min_paired": math.nan}, {"speed_brake_decel": 0.0},
+                                 {"speed_brake_decel": math.nan}, {"speed_brake_tau": 0.0}, {"speed_brake_tau": 10.5},
+                                 {"speed_brake_tau": 1e16}, {"speed_brake_tau": math.inf}, {"speed_slip_rel": -0.1},
+                                 {"speed_slip_rel": 1e3}, {"speed_slip_rel": math.nan}])
 def test_an_invalid_calibration_is_refused(runner: Path, bad: dict[str, float]) -> None:
     cfg = dataclasses.replace(pl.PlausibilityConfig(), **bad)
     assert subprocess.run([str(runner)], input=_config_lines(cfg, au.AuthorityConfig()), capture_output=True,

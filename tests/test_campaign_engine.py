@@ -385,9 +385,10 @@ def test_batch_speed_checks_equal_the_scalar_ones_while_cars_brake_and_their_whe
     """``SpeedChecks`` (checks 6 and 8) against ``monitor_step`` per row and period while cars
     stop at 0.2-6 m/s^2 and their second speed reads 0-35 % below (or above) the speed, with the
     speed held for its 20 ms frame and the second speed for its 50 ms one as the engine passes
-    them (the same arrays between frames): the speed's lag, the pair's count and residual and
-    the trips.  The rows cover the braking allowance acting, not acting (too little deceleration,
-    the second speed above) and exceeded."""
+    them (the same arrays between frames), a frame of either now and then lost: the speed's lag,
+    the pair's count and residual, the lost second speed and the trips.  The rows cover the
+    braking allowance acting, not acting (too little deceleration, the second speed above) and
+    exceeded."""
     from firmware_py import plausibility as pl
     from sim_plant.campaign.batch_speed_checks import SpeedChecks
 
@@ -407,11 +408,14 @@ def test_batch_speed_checks_equal_the_scalar_ones_while_cars_brake_and_their_whe
         true_v = np.maximum(v0 - decel * braked, 3.0)
         if k % 10 == 0:
             v = np.round(true_v / 0.002) * 0.002
+            v = np.where((np.arange(rows) % 5 == 1) & (k % 200 == 100), np.nan, v)  # a lost speed frame
         if k % 25 == 0:
             v2 = np.round(true_v * (1.0 - np.where(k >= onset, slip, 0.0)) / 0.3) * 0.3
-        checks.step(v, v2, latched)
+            v2 = np.where((np.arange(rows) % 5 == 2) & (k % 300 == 150), np.inf, v2)  # a lost second speed
+        lost = checks.step(v, v2, latched)
         for i, s in enumerate(states):
             pl.monitor_step(c, s, 0.0, 0.0, 0.0, 0.0, float(v[i]), 0.0, 0.0, float(v2[i]))
+            assert bool(np.asarray(lost)[i] if np.ndim(lost) else lost) == bool(s.flags & pl.MISSING), (k, i)
             assert checks.speed_lag[i] == s.speed_lag, (k, i)
             assert checks.speed_pair_count[i] == s.speed_pair_count, (k, i)
             assert checks.speed_pair_err[i] == s.speed_pair_err, (k, i)
@@ -419,6 +423,30 @@ def test_batch_speed_checks_equal_the_scalar_ones_while_cars_brake_and_their_whe
             allowed += v2[i] < v[i] and s.speed_lag - v[i] > c.speed_brake_lag
     tripped = (latched & pl.CHECK_SPEED_PAIR) != 0
     assert allowed > 0 and tripped.any() and not tripped.all()
+
+
+def test_batch_monitor_equals_the_scalar_one_in_a_braking_turn_where_the_allowance_must_not_out_vote() -> None:
+    """``BatchMonitor`` against ``monitor_step`` on test_speed_pair's braking turn whose speed
+    drifts up (the second speed agrees only through the braking allowance, so the steady-turn
+    check finds the drift) beside the same turn without the drift: bits and flags per period."""
+    from firmware_py import plausibility as pl
+    from sim_plant.campaign.batch_monitor import BatchMonitor
+    from test_speed_pair import braking_turn_with_a_speed_drift
+
+    runs = [braking_turn_with_a_speed_drift(), braking_turn_with_a_speed_drift(second_speed=False)]
+    names = ("steer", "steer_redundant", "yaw_rate", "lat_accel", "speed", "yaw_rate_redundant", "speed_redundant")
+    x = {n: np.stack([r.held[n] if n in r.held else np.full(r.t.size, np.nan) for r in runs], axis=1) for n in names}
+    aux = np.stack([np.concatenate([[0.0], r.aux[:-1]]) for r in runs], axis=1)
+    cfg = pl.PlausibilityConfig()
+    batch, c, states = BatchMonitor(cfg, len(runs)), pl.configure(cfg), [pl.MonitorState() for _ in runs]
+    for k in range(runs[0].t.size):
+        bits = batch.step(x["steer"][k], x["steer_redundant"][k], x["yaw_rate"][k], x["lat_accel"][k], x["speed"][k],
+                          aux[k], x["yaw_rate_redundant"][k], x["speed_redundant"][k])
+        for i, s in enumerate(states):
+            expected = pl.monitor_step(c, s, *(float(x[n][k, i]) for n in names[:5]), float(aux[k, i]),
+                                       float(x["yaw_rate_redundant"][k, i]), float(x["speed_redundant"][k, i]))
+            assert bits[i] == expected and batch.flags[i] == s.flags, (k, i)
+    assert all(s.latched & pl.CHECK_TURN for s in states)
 
 
 def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_models() -> None:

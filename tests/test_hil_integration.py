@@ -157,11 +157,13 @@ def test_demo_overlays_both_runs_and_tells_a_held_wheel_story(tmp_path: Path) ->
 
 
 def _timing_held(hil: dict) -> bool:
-    """Whether a realtime run stayed the fixed-delay loop the offline comparison assumes: every
-    command within its 5 ms period, no overrun, and no status but ACTIVE (a sample withheld in a
-    stall makes the monitor DEGRADED, which opens the panic window and changes the law's output)."""
+    """Whether a realtime run stayed near the fixed-delay loop the offline comparison assumes: the
+    99th percentile of the commands' latency within one and a half periods (a loaded machine's
+    jitter; the run that failed had 6.4 ms in a 5 ms loop, and a shared machine 5.1-5.9 ms
+    without a failure), no overrun, and never DEGRADED (a sample withheld in a stall makes the
+    monitor DEGRADED, which opens the panic window and changes the law's output: that failure)."""
     period = 1.0 / hil["rate_hz"]
-    return (hil["latency_p99_s"] < period and hil["loop"]["controller"]["overruns"] == 0
+    return (hil["latency_p99_s"] < 1.5 * period and hil["loop"]["controller"]["overruns"] == 0
             and hil["loop"]["plant"]["overruns"] == 0 and hil["plausibility"]["first_degraded_s"] is None)
 
 
@@ -182,7 +184,8 @@ def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:
             break
     else:
         pytest.skip("no realtime run held its 5 ms timing on this machine: p99 latencies "
-                    + ", ".join(f"{r['latency_p99_s'] * 1e3:.1f} ms" for r in runs))
+                    + ", ".join(f"{r['latency_p99_s'] * 1e3:.1f} ms" for r in runs)
+                    + ", DEGRADED at " + ", ".join(str(r["plausibility"]["first_degraded_s"]) for r in runs))
     assert hil["mode"] == "realtime" and hil["delay_steps"] >= 1
     offline = _offline("--mz", "4000", "--v", "22", "--mu", "1", "--ts", "0.005", "--delay-steps",
                        str(hil["delay_steps"]), "--k", "3", "--tau", "0.05")

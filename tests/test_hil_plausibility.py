@@ -211,11 +211,17 @@ def test_a_second_speed_fault_while_the_car_brakes_is_judged_on_the_braked_wheel
     def v(t: float) -> float:
         return 25.0 - 3.48 * max(0.0, t - 0.5)
 
-    def wheels(t: float) -> float:
-        return v(t) * (1.0 - slip[round(t * RATE)]) - (2.5 if t >= 1.0 else 0.0)
+    def wheels(t: float, bias: float = 2.5) -> float:
+        return v(t) * (1.0 - slip[round(t * RATE)]) - (bias if t >= 1.0 else 0.0)
 
     braking = [replace(s, v_m_s=v(s.t_s)) for s in _steps(800, speed_redundant_measured_m_s=wheels)]
     fig = plausibility_figures(_traffic(fault_from=None, steps=800), base.with_sensor_faults((fault,)), RATE, braking)
+    assert fig["error_over_bound_s"] is None
+    # 6 m/s low: under the widened bound (7.5 m/s at 21 m/s) as the fault's own error; with the
+    # wheels' 8.8 % slip counted as error too it would pass it by 1.4 s
+    large = SensorFault("speed_redundant", "bias", 1.0, -6.0)
+    braking = [replace(s, v_m_s=v(s.t_s)) for s in _steps(800, speed_redundant_measured_m_s=lambda t: wheels(t, 6.0))]
+    fig = plausibility_figures(_traffic(fault_from=None, steps=800), base.with_sensor_faults((large,)), RATE, braking)
     assert fig["error_over_bound_s"] is None
     assert 2.5 < cfg.speed_pair_bound + (cfg.speed_pair_rel + cfg.speed_slip_rel) * v(1.0)
     rolling = replace(scn.load("side-wind"), sensors=SensorConfig.ideal())  # no stop: the wheels roll

@@ -210,3 +210,51 @@ def test_a_split_mu_stop_s_wheel_slip_is_no_fault_with_the_braking_allowance_and
     assert 0.3 < run.margins["speed_pair"] < 1.5  # the slip seen, within the braking bound
     without = pr.run(sc, monitor=pl.PlausibilityConfig(speed_slip_rel=0.0), second_speed=True)
     assert without.report_time is not None and np.any(without.flags & pl.CHECK_SPEED_PAIR)
+
+
+def braking_turn_with_a_speed_drift(second_speed: bool = True,
+                                    monitor: pl.PlausibilityConfig | None = None) -> pr.MonitorRun:
+    """A steady 4 m/s^2 curve at 30 m/s, the car braking at 3 m/s^2 (both sides dry) from 1.2 s
+    and its speed reading drifting up at 2 m/s per s from 1.6 s: the speed pair's allowance
+    holds the difference, so only the steady-turn check (7) finds the drift."""
+    from dataclasses import replace
+
+    from sim_plant.car.disturbances import SplitMuBraking
+
+    base = pr.steady_curve(30.0, 1.0, a_y=4.0, duration=4.5)
+    brake = pr.scn.Event(1.2, "split_mu_braking", 0.0, load=SplitMuBraking(t_start=1.2, mu_left=1.0, mu_right=1.0,
+                                                                           deceleration=3.0, mass=base.mass))
+    sc = replace(base, events=base.events + (brake,)).with_sensor_faults((SensorFault("speed", "drift", 1.6, 2.0),))
+    return pr.run(sc, monitor=monitor, second_speed=second_speed)
+
+
+def test_a_second_speed_within_only_the_braking_allowance_does_not_out_vote_the_turn_check() -> None:
+    # An agreeing second speed out-votes check 7 (a side slip still settling); one that agrees
+    # only through the slip it is allowed while braking must not, or a speed reading high by up
+    # to that slip would be found by neither check.
+    run = braking_turn_with_a_speed_drift()
+    alone = braking_turn_with_a_speed_drift(second_speed=False)
+    assert run.flags[-1] & pl.CHECK_TURN and alone.flags[-1] & pl.CHECK_TURN
+    assert np.flatnonzero(run.flags & pl.CHECK_TURN)[0] == np.flatnonzero(alone.flags & pl.CHECK_TURN)[0]
+    assert not run.flags[-1] & pl.CHECK_SPEED_PAIR and run.margins["speed_pair"] < 1.0  # within the allowance
+
+
+def test_the_judges_braking_periods_and_their_widened_bound() -> None:
+    # braking_of: the true speed falling at BRAKING_SHARE of speed_brake_decel or more in a period
+    # (the monitor's 20 ms sawtooth opens the allowance in part from about 0.85 of it)
+    ts, share = CFG.ts, pr.BRAKING_SHARE
+    v = np.array([20.0, 20.0, 20.0 - 0.99 * share * CFG.speed_brake_decel * ts,
+                  20.0 - 2.0 * share * CFG.speed_brake_decel * ts, 21.0])
+    assert braking_of_list(v) == [False, False, False, True, False]
+    assert pr.braking_of(np.stack([v, v], axis=1), ts, CFG)[:, 1].tolist() == braking_of_list(v)
+    plain = pr.speed_pair_bound(CFG, 20.0)
+    assert plain == pytest.approx(1.0 + 0.05 * 20.0 + 0.15 * 1.05)
+    assert pr.speed_pair_bound(CFG, 20.0, True) == pytest.approx(plain + CFG.speed_slip_rel * 20.0)
+    both = pr.speed_pair_bound(CFG, np.array([20.0, 20.0]), np.array([False, True]))
+    assert both.tolist() == pytest.approx([plain, plain + CFG.speed_slip_rel * 20.0])
+    assert pr.sensor_bound("speed_redundant", CFG, 0.0, 20.0, True, True, True) == pytest.approx(both[1])
+    assert pr.sensor_bound("yaw_rate", CFG, 0.0, 20.0, True, True, True) == CFG.yaw_bound  # only the speeds widen
+
+
+def braking_of_list(v: np.ndarray) -> list[bool]:
+    return pr.braking_of(v, CFG.ts, CFG).tolist()

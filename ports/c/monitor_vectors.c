@@ -8,7 +8,7 @@
  * yaw_rate_redundant speed_redundant" (nan for a missing input).  OUTPUT: a line "coeffs" + the
  * monitor's and the authority's coefficients, then per period "bits flags kin_err pair_err
  * model_err u auth_flags yaw_pair_err turn_err turn_n turn_settled yaw_hold_n yaw_clear_n
- * speed_pair_err speed_pair_count speed2_seen steer_hold_n" (the limiter cut by the flags'
+ * speed_pair_err speed_pair_count speed2_seen steer_hold_n speed_lag" (the limiter cut by the flags'
  * MRS_CUT_CHECKS and faded by their MRS_FADE_CHECKS), every real as %.17g so that a double reads
  * back exactly.  "defaults" alone prints the default configurations instead.  Exit 2 on
  * unreadable input, 3 on an invalid calibration.
@@ -153,10 +153,11 @@ int main(void)
         bits = mrs_monitor_step(&mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5], v[7], v[8]);
         u = mrs_authority_step(&ac, &as, v[6], bits, (uint8_t)((ms.flags & MRS_CUT_CHECKS) != 0u),
                                (uint8_t)((ms.flags & MRS_FADE_CHECKS) != 0u));
-        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g %d %u %d %d %.17g %d %u %d\n", (unsigned)bits,
+        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g %d %u %d %d %.17g %d %u %d %.17g\n", (unsigned)bits,
                (unsigned)ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err,
                ms.turn_err, (int)ms.turn_n, (unsigned)ms.turn_settled, (int)ms.yaw_hold_n, (int)ms.yaw_clear_n,
-               ms.speed_pair_err, (int)ms.speed_pair_count, (unsigned)ms.speed2_seen, (int)ms.steer_hold_n);
+               ms.speed_pair_err, (int)ms.speed_pair_count, (unsigned)ms.speed2_seen, (int)ms.steer_hold_n,
+               ms.speed_lag);
     }
     return 0;
 }

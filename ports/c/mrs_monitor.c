@@ -85,7 +85,7 @@ int mrs_monitor_configure(const mrs_monitor_config_t *g, mrs_monitor_coeffs_t *c
         !(g->side_accel >= 0.0 && g->side_accel < 1e3) || !(g->turn_lat_rel >= 0.0 && g->turn_lat_rel < 1e3) ||
         !(g->turn_yaw_bias >= 0.0 && g->turn_yaw_bias < 1e3) || !(g->turn_lat_bias >= 0.0 && g->turn_lat_bias < 1e3) ||
         !(g->speed_pair_rel >= 0.0 && g->speed_pair_rel < 1e3) ||
-        !(g->speed_slip_rel >= 0.0 && g->speed_slip_rel < 1e3) ||
+        !(g->speed_slip_rel >= 0.0 && g->speed_slip_rel < 1e3) || !(g->speed_brake_tau <= 10.0) ||
         !(g->turn_yaw_tol < 2.0 * g->turn_yaw_min) || !(g->yaw_pair_hold <= g->yaw_pair_bound)) {
         return -1;
     }
@@ -255,6 +255,7 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
     double inv_v, r_kin, delta, r_ss, e, rm, bound;
     int new_sample, vouched, confirmed;
     int speed_vouched = 0; /* the second speed there and agreeing: it out-votes check 7 */
+    int within = 0; /* the speed pair's difference within its plain bound (no braking allowance) */
 
     /* 6. speed: a jump no car makes; before the pause below speed_min (K_n(v) follows it) */
     if (speed >= 0.0 && speed < 1e3) {
@@ -282,12 +283,13 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
             e = MRS_MAG(speed - speed_redundant);
             rm = speed < speed_redundant ? speed : speed_redundant; /* min(v, v_2) */
             bound = c->speed_pair_bound + c->speed_pair_rel * rm;
+            within = e <= bound; /* it vouches (out-votes check 7) only within the plain bound */
             if (speed_redundant < speed && s->speed_lag - speed > c->speed_brake_lag) {
                 bound += c->speed_slip_rel * rm; /* braking: the wheels the second speed is read from slip */
             }
             s->speed_pair_err = e / bound;
             MRS_COUNT(s->speed_pair_count, e > bound, c->speed_pair_steps, MRS_CHECK_SPEED_PAIR);
-            speed_vouched = s->speed_pair_count == 0;
+            speed_vouched = s->speed_pair_count == 0 && within;
         } else {
             s->speed_pair_count = 0;
         }

@@ -19,7 +19,7 @@ import numpy as np
 
 from firmware_py import plausibility as pl
 from sim_plant.campaign.params import FAULT_CHANNELS, FAULT_KINDS, SampleSet, fault_value
-from sim_plant.offline.plausibility_runs import sensor_bound
+from sim_plant.offline.plausibility_runs import is_braking, sensor_bound
 
 
 class BatchFaults:
@@ -95,7 +95,7 @@ class FaultFigures:
         # yaw-rate sensor's second element, so the pair runs, and the second speed; below the
         # monitor's speed_min every bound is infinite).
         self.channels = dict(faults.rows)
-        self.v_prev: np.ndarray | None = None  # the true speed the step before (braking_of's test)
+        self.v_prev: np.ndarray | None = None  # the true speed the step before (is_braking's test)
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
              flags: np.ndarray | int = 0) -> None:
@@ -108,7 +108,7 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        braking = False if self.v_prev is None else self.v_prev - v_true >= self.cfg.speed_brake_decel * self.ts
+        braking = False if self.v_prev is None else is_braking(self.v_prev, v_true, self.ts, self.cfg)
         self.v_prev = v_true.copy()
         bound = np.full(error.shape, np.inf)
         for channel, on in self.channels.items():

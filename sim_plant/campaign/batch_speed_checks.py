@@ -120,6 +120,7 @@ class SpeedChecks:
 
     def vouched(self) -> np.ndarray | bool:
         """The rows where this period's second speed is there and agrees with the speed (both
-        valid, the pair's count at 0): ``monitor_step``'s ``speed_vouched``, which out-votes the
+        valid, the pair's count at 0, the difference within the plain bound, whatever the
+        braking allowance): ``monitor_step``'s ``speed_vouched``, which out-votes the
         steady-turn check."""
-        return self._has_pair and self._both & (self.speed_pair_count == 0)
+        return self._has_pair and self._both & (self.speed_pair_count == 0) & ~self._over

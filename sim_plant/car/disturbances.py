@@ -59,7 +59,7 @@ class Loads:
 
     def __add__(self, other: "Loads") -> "Loads":
         return Loads(self.m_z + other.m_z, self.f_y + other.f_y, self.a_x + other.a_x, self.grip.then(other.grip),
-                     self.wheel_slip + other.wheel_slip)
+                     max(self.wheel_slip, other.wheel_slip))  # a slip is no force: the larger, not the sum
 
 
 NO_LOADS = Loads()

@@ -18,7 +18,7 @@ error passes 0.03 rad/s, and may never reach the kinematic 0.035); for the later
 the kinematic bound times v, plus ``side_accel`` when the car has the second element; for a
 steering channel ``steer_bound``; for the second yaw-rate element ``yaw_pair_bound``; for either
 speed the speed pair's ``speed_pair_bound + speed_pair_rel v`` when the car has the second speed
-(plus ``speed_slip_rel v`` in a step where the car slows at ``speed_brake_decel`` or more: the
+(plus ``speed_slip_rel v`` in a step where the car slows at ``speed_brake_decel`` or near it: the
 braked wheels' slip, which the second speed reads and the monitor allows; the second speed's
 own error is against the braked wheels' speed), else none (the speed's other checks look at its
 jumps, ``speed_step``, and in a steady turn at a_y / r over half-second blocks, ``CHECK_TURN``,
@@ -38,7 +38,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.disturbances import sum_loads
 from sim_plant.car.sensors import Sensors, dormant_faults
 from sim_plant.harness.hil_steps import Step
-from sim_plant.offline.plausibility_runs import sensor_bound
+from sim_plant.offline.plausibility_runs import is_braking, sensor_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -123,7 +123,7 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     def bound(s: Step, v_before: float) -> float:
         if sensor == "yaw_rate":  # the constant bounds of the module's docstring
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
-        braking = v_before - s.v_m_s >= cfg.speed_brake_decel * ts  # plausibility_runs.braking_of
+        braking = is_braking(v_before, s.v_m_s, ts, cfg)
         return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair, braking))
 
     if sensor in ("speed", "speed_redundant") and not speed_pair:

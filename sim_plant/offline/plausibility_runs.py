@@ -177,13 +177,27 @@ def speed_pair_bound(cfg: pl.PlausibilityConfig, v: float | np.ndarray,
     return bound + np.where(braking, cfg.speed_slip_rel * v, 0.0) if np.any(braking) else bound
 
 
+#: The share of ``speed_brake_decel`` from which a judge counts a period as braking.  The monitor
+#: sees the speed in 20 ms frames, so its lag's margin over the speed is a sawtooth that opens the
+#: allowance in part from 0.85-0.9 of ``speed_brake_decel`` (0.42-0.45 m/s^2, measured at 500 Hz)
+#: and fully from about 1.24: a judge that switched at 1.0 would count the monitor late between.
+BRAKING_SHARE = 0.8
+
+
+def is_braking(v_before: float | np.ndarray, v: float | np.ndarray, ts: float,
+               cfg: pl.PlausibilityConfig) -> bool | np.ndarray:
+    """Whether the true speed fell from ``v_before`` to ``v`` in one period of ``ts`` s at
+    ``BRAKING_SHARE`` of ``speed_brake_decel`` or more: a period in which the monitor may allow
+    the second speed the braked wheels' slip."""
+    return v_before - v >= BRAKING_SHARE * cfg.speed_brake_decel * ts
+
+
 def braking_of(v: np.ndarray, ts: float, cfg: pl.PlausibilityConfig) -> np.ndarray:
-    """The periods (rows of ``v``, a true speed every ``ts`` s, one run or a column per run) in
-    which the car slows at ``speed_brake_decel`` or more: where the monitor allows the second
-    speed the wheels' slip.  The first period is not."""
+    """``is_braking`` for each period of ``v`` (a true speed every ``ts`` s, one run, or a column
+    per run); the first period is not."""
     v = np.asarray(v, dtype=float)
     out = np.zeros(v.shape, dtype=bool)
-    out[1:] = v[:-1] - v[1:] >= cfg.speed_brake_decel * ts
+    out[1:] = is_braking(v[:-1], v[1:], ts, cfg)
     return out
 
 
