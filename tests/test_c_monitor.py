@@ -70,13 +70,17 @@ def _c(runner: Path, m: pl.PlausibilityConfig, a: au.AuthorityConfig, rows: list
 
 # A row: delta_driver, delta_driver_redundant, yaw_rate, lat_accel, speed, aux_cmd_applied, u_request,
 # yaw_rate_redundant, speed_redundant (the last NaN unless a case gives the second speed).
-def _run_rows(sc, second_yaw: SensorConfig | None = None) -> list[tuple[float, ...]]:
-    r = pr.run(sc, second_yaw=second_yaw)
+def _rows_of(r: pr.MonitorRun) -> list[tuple[float, ...]]:
+    """An offline run's monitor inputs as rows (the second speed NaN where the car has none)."""
     h = r.held
     aux = np.concatenate([[0.0], r.aux[:-1]])  # the angle acting on the car at each period
-    return [(*(float(x) for x in row), math.nan) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"],
-                                                                 h["lat_accel"], h["speed"], aux, r.aux,
-                                                                 h["yaw_rate_redundant"])]
+    return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"], h["lat_accel"],
+                                                        h["speed"], aux, r.aux, h["yaw_rate_redundant"],
+                                                        h["speed_redundant"])]
+
+
+def _run_rows(sc, second_yaw: SensorConfig | None = None) -> list[tuple[float, ...]]:
+    return _rows_of(pr.run(sc, second_yaw=second_yaw))
 
 
 def _random_rows(seed: int, n: int = 3000) -> list[tuple[float, ...]]:
@@ -212,12 +216,7 @@ def _braking_turn_rows() -> list[tuple[float, ...]]:
     the braking allowance, which must not out-vote the steady-turn check."""
     from test_speed_pair import braking_turn_with_a_speed_drift
 
-    r = braking_turn_with_a_speed_drift()
-    h = r.held
-    aux = np.concatenate([[0.0], r.aux[:-1]])
-    return [tuple(float(x) for x in row) for row in zip(h["steer"], h["steer_redundant"], h["yaw_rate"], h["lat_accel"],
-                                                        h["speed"], aux, r.aux, h["yaw_rate_redundant"],
-                                                        h["speed_redundant"])]
+    return _rows_of(braking_turn_with_a_speed_drift())
 
 
 CASES = {

@@ -435,7 +435,7 @@ def test_batch_monitor_equals_the_scalar_one_in_a_braking_turn_where_the_allowan
 
     runs = [braking_turn_with_a_speed_drift(), braking_turn_with_a_speed_drift(second_speed=False)]
     names = ("steer", "steer_redundant", "yaw_rate", "lat_accel", "speed", "yaw_rate_redundant", "speed_redundant")
-    x = {n: np.stack([r.held[n] if n in r.held else np.full(r.t.size, np.nan) for r in runs], axis=1) for n in names}
+    x = {n: np.stack([r.held[n] for r in runs], axis=1) for n in names}  # (speed_redundant NaN without it)
     aux = np.stack([np.concatenate([[0.0], r.aux[:-1]]) for r in runs], axis=1)
     cfg = pl.PlausibilityConfig()
     batch, c, states = BatchMonitor(cfg, len(runs)), pl.configure(cfg), [pl.MonitorState() for _ in runs]

@@ -96,6 +96,7 @@ class FaultFigures:
         # monitor's speed_min every bound is infinite).
         self.channels = dict(faults.rows)
         self.v_prev: np.ndarray | None = None  # the true speed the step before (is_braking's test)
+        self.speed_faulted = any(ch in ("speed", "speed_redundant") for ch in self.channels)  # braking matters
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
              flags: np.ndarray | int = 0) -> None:
@@ -108,8 +109,10 @@ class FaultFigures:
         first = fault & ~self.reported
         self.reported |= fault
         self.report_step = np.where(first, k, self.report_step)
-        braking = False if self.v_prev is None else is_braking(self.v_prev, v_true, self.ts, self.cfg)
-        self.v_prev = v_true.copy()
+        braking = False
+        if self.speed_faulted:  # only a speed's bound widens while the car brakes
+            braking = False if self.v_prev is None else is_braking(self.v_prev, v_true, self.ts, self.cfg)
+            self.v_prev = v_true.copy()
         bound = np.full(error.shape, np.inf)
         for channel, on in self.channels.items():
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,

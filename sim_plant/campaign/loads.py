@@ -131,8 +131,9 @@ class GripLoads(_Settling):
         f_r = np.minimum(demand, self.mu_right * side_load)
         split_on = on & self.split
         # SplitMuBraking.wheel_slip: ABS's slip on a side it caps, else the tyre's stiffness
-        slip_l = np.where(demand > self.mu * side_load, sp.abs_slip, sp.slip_per_force * demand / side_load)
-        slip_r = np.where(demand > self.mu_right * side_load, sp.abs_slip, sp.slip_per_force * demand / side_load)
+        rolling = sp.slip_per_force * demand / side_load
+        slip_l = np.where(demand > self.mu * side_load, sp.abs_slip, rolling)
+        slip_r = np.where(demand > self.mu_right * side_load, sp.abs_slip, rolling)
         wheel_slip = np.where(split_on, 0.5 * (slip_l + slip_r), 0.0)
         m_split = np.where(split_on, (f_l - f_r) * sp.track_width / 2.0, 0.0)
         a_split = np.where(split_on, (f_l + f_r) / self.mass, 0.0)

@@ -123,19 +123,22 @@ class SplitMuBraking:
         _in_range(self, "abs_slip", 0.0, 0.5)
         _in_range(self, "slip_per_force", 0.0, 0.5)
 
+    def _demand(self, t: float) -> tuple[float, float]:
+        """(each side's demanded brake force, each side's static load) in N."""
+        return 0.5 * self.mass * self.deceleration * _ramp(t, self.t_start, self.ramp), 0.5 * self.mass * G
+
     def brake_forces(self, t: float) -> tuple[float, float]:
         """(F_left, F_right) in N, each side's brake force after ABS."""
-        demand = 0.5 * self.mass * self.deceleration * _ramp(t, self.t_start, self.ramp)
-        side_load = 0.5 * self.mass * G
+        demand, side_load = self._demand(t)
         return min(demand, self.mu_left * side_load), min(demand, self.mu_right * side_load)
 
     def wheel_slip(self, t: float) -> float:
         """The mean slip of the two rear wheels: ``abs_slip`` on a side ABS caps (its pressure
         asks for more than its road gives), else ``slip_per_force`` times its force over its load."""
-        demand = 0.5 * self.mass * self.deceleration * _ramp(t, self.t_start, self.ramp)
-        side_load = 0.5 * self.mass * G
-        left = self.abs_slip if demand > self.mu_left * side_load else self.slip_per_force * demand / side_load
-        right = self.abs_slip if demand > self.mu_right * side_load else self.slip_per_force * demand / side_load
+        demand, side_load = self._demand(t)
+        rolling = self.slip_per_force * demand / side_load
+        left = self.abs_slip if demand > self.mu_left * side_load else rolling
+        right = self.abs_slip if demand > self.mu_right * side_load else rolling
         return 0.5 * (left + right)
 
     def at(self, t: float) -> Loads:

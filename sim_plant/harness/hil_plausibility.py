@@ -132,11 +132,12 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     clean = Sensors(dormant_faults(sc.sensor_config), ts)
     read = getattr(clean, sensor)
     v_before = steps[0].v_m_s if steps else 0.0
+    disturbances = sc.disturbances  # (a property that builds its tuple each time)
     for s in steps:
         clean.at(s.t_s)
         true_value = getattr(s, truth)
         if sensor == "speed_redundant":  # the second speed reads the braked wheels, slip and all
-            true_value *= 1.0 - sum_loads(sc.disturbances, s.t_s).wheel_slip
+            true_value *= 1.0 - sum_loads(disturbances, s.t_s).wheel_slip
         if abs(getattr(s, measured) - read(true_value)) > bound(s, v_before):
             return s.t_s
         v_before = s.v_m_s
