@@ -10,7 +10,7 @@ from firmware_py import model_regulator as mr
 from mrsteer_dbc import names
 from sim_plant.car import scenario as scn
 from sim_plant.car.sensor_faults import SensorFault
-from sim_plant.car.sensors import SensorConfig
+from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
 from sim_plant.harness.hil_plausibility import plausibility_figures
 
 RATE = 500.0
@@ -126,6 +126,16 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
         sc = replace(scn.load("side-wind"), sensors=sensors).with_sensor_faults(
             (SensorFault("lat_accel", "bias", 0.5, offset),))
         steps = _steps(400, lat_accel_measured_m_s2=lambda t, o=offset: 0.4 + (o if t >= 0.5 else 0.0))
+        fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
+        assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
+    # the second yaw-rate element: the pair's 0.03 rad/s, on the residual r_2 - r the pair sees,
+    # so a first element's healthy bias of 0.3 deg/s (0.0052 rad/s) hides an offset of 0.031 of
+    # the same sign and adds to one of the other
+    biased = replace(scn.load("side-wind").sensors, yaw_rate=YawRateSensorConfig(bias_deg_s=0.3))
+    for offset, over in ((0.031, False), (-0.031, True)):
+        sc = replace(scn.load("side-wind"), sensors=biased).with_sensor_faults(
+            (SensorFault("yaw_rate_redundant", "bias", 0.5, offset),))
+        steps = _steps(400, yaw_rate_redundant_measured_rad_s=lambda t, o=offset: 0.02 + (o if t >= 0.5 else 0.0))
         fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
         assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
     # either speed: the speed pair's 1.0 m/s + 5 % of 20 m/s, and half the second speed's

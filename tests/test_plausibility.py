@@ -18,6 +18,7 @@ from mrsteer_dbc import names
 from sim_plant.campaign import params
 from sim_plant.car import scenario as scn
 from sim_plant.car.sensor_faults import SensorFault
+from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
 from sim_plant.offline import plausibility_runs as pr
 
 TS = 0.002
@@ -335,6 +336,47 @@ def test_an_a_y_drift_is_reported_within_300_ms_of_passing_the_bound_of_the_true
     exceeded = r.exceeded_time(pr.error_bound("lat_accel", pl.PlausibilityConfig(), r))
     assert exceeded is not None and exceeded > 3.0  # a slow drift: its error passes the bound seconds after onset
     assert r.report_time is not None and r.report_time - exceeded <= 0.3
+
+
+def test_an_a_y_drift_against_a_yaw_rate_bias_is_judged_by_the_residual_its_check_sees() -> None:
+    """A yaw-rate bias of +0.3 deg/s (a healthy sensor's, as the campaigns sample it) hides
+    b_r v = 0.079 m/s^2 of a +0.25 m/s^2-per-s a_y drift from the kinematic check at 15 m/s, so
+    the check's residual passes its bound 0.31 s after the fault's own error does.  The judges
+    count from the residual (``check_offset``): the report is within 300 ms of that, and was
+    0.36 s after the fault's own error passed the bound."""
+    bias, drift, onset, v = 0.3, 0.25, 1.0, 15.0
+    sc = pr.steady_curve(v, 0.75, a_y=0.0, duration=6.5)
+    sc = replace(sc, sensors=replace(sc.sensors, yaw_rate=replace(sc.sensors.yaw_rate, bias_deg_s=bias)))
+    r = pr.run(sc.with_sensor_faults((SensorFault("lat_accel", "drift", onset, drift),)), controller=LAW,
+               second_yaw=SECOND, second_speed=True)
+    bound = pr.error_bound("lat_accel", pl.PlausibilityConfig(), r)
+    exceeded = r.exceeded_time(bound)
+    # the drift's own error d (t - onset) less b_r v passes the bound (the car nearly straight)
+    hidden = math.radians(bias) * v
+    assert exceeded == pytest.approx(onset + (bound[-1] + hidden) / drift, abs=0.06)
+    assert r.report_time is not None and 0.0 <= r.report_time - exceeded <= 0.3
+    assert r.report_time - (onset + bound[-1] / drift) > 0.3  # late, counted from the fault's own error
+
+
+def test_the_healthy_offsets_a_check_sees_with_a_fault() -> None:
+    """``check_offset``: the kinematic residual a_y - v r and the pair's r_2 - r, in the faulted
+    sensor's units; per row with arrays; nothing for the channels without a modelled offset."""
+    import numpy as np
+
+    bias = {"yaw_rate": 0.004, "lat_accel": 0.1, "yaw_rate_redundant": -0.001}
+    assert pr.check_offset("lat_accel", bias, 20.0) == pytest.approx(0.1 - 0.004 * 20.0)
+    assert pr.check_offset("yaw_rate", bias, 20.0) == pytest.approx(0.004 - 0.1 / 20.0)
+    assert pr.check_offset("yaw_rate", bias, 20.0, by_pair=True) == pytest.approx(0.004 + 0.001)
+    assert pr.check_offset("yaw_rate_redundant", bias, 20.0) == pytest.approx(-0.001 - 0.004)
+    for sensor in ("steer", "steer_redundant", "speed", "speed_redundant"):
+        assert pr.check_offset(sensor, bias, 20.0) == 0.0
+    rows = {"yaw_rate": np.array([0.004, -0.002]), "lat_accel": 0.0}
+    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0])) == pytest.approx([-0.04, 0.06])
+    assert pr.check_offset("lat_accel", {}, 30.0) == 0.0  # no offsets given: none
+    # the sensors' own: SI, and none on exact sensors, which add no bias
+    cfg = SensorConfig(yaw_rate=YawRateSensorConfig(bias_deg_s=0.3))
+    assert cfg.biases() == {"yaw_rate": pytest.approx(math.radians(0.3)), "lat_accel": 0.0, "yaw_rate_redundant": 0.0}
+    assert set(replace(cfg, exact=True).biases().values()) == {0.0}
 
 
 def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays() -> None:

@@ -10,7 +10,8 @@ scalar's arithmetic: ``value``, ``x + value``, ``x * value``, ``x + value (t - s
 
 ``BatchSensors`` applies ``input`` to each channel; the error of a faulted reading is the
 reading less that of the same sensor without the fault (``plausibility_runs.run``'s ``clean``
-copy), which ``ExceededTracker`` follows against the monitor's bound.
+copy), which ``ExceededTracker`` follows against the monitor's bound, with the healthy sensors'
+offsets its check sees (``plausibility_runs.check_offset``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from firmware_py import plausibility as pl
 from sim_plant.campaign.params import FAULT_CHANNELS, FAULT_KINDS, SampleSet, fault_value
-from sim_plant.offline.plausibility_runs import is_braking, sensor_bound
+from sim_plant.offline.plausibility_runs import check_offset, is_braking, sensor_bound
 
 
 class BatchFaults:
@@ -82,9 +83,11 @@ class FaultFigures:
     (``engine.METRICS``; ``fault_yaw_rate`` and ``twin_yaw_rate`` are the engine's, from a
     fault-free twin)."""
 
-    def __init__(self, faults: BatchFaults, n: int, ts: float) -> None:
+    def __init__(self, faults: BatchFaults, n: int, ts: float,
+                 bias: dict[str, float | np.ndarray] | None = None) -> None:
         rows = faults.onset.size
         self.faults, self.ts = faults, ts
+        self.bias = bias if bias is not None else {}  # the healthy offsets (check_offset's), per row
         self.cfg = pl.PlausibilityConfig(ts=ts)
         self.faulted = faults.sensor != 0
         self.tracker = ExceededTracker(rows, max(1, int(round(HOLD / ts))), n - 1)
@@ -114,10 +117,12 @@ class FaultFigures:
             braking = False if self.v_prev is None else is_braking(self.v_prev, v_true, self.ts, self.cfg)
             self.v_prev = v_true.copy()
         bound = np.full(error.shape, np.inf)
+        seen = error
         for channel, on in self.channels.items():
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,
                                               braking=braking), bound)
-        self.tracker.step(k, np.abs(error) > bound, first)
+            seen = np.where(on, error + check_offset(channel, self.bias, v_true), seen)
+        self.tracker.step(k, np.abs(seen) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:
         ex, rep, ts = self.tracker.exceeded, self.report_step, self.ts

@@ -91,6 +91,8 @@ class BatchSensors:
         lat, steer2 = config.lat_accel, config.steer_redundant
         self.lat_sigma = lat.noise_density * 1e-6 * G_SENSOR * math.sqrt(fs / 2.0)  # Sensors.lat_sigma
         self.lat_bias = lat.bias_m_s2
+        #: the healthy offsets by channel (``SensorConfig.biases``; the yaw rate's per row)
+        self.biases = {"yaw_rate": self.bias, "lat_accel": self.lat_bias, "yaw_rate_redundant": 0.0}
         self.steer2_sigma = math.radians(steer2.noise)
         self._yaw_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)
         self._yaw2_lpf = _Butterworth(config.yaw_rate.lowpass_hz, fs)

@@ -205,7 +205,8 @@ class _Group:
         # the channels some row faults: with the monitor on, their errors are followed every step
         tracked = sensors.tracked
         speed_faulted = "speed" in tracked
-        figures = FaultFigures(self.faults, n, ts) if self.faults is not None and self.monitor is not None else None
+        figures = (FaultFigures(self.faults, n, ts, sensors.biases)
+                   if self.faults is not None and self.monitor is not None else None)
         track_speed = figures is not None and speed_faulted
         track_speed2 = figures is not None and "speed_redundant" in tracked
         track_steer2 = figures is not None and "steer_redundant" in tracked

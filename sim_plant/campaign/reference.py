@@ -46,7 +46,7 @@ from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.offline.excursion_yaw import excursion_yaw
-from sim_plant.offline.plausibility_runs import MonitorRun, braking_of, cycles, sensor_bound
+from sim_plant.offline.plausibility_runs import MonitorRun, braking_of, check_offset, cycles, sensor_bound
 
 
 @dataclass(frozen=True)
@@ -88,6 +88,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     position = PositionActuator(sc.actuator, ts)
     sensors = Sensors(sc.sensor_config, ts)
     fault = sc.sensor_config.faults[0] if sc.sensor_config.faults else None
+    bias = sc.sensor_config.biases()  # the healthy offsets the fault's check sees with it
     # the same sensors without the fault: an identity fault in its place keeps every noise stream
     # where the faulted copy has it (the second yaw-rate element's follows the faults')
     clean = None if fault is None else Sensors(
@@ -132,7 +133,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], wheels
         if fault is not None and clean is not None:
             clean.at(t)
-            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
+            error[k] = (read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
+                        + check_offset(fault.sensor, bias, scene.v))
         for ch in (*CHANNELS, SPEED_REDUNDANT):
             if k % every[ch] == 0:
                 held[ch] = read[ch]

@@ -164,6 +164,14 @@ class SensorConfig:
     def ideal(cls) -> "SensorConfig":
         return cls(exact=True)
 
+    def biases(self) -> dict[str, float]:
+        """The constant offsets the healthy sensors add (rad/s, m/s^2, by channel; 0 on exact
+        sensors): the yaw rate's, its second element's and the lateral acceleration's."""
+        if self.exact:
+            return {"yaw_rate": 0.0, "lat_accel": 0.0, YAW_RATE_REDUNDANT: 0.0}
+        return {"yaw_rate": math.radians(self.yaw_rate.bias_deg_s), "lat_accel": self.lat_accel.bias_m_s2,
+                YAW_RATE_REDUNDANT: math.radians(self.yaw_rate_redundant.bias_deg_s)}
+
     @classmethod
     def default(cls) -> "SensorConfig":
         return cls()
@@ -274,16 +282,13 @@ class Sensors:
                 raise ModelFileError(f"{name} lowpass_hz {hz:g} must be below the Nyquist "
                                      f"frequency {fs / 2:g} Hz of the plant step")
         self.yaw_sigma = math.radians(yaw.noise_density) * math.sqrt(fs / 2.0)
-        self.yaw_bias = math.radians(yaw.bias_deg_s)
         self.lat_sigma = lat.noise_density * 1e-6 * G * math.sqrt(fs / 2.0)
-        self.lat_bias = lat.bias_m_s2
         self.sigma = {"yaw_rate": self.yaw_sigma, "steer": math.radians(config.steer.noise),
                       "speed": config.speed.noise, "lat_accel": self.lat_sigma,
                       "steer_redundant": math.radians(config.steer_redundant.noise),
                       YAW_RATE_REDUNDANT: math.radians(yaw2.noise_density) * math.sqrt(fs / 2.0),
                       SPEED_REDUNDANT: config.speed_redundant.noise}
-        self.bias = {"yaw_rate": self.yaw_bias, "lat_accel": self.lat_bias,
-                     YAW_RATE_REDUNDANT: math.radians(yaw2.bias_deg_s)}
+        self.bias = config.biases()  # applied only when not exact
         self._hz = {"yaw_rate": yaw.lowpass_hz, "lat_accel": lat.lowpass_hz, YAW_RATE_REDUNDANT: yaw2.lowpass_hz}
         filtered = not config.exact  # exact sensors filter nothing
         self.lowpass = _Lowpass(yaw.lowpass_hz, fs).ba if filtered and yaw.lowpass_hz > 0.0 else None

@@ -38,7 +38,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.disturbances import sum_loads
 from sim_plant.car.sensors import Sensors, dormant_faults
 from sim_plant.harness.hil_steps import Step
-from sim_plant.offline.plausibility_runs import is_braking, sensor_bound
+from sim_plant.offline.plausibility_runs import check_offset, is_braking, sensor_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -112,8 +112,10 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     car without the second speed (its check then bounds its jumps, not its error; with it, the
     speed pair's ``speed_pair_bound``).  The error is the fault's own: the reading the plant sent
     less what the same sensor (its noise, filter, quantisation and bias; ``sensors.dormant_faults``)
-    reads of the trace's true value at each step of ``ts`` s without the fault.  A sensor's
-    filter lag in a fast transient, or its noise, is not the fault's."""
+    reads of the trace's true value at each step of ``ts`` s without the fault, plus the healthy
+    sensors' offsets its check sees with it (``plausibility_runs.check_offset``: the yaw rate's
+    by the pair's when the car has the second element).  A sensor's filter lag in a fast
+    transient, or its noise, is not the fault's."""
     cfg = pl.PlausibilityConfig()
     sensor = min(sc.sensor_config.faults, key=lambda f: f.start).sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
@@ -133,12 +135,14 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     read = getattr(clean, sensor)
     v_before = steps[0].v_m_s if steps else 0.0
     disturbances = sc.disturbances  # (a property that builds its tuple each time)
+    bias = sc.sensor_config.biases()
     for s in steps:
         clean.at(s.t_s)
         true_value = getattr(s, truth)
         if sensor == "speed_redundant":  # the second speed reads the braked wheels, slip and all
             true_value *= 1.0 - sum_loads(disturbances, s.t_s).wheel_slip
-        if abs(getattr(s, measured) - read(true_value)) > bound(s, v_before):
+        offset = check_offset(sensor, bias, s.v_m_s, by_pair=pair)
+        if abs(getattr(s, measured) - read(true_value) + offset) > bound(s, v_before):
             return s.t_s
         v_before = s.v_m_s
     return None

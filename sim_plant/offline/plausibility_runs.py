@@ -24,7 +24,8 @@ without it the monitor has none (NaN: the speed pair paused), as before the bus 
 ``CUT_CHECKS``: the pair checks; 0 fades every fault instead).
 
 The error of a faulted sensor is measured against a second, fault-free copy of the same sensor
-models (same seed, same streams), so it is the fault's own contribution, noise excluded.
+models (same seed, same streams), so it is the fault's own contribution, noise excluded, plus
+the healthy sensors' constant offsets that its check sees with it (``check_offset``).
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ class MonitorRun:
     bits: np.ndarray  # CtrlStatus_Plausibility per period
     r_true: np.ndarray
     aux: np.ndarray  # the command applied
-    error: np.ndarray  # the faulted sensor's error (0 without a fault)
+    error: np.ndarray  # the faulted sensor's error as its check sees it (+ check_offset; 0 without a fault)
     fault_sensor: str | None
     margins: dict[str, float]  # each check's largest residual over the run / its bound
     held: dict[str, np.ndarray]  # what the controller and the monitor saw, per channel (and yaw_rate_redundant)
@@ -158,6 +159,29 @@ def _sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray
     return yaw if sensor == "yaw_rate" else yaw * v + cfg.side_accel * pair
 
 
+def check_offset(sensor: str, bias: dict[str, float | np.ndarray], v: float | np.ndarray,
+                 by_pair: bool = False) -> float | np.ndarray:
+    """What the healthy sensors' constant offsets (``bias``: ``SensorConfig.biases``, by channel,
+    floats or arrays per row) add to a fault's error in the residual its check compares with
+    the bound, in the faulted sensor's units (``v`` the true speed): the kinematic check reads
+    a_y - v r, so an a_y error e shows as e + b_a - v b_r, and a yaw-rate error as e + b_r - b_a / v;
+    the yaw-rate pair reads r_2 - r, so the second element's error shows as e + b_2 - b_r (and the
+    first's, ``by_pair``, as e + b_r - b_2).  A judge compares |e + offset| with ``sensor_bound``:
+    the monitor cannot tell a fault from its partner's healthy offset, so a fault opposing that
+    offset passes the check's bound only when it has passed it by the offset too (an a_y drift
+    against a yaw-rate bias of 0.3 deg/s was judged up to 140 ms late without it).  The steering
+    channels and the speeds have no modelled offset: 0."""
+    b_r, b_a, b_2 = bias.get("yaw_rate", 0.0), bias.get("lat_accel", 0.0), bias.get("yaw_rate_redundant", 0.0)
+    if sensor == "lat_accel":
+        return b_a - b_r * v
+    if sensor == "yaw_rate_redundant":
+        return b_2 - b_r
+    if sensor == "yaw_rate":
+        # (below the monitor's speed_min every bound is infinite: the 1 m/s floor only avoids 1 / 0)
+        return b_r - b_2 if by_pair else b_r - b_a / np.maximum(v, 1.0)
+    return 0.0
+
+
 #: What the second speed's rounding (half its LSB) may add to the speed pair's difference.
 _SPEED2_HALF_LSB = 0.5 * dbc_resolution("speed_redundant")
 
@@ -220,6 +244,9 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
     second = Sensors(replace(second_yaw, faults=()), ts) if second_yaw is not None else None
     faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
+    bias = sc.sensors.biases()
+    if second_yaw is not None:
+        bias["yaw_rate_redundant"] = second_yaw.biases()["yaw_rate"]
     if faulted == "speed_redundant" and not second_speed:
         raise ValueError("a fault of the second speed needs second_speed=True (the monitor reads it only then)")
     reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
@@ -253,7 +280,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
                 held["speed_redundant"] = read["speed_redundant"]
         if faulted is not None:
             true_value = wheels if faulted == "speed_redundant" else truth[faulted]
-            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value)
+            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value) + check_offset(faulted, bias, scene.v)
         if second is not None:
             second.at(t)
             r_2 = second.yaw_rate(truth["yaw_rate"])
