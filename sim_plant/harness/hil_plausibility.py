@@ -10,7 +10,9 @@ The detection time is read from the command frames, which come every control per
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
 plausibility fault bit (``CtrlStatus_Plausibility`` 1 or 2; the status frame itself comes only
 every 100 ms).  The plant's trace also gives when the faulted sensor's error (its reading less
-the same sensor's without the fault, at the trace's true values: the fault's own) first exceeded the bound the monitor checks it against, the moment from which issue 18
+the same sensor's without the fault, at the trace's true values: the fault's own; plus the
+healthy sensors' biases its check sees with it, ``plausibility_runs.check_offset``) first
+exceeded the bound the monitor checks it against, the moment from which issue 18
 counts its 300 ms (``error_over_bound_s``; ``yaw_error_over_bound_s`` the same for a yaw-rate
 fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pair's
 ``yaw_pair_bound`` when the car has the sensor's second element (a stuck element is found as its
