@@ -129,9 +129,9 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
         fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
         assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
     # the second yaw-rate element: the pair's 0.03 rad/s, on the residual r_2 - r the pair sees,
-    # so a first element's healthy bias of 0.3 deg/s (0.0052 rad/s) hides an offset of 0.031 of
+    # so a first element's healthy bias of 1 deg/s (0.0175 rad/s) hides an offset of 0.031 of
     # the same sign and adds to one of the other
-    biased = replace(scn.load("side-wind").sensors, yaw_rate=YawRateSensorConfig(bias_deg_s=0.3))
+    biased = replace(scn.load("side-wind").sensors, yaw_rate=YawRateSensorConfig(bias_deg_s=1.0))
     for offset, over in ((0.031, False), (-0.031, True)):
         sc = replace(scn.load("side-wind"), sensors=biased).with_sensor_faults(
             (SensorFault("yaw_rate_redundant", "bias", 0.5, offset),))
@@ -152,6 +152,36 @@ def test_every_sensors_error_is_timed_from_when_it_passed_the_monitors_bound() -
         fig = plausibility_figures(_traffic(fault_from=None, steps=800), without.with_sensor_faults((fault,)), RATE,
                                    steps)
         assert fig["error_over_bound_s"] is None
+
+
+def test_the_yaw_rate_is_judged_on_the_residual_of_the_pair_and_never_before_its_onset_or_below_speed_min() -> None:
+    from dataclasses import replace
+
+    from firmware_py import plausibility as pl
+
+    base = scn.load("side-wind")
+    # The first element against the second, whose healthy bias of 1 deg/s (0.0175 rad/s) the pair
+    # sees with it: an offset of +0.034 shows as 0.0166 (within the pair's 0.03), -0.034 as 0.051.
+    second = replace(base.sensors, yaw_rate_redundant=YawRateSensorConfig(bias_deg_s=1.0))
+    for offset, over in ((0.034, False), (-0.034, True)):
+        sc = replace(base, sensors=second).with_sensor_faults((SensorFault("yaw_rate", "bias", 0.5, offset),))
+        steps = _steps(400, yaw_rate_measured_rad_s=lambda t, o=offset: 0.02 + (o if t >= 0.5 else 0.0))
+        fig = plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)
+        assert (fig["error_over_bound_s"] == pytest.approx(0.5)) if over else fig["error_over_bound_s"] is None
+    # A first element's bias of 2 deg/s (0.035 rad/s, over the pair's bound by itself) is no fault
+    # of the second element before that fault's onset: a +0.04 offset then shows as 0.005.
+    first = replace(base.sensors, yaw_rate=YawRateSensorConfig(bias_deg_s=2.0))
+    sc = replace(base, sensors=first).with_sensor_faults((SensorFault("yaw_rate_redundant", "bias", 0.5, 0.04),))
+    steps = _steps(400, yaw_rate_redundant_measured_rad_s=lambda t: 0.02 + (0.04 if t >= 0.5 else 0.0))
+    assert plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)["error_over_bound_s"] is None
+    # Below the monitor's speed_min its checks pause: a yaw-rate offset of 0.1 rad/s at 3 m/s is
+    # over no bound (at 20 m/s it is at its onset).
+    sc = base.with_sensor_faults((SensorFault("yaw_rate", "bias", 0.5, 0.1),))
+    steps = _steps(400, yaw_rate_measured_rad_s=lambda t: 0.02 + (0.1 if t >= 0.5 else 0.0))
+    assert plausibility_figures(_traffic(fault_from=None), sc, RATE, steps)["error_over_bound_s"] == pytest.approx(0.5)
+    slow = [replace(s, v_m_s=3.0) for s in steps]
+    assert 3.0 < pl.PlausibilityConfig().speed_min
+    assert plausibility_figures(_traffic(fault_from=None), sc, RATE, slow)["error_over_bound_s"] is None
 
 
 def test_the_error_is_the_faults_own_not_the_sensors_lag_in_a_transient() -> None:

@@ -67,7 +67,8 @@ METRICS = {
     "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
-    "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error left "
+    "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error (plus "
+                            "the healthy biases its check sees: plausibility_runs.check_offset) left "
                             "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's; none below "
                             "speed_min) for 0.3 s "
                             "(0: it never did, or was reported before, or no controller; inf: never reported)"),

@@ -31,6 +31,7 @@ wall-clock stamps are not simulated time."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from firmware_py import model_regulator as mr
@@ -119,13 +120,16 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     by the pair's when the car has the second element).  A sensor's filter lag in a fast
     transient, or its noise, is not the fault's."""
     cfg = pl.PlausibilityConfig()
-    sensor = min(sc.sensor_config.faults, key=lambda f: f.start).sensor
+    first = min(sc.sensor_config.faults, key=lambda f: f.start)
+    sensor = first.sensor
     pair = sc.sensor_config.yaw_rate_redundant_present and not any(
         f.sensor == "yaw_rate_redundant" for f in sc.sensor_config.faults)
     speed_pair = sc.sensor_config.speed_redundant_present
 
     def bound(s: Step, v_before: float) -> float:
         if sensor == "yaw_rate":  # the constant bounds of the module's docstring
+            if s.v_m_s < cfg.speed_min:
+                return math.inf
             return min(cfg.yaw_bound, cfg.yaw_pair_bound) if pair else cfg.yaw_bound
         braking = is_braking(v_before, s.v_m_s, ts, cfg)
         return float(sensor_bound(sensor, cfg, s.yaw_rate_rad_s, s.v_m_s, pair, speed_pair, braking))
@@ -143,7 +147,8 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
         true_value = getattr(s, truth)
         if sensor == "speed_redundant":  # the second speed reads the braked wheels, slip and all
             true_value *= 1.0 - sum_loads(disturbances, s.t_s).wheel_slip
-        offset = check_offset(sensor, bias, s.v_m_s, by_pair=pair)
+        # from the onset: a healthy offset alone is not the fault's error
+        offset = check_offset(sensor, bias, s.v_m_s, by_pair=pair) if s.t_s >= first.start else 0.0
         if abs(getattr(s, measured) - read(true_value) + offset) > bound(s, v_before):
             return s.t_s
         v_before = s.v_m_s

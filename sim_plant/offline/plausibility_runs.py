@@ -166,7 +166,8 @@ def check_offset(sensor: str, bias: dict[str, float | np.ndarray], v: float | np
     the bound, in the faulted sensor's units (``v`` the true speed): the kinematic check reads
     a_y - v r, so an a_y error e shows as e + b_a - v b_r, and a yaw-rate error as e + b_r - b_a / v;
     the yaw-rate pair reads r_2 - r, so the second element's error shows as e + b_2 - b_r (and the
-    first's, ``by_pair``, as e + b_r - b_2).  A judge compares |e + offset| with ``sensor_bound``:
+    first's, ``by_pair``, as e + b_r - b_2).  From the fault's onset (the offsets alone are no
+    fault's error) a judge compares |e + offset| with ``sensor_bound``:
     the monitor cannot tell a fault from its partner's healthy offset, so a fault opposing that
     offset passes the check's bound only when it has passed it by the offset too (an a_y drift
     against a yaw-rate bias of 0.3 deg/s was judged up to 140 ms late without it).  The steering
@@ -244,6 +245,7 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
     sensors, clean = Sensors(sc.sensor_config, ts), Sensors(sc.sensors, ts)
     second = Sensors(replace(second_yaw, faults=()), ts) if second_yaw is not None else None
     faulted = sc.sensor_faults[0].sensor if sc.sensor_faults else None
+    onset = sc.sensor_faults[0].start if sc.sensor_faults else math.inf
     bias = sc.sensors.biases()
     if second_yaw is not None:
         bias["yaw_rate_redundant"] = second_yaw.biases()["yaw_rate"]
@@ -280,7 +282,9 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
                 held["speed_redundant"] = read["speed_redundant"]
         if faulted is not None:
             true_value = wheels if faulted == "speed_redundant" else truth[faulted]
-            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value) + check_offset(faulted, bias, scene.v)
+            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value)
+            if t >= onset:  # a healthy offset alone is not the fault's error
+                out["err"][k] += check_offset(faulted, bias, scene.v)
         if second is not None:
             second.at(t)
             r_2 = second.yaw_rate(truth["yaw_rate"])
