@@ -364,15 +364,19 @@ def test_the_healthy_offsets_a_check_sees_with_a_fault() -> None:
     import numpy as np
 
     bias = {"yaw_rate": 0.004, "lat_accel": 0.1, "yaw_rate_redundant": -0.001}
-    assert pr.check_offset("lat_accel", bias, 20.0) == pytest.approx(0.1 - 0.004 * 20.0)
-    assert pr.check_offset("yaw_rate", bias, 20.0) == pytest.approx(0.004 - 0.1 / 20.0)
-    assert pr.check_offset("yaw_rate", bias, 20.0, by_pair=True) == pytest.approx(0.004 + 0.001)
-    assert pr.check_offset("yaw_rate_redundant", bias, 20.0) == pytest.approx(-0.001 - 0.004)
+    assert pr.check_offset("lat_accel", bias, 20.0, True) == pytest.approx(0.1 - 0.004 * 20.0)
+    assert pr.check_offset("yaw_rate", bias, 20.0, True) == pytest.approx(0.004 - 0.1 / 20.0)
+    assert pr.check_offset("yaw_rate", bias, 20.0, True, by_pair=True) == pytest.approx(0.004 + 0.001)
+    assert pr.check_offset("yaw_rate_redundant", bias, 20.0, True) == pytest.approx(-0.001 - 0.004)
     for sensor in ("steer", "steer_redundant", "speed", "speed_redundant"):
-        assert pr.check_offset(sensor, bias, 20.0) == 0.0
+        assert pr.check_offset(sensor, bias, 20.0, True) == 0.0
     rows = {"yaw_rate": np.array([0.004, -0.002]), "lat_accel": 0.0}
-    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0])) == pytest.approx([-0.04, 0.06])
-    assert pr.check_offset("lat_accel", {}, 30.0) == 0.0  # no offsets given: none
+    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0]), True) == pytest.approx([-0.04, 0.06])
+    assert pr.check_offset("lat_accel", {}, 30.0, True) == 0.0  # no offsets given: none
+    # none before the fault's onset, a bool or one per row
+    assert pr.check_offset("lat_accel", bias, 20.0, False) == 0.0
+    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0]), np.array([False, True])) == pytest.approx(
+        [0.0, 0.06])
     # the sensors' own: SI, and none on exact sensors, which add no bias
     cfg = SensorConfig(yaw_rate=YawRateSensorConfig(bias_deg_s=0.3))
     assert cfg.biases() == {"yaw_rate": pytest.approx(math.radians(0.3)), "lat_accel": 0.0, "yaw_rate_redundant": 0.0}

@@ -121,8 +121,7 @@ class FaultFigures:
         for channel, on in self.channels.items():
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,
                                               braking=braking), bound)
-            # from the onset: a healthy offset alone is not the fault's error
-            seen = np.where(on & after, error + check_offset(channel, self.bias, v_true), seen)
+            seen = np.where(on, error + check_offset(channel, self.bias, v_true, after), seen)
         self.tracker.step(k, np.abs(seen) > bound, first)
 
     def result(self) -> dict[str, np.ndarray]:

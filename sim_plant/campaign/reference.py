@@ -133,9 +133,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], wheels
         if fault is not None and clean is not None:
             clean.at(t)
-            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
-            if t >= fault.start:  # a healthy offset alone is not the fault's error
-                error[k] += check_offset(fault.sensor, bias, scene.v)
+            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor]) + check_offset(
+                fault.sensor, bias, scene.v, t >= fault.start)
         for ch in (*CHANNELS, SPEED_REDUNDANT):
             if k % every[ch] == 0:
                 held[ch] = read[ch]

@@ -147,8 +147,7 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
         true_value = getattr(s, truth)
         if sensor == "speed_redundant":  # the second speed reads the braked wheels, slip and all
             true_value *= 1.0 - sum_loads(disturbances, s.t_s).wheel_slip
-        # from the onset: a healthy offset alone is not the fault's error
-        offset = check_offset(sensor, bias, s.v_m_s, by_pair=pair) if s.t_s >= first.start else 0.0
+        offset = check_offset(sensor, bias, s.v_m_s, s.t_s >= first.start, by_pair=pair)
         if abs(getattr(s, measured) - read(true_value) + offset) > bound(s, v_before):
             return s.t_s
         v_before = s.v_m_s

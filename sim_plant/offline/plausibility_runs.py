@@ -160,27 +160,29 @@ def _sensor_bound(sensor: str, cfg: pl.PlausibilityConfig, r: float | np.ndarray
 
 
 def check_offset(sensor: str, bias: dict[str, float | np.ndarray], v: float | np.ndarray,
-                 by_pair: bool = False) -> float | np.ndarray:
+                 after: bool | np.ndarray, by_pair: bool = False) -> float | np.ndarray:
     """What the healthy sensors' constant offsets (``bias``: ``SensorConfig.biases``, by channel,
     floats or arrays per row) add to a fault's error in the residual its check compares with
     the bound, in the faulted sensor's units (``v`` the true speed): the kinematic check reads
     a_y - v r, so an a_y error e shows as e + b_a - v b_r, and a yaw-rate error as e + b_r - b_a / v;
     the yaw-rate pair reads r_2 - r, so the second element's error shows as e + b_2 - b_r (and the
-    first's, ``by_pair``, as e + b_r - b_2).  From the fault's onset (the offsets alone are no
-    fault's error) a judge compares |e + offset| with ``sensor_bound``:
-    the monitor cannot tell a fault from its partner's healthy offset, so a fault opposing that
+    first's, ``by_pair``, as e + b_r - b_2); 0 where not ``after`` the fault's onset (a bool, or
+    one per row: the offsets alone are no fault's error).  A judge compares |e + offset| with
+    ``sensor_bound``: the monitor cannot tell a fault from its partner's healthy offset, so a fault opposing that
     offset passes the check's bound only when it has passed it by the offset too (an a_y drift
     against a yaw-rate bias of 0.3 deg/s was judged up to 140 ms late without it).  The steering
     channels and the speeds have no modelled offset: 0."""
     b_r, b_a, b_2 = bias.get("yaw_rate", 0.0), bias.get("lat_accel", 0.0), bias.get("yaw_rate_redundant", 0.0)
     if sensor == "lat_accel":
-        return b_a - b_r * v
-    if sensor == "yaw_rate_redundant":
-        return b_2 - b_r
-    if sensor == "yaw_rate":
+        offset = b_a - b_r * v
+    elif sensor == "yaw_rate_redundant":
+        offset = b_2 - b_r
+    elif sensor == "yaw_rate":
         # (below the monitor's speed_min every bound is infinite: the 1 m/s floor only avoids 1 / 0)
-        return b_r - b_2 if by_pair else b_r - b_a / np.maximum(v, 1.0)
-    return 0.0
+        offset = b_r - b_2 if by_pair else b_r - b_a / np.maximum(v, 1.0)
+    else:
+        return 0.0
+    return np.where(after, offset, 0.0) if np.ndim(after) else (offset if after else 0.0)
 
 
 #: What the second speed's rounding (half its LSB) may add to the speed pair's difference.
@@ -282,9 +284,8 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
                 held["speed_redundant"] = read["speed_redundant"]
         if faulted is not None:
             true_value = wheels if faulted == "speed_redundant" else truth[faulted]
-            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value)
-            if t >= onset:  # a healthy offset alone is not the fault's error
-                out["err"][k] += check_offset(faulted, bias, scene.v)
+            out["err"][k] = read[faulted] - getattr(clean, faulted)(true_value) + check_offset(
+                faulted, bias, scene.v, t >= onset)
         if second is not None:
             second.at(t)
             r_2 = second.yaw_rate(truth["yaw_rate"])
