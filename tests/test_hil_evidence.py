@@ -54,7 +54,7 @@ def test_a_failed_evidence_leaves_its_out_as_it_was(tmp_path: Path, monkeypatch:
     def fake_run(cfg: hil.HilConfig, progress: Any = None) -> Any:
         """split-mu's two runs write their outputs; side-wind's first fails half-way."""
         calls.append(cfg.scenario)
-        cfg.out.mkdir(parents=True)
+        cfg.out.mkdir(parents=True, exist_ok=True)  # as hil.run does
         (cfg.out / "traffic.log").write_text("a run's log\n")
         if len(calls) == 3:
             raise hil.HilError("plant exited with status 1")
