@@ -273,3 +273,15 @@ def test_design_busload_defaults_to_the_500_kbit_bus(capsys: pytest.CaptureFixtu
     assert main(["design", "busload", "--bitrate", "500000", "--json"]) == 0
     assert default == json.loads(capsys.readouterr().out)
     assert default["load_percent_worst"] < 40.0
+
+
+@pytest.mark.parametrize("command", ["margins", "tune", "compare"])
+def test_quick_is_the_same_24_point_envelope_in_every_design_command(command: str) -> None:
+    from mrsteer_cli import design_cli
+    from mrsteer_cli.cli import build_parser
+
+    quick = design_cli._envelope(build_parser().parse_args(["design", command, "--quick"]))
+    assert quick == M.QUICK_ENVELOPE and len(quick) == 24
+    assert design_cli._envelope(build_parser().parse_args(["design", command])) == M.Envelope()
+    assert len(design_cli._envelope(build_parser().parse_args(["design", command, "--quick", "--mass-grid",
+                                                               "1500"]))) == 12

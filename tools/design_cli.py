@@ -135,7 +135,8 @@ def add_parsers(sub: Any, parser_class: type) -> None:
     p.add_argument("--out", type=Path, default=None, metavar="FILE.cfg",
                    help="with --schedule: write the tuned calibration there (firmware_py.calibration_file format)")
     p.add_argument("--quick", action="store_true",
-                   help="with --schedule: coarse local grids and few trials (a smoke test, under a minute of CPU)")
+                   help="verify on the 24-point envelope of `design margins --quick` unless a grid option says "
+                   "otherwise; with --schedule also coarse local grids and few trials (a smoke test)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
 
@@ -146,6 +147,9 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                         "stability, margins, delay margin, dry-road peaks, worst command noise, saturation "
                         "thresholds; with --out also a plot of peak yaw rate against command noise over candidates.")
     _add_envelope(p)
+    p.add_argument("--quick", action="store_true",
+                   help="the table on the 24-point envelope of `design margins --quick` unless a grid option says "
+                   "otherwise (the plot's candidates are scored as without it)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="also write tradeoff.png (and tradeoff.json) there: peak yaw rate at the Figure-10 point "
                    "against worst command noise over candidate calibrations")
@@ -263,8 +267,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
     if args.schedule:
         return _cmd_tune_schedule(args)
-    if args.start is not None or args.out is not None or args.quick:
-        raise ValueError("--start, --out and --quick need --schedule")
+    if args.start is not None or args.out is not None:
+        raise ValueError("--start and --out need --schedule")
 
     try:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
