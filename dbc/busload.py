@@ -68,6 +68,10 @@ class BusLoad:
         }
 
 
+#: The bus the shipped design budgets, bit/s (classic CAN at 500 kbit/s: docs/design.md, "Bus load").
+BITRATE = 500_000
+
+
 def bus_load(contract: Contract, bitrate: float, rate_hz: float | None = None) -> BusLoad:
     """Load of every cyclic message; ``rate_hz`` sets the control-loop frames' rate (default:
     the DBC's cycle time of those frames, i.e. the shipped default rate)."""

@@ -14,6 +14,7 @@ at the breakpoints here, once, and ``step()`` interpolates them linearly.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 Q_LIMITED = "limited"
@@ -122,6 +123,26 @@ def describe_gains(cfg: ControllerConfig) -> dict[str, object]:
     else:
         out.update(k=cfg.k, tau=cfg.tau, tau_n=cfg.tau_n)
     return out
+
+
+def format_gains(desc: Mapping[str, object]) -> str:
+    """``describe_gains``' dict (or a summary holding its keys) in words, for a printed table:
+    the schedule breakpoint by breakpoint or the constant K, tau, tau_n, and the nominal
+    actuator and filter where the law models them."""
+
+    def ms(values: object) -> str:
+        return "/".join(f"{1e3 * x:.4g}" for x in values)  # type: ignore[attr-defined]
+
+    sched = desc.get("schedule")
+    if isinstance(sched, Mapping):
+        text = (f"scheduled over v {'/'.join(f'{x:g}' for x in sched['speed_m_s'])} m/s: "
+                f"K {'/'.join(f'{x:.4g}' for x in sched['k'])}, tau {ms(sched['tau_s'])} ms, "
+                f"tau_n {ms(sched['tau_n_s'])} ms")
+    else:
+        text = f"K {desc['k']:.4g}, tau {ms((desc['tau'],))} ms, tau_n {ms((desc['tau_n'],))} ms"
+    nominal = [f"actuator {ms((desc['model_actuator_tau_s'],))} ms"] if desc.get("model_actuator_tau_s") else []
+    nominal += [f"filter {desc['model_filter_hz']:g} Hz"] if desc.get("model_filter_hz") else []
+    return text + (f"; nominal {', '.join(nominal)}" if nominal else "")
 
 
 #: The calibration shipped before issue 15 (tuned on the ideal loop; unstable on the reference loop).

@@ -61,14 +61,14 @@ FAULT_SPEED = 0x04
 from firmware_py.calibration import (  # noqa: E402  (re-exports)
     AUX_LIMIT, DEFAULT_TAU_N, MAX_MODEL_DELAY, MAX_SCHEDULE, METHOD_TUSTIN, METHOD_ZOH, NOMINAL_C_F,
     NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS, PAPER_CONFIG, PAPER_K, PAPER_TAU, PREVIOUS_CONFIG,
-    Q_LIMITED, Q_STANDARD, ControllerConfig, constant_gains, describe_gains, plain_law, validate,
+    Q_LIMITED, Q_STANDARD, ControllerConfig, constant_gains, describe_gains, format_gains, plain_law, validate,
 )
 
 __all__ = [
     "AUX_LIMIT", "DEFAULT_TAU_N", "MAX_MODEL_DELAY", "MAX_SCHEDULE", "METHOD_TUSTIN", "METHOD_ZOH", "NOMINAL_C_F",
     "NOMINAL_C_R", "NOMINAL_L_F", "NOMINAL_L_R", "NOMINAL_MASS", "PAPER_CONFIG", "PAPER_K", "PAPER_TAU",
-    "PREVIOUS_CONFIG", "Q_LIMITED", "Q_STANDARD", "ControllerConfig", "constant_gains", "describe_gains", "plain_law",
-    "validate",
+    "PREVIOUS_CONFIG", "Q_LIMITED", "Q_STANDARD", "ControllerConfig", "constant_gains", "describe_gains", "format_gains",
+    "plain_law", "validate",
     "STATUS_INACTIVE", "STATUS_ACTIVE", "STATUS_SATURATED", "STATUS_FAULT", "FAULT_DRIVER_ANGLE",
     "FAULT_YAW_RATE", "FAULT_SPEED", "Coefficients", "LawPoint", "State", "q_filter", "configure", "law_at",
     "reset", "step", "ModelRegulator",

@@ -247,3 +247,41 @@ def test_design_model_flags_reject_bad_input(argv: list[str], needle: str, capsy
     except SystemExit as exc:
         code = exc.code
     assert code == 2 and needle in capsys.readouterr().err
+
+
+def test_design_margins_as_the_readme_writes_it_on_the_shipped_schedule(capsys: pytest.CaptureFixture[str]) -> None:
+    """README: ``mrsteer design margins`` (here with --quick, its 24-point envelope): the shipped
+    calibration is a speed schedule, and the table says so breakpoint by breakpoint."""
+    assert main(["design", "margins", "--quick"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0] == (
+        "limited model regulator, gains scheduled over v 5/10/20/30/40/50 m/s: K 10.4/27/10/10/6.3/4.5, "
+        "tau 54.72/252/61.6/149.6/93.44/77.55 ms, tau_n 34/89/120/255/275/305 ms; nominal actuator 20 ms, "
+        "filter 30 Hz")
+    assert "24 operating points: STABLE everywhere" in out
+    assert main(["design", "margins", "--quick", "--v-grid", "20", "--mu-grid", "1", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    # a grid option overrides --quick's axis, the others stay --quick's
+    assert [(p["v"], p["mu"], p["mass"]) for p in res["points"]] == [(20.0, 1.0, 1296.0), (20.0, 1.0, 1800.0)]
+    assert res["schedule"]["k"] == list(mr.ControllerConfig().schedule_k)
+
+
+def test_design_busload_defaults_to_the_500_kbit_bus(capsys: pytest.CaptureFixture[str]) -> None:
+    """docs/architecture.md: ``mrsteer design busload`` as written, the bus the shipped design budgets."""
+    assert main(["design", "busload", "--json"]) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert main(["design", "busload", "--bitrate", "500000", "--json"]) == 0
+    assert default == json.loads(capsys.readouterr().out)
+    assert default["load_percent_worst"] < 40.0
+
+
+@pytest.mark.parametrize("command", ["margins", "tune", "compare"])
+def test_quick_is_the_same_24_point_envelope_in_every_design_command(command: str) -> None:
+    from mrsteer_cli import design_cli
+    from mrsteer_cli.cli import build_parser
+
+    quick = design_cli._envelope(build_parser().parse_args(["design", command, "--quick"]))
+    assert quick == M.QUICK_ENVELOPE and len(quick) == 24
+    assert design_cli._envelope(build_parser().parse_args(["design", command])) == M.Envelope()
+    assert len(design_cli._envelope(build_parser().parse_args(["design", command, "--quick", "--mass-grid",
+                                                               "1500"]))) == 12

@@ -19,6 +19,7 @@ from firmware_py.controller.options import calibration_from_args, describe_gains
 from firmware_py.platform.cli import EXIT_USAGE, Parser
 from mrsteer_cli import campaign_cli, design_cli, hil_cli, replay_cli
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number, say
+from sim_plant.car.plants import LINEAR, PLANTS
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 from sim_plant.offline import experiments
@@ -58,6 +59,13 @@ def _add_controller(p: argparse.ArgumentParser, choices: Sequence[str] = CONTROL
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
 
 
+def _add_plant(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plant", choices=PLANTS, default=LINEAR,
+                   help="the car: linear (the paper's exact model, default) or nonlinear (the bus runs' realistic car: "
+                   "magic-formula tyres, the speed a state; needs --ts > 0; with --actuator default --sensors default "
+                   "it is the car of the realistic built-in scenarios)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="mrsteer", description="Limited-integrator model-regulator active steering: "
                     "controller firmware, vehicle simulator and tools.")
@@ -87,6 +95,7 @@ def _add_sim_parsers(sub: Any) -> None:
     p.add_argument("--mz", type=number("M_z", -1e5, 1e5), required=True, metavar="NM", help="yaw moment step in Nm")
     _add_operating_point(p, required=True)
     _add_controller(p)
+    _add_plant(p)
     add_models(p, seed=True)
     p.set_defaults(handler=_cmd_disturbance)
 
@@ -95,6 +104,7 @@ def _add_sim_parsers(sub: Any) -> None:
                            "uncontrolled car on dry road; yaw rate is reported in those units.")
     _add_operating_point(p, required=True)
     _add_controller(p)
+    _add_plant(p)
     add_models(p, seed=True)
     p.set_defaults(handler=_cmd_steer)
 
@@ -166,13 +176,22 @@ def _echo(args: argparse.Namespace) -> dict[str, object]:
             "model_delay_steps": cfg.model_delay_steps if args.ts > 0 else 0, "duration": args.duration}
 
 
+#: The law's gains in a result (``describe_gains``): printed as text on one ``gains`` line.
+_GAIN_KEYS = ("k", "tau", "tau_n", "schedule", "model_actuator_tau_s", "model_filter_hz")
+
+
 def _emit(args: argparse.Namespace, result: dict[str, object], title: str) -> None:
     if args.json:
         print(json.dumps(result, indent=2))
         return
     print(title)
     for key, value in result.items():
-        print(f"  {key:<28}{value:.6g}" if isinstance(value, float) else f"  {key:<28}{value}")
+        if key in _GAIN_KEYS:
+            if key == _GAIN_KEYS[0] or key == "schedule":
+                print(f"  {'gains':<28}{mr.format_gains(result)}")
+            continue
+        text = f"{value:.6g}" if isinstance(value, float) else "n/a" if value is None else value
+        print(f"  {key:<28}{text}")
 
 
 def _models_out(args: argparse.Namespace, trace: Any) -> tuple[Any, dict[str, object]]:
@@ -185,16 +204,16 @@ def _models_out(args: argparse.Namespace, trace: Any) -> tuple[Any, dict[str, ob
 def _cmd_disturbance(args: argparse.Namespace) -> int:
     exp = experiments.disturbance(_params(args), args.mz, args.controller, _config(args), args.duration)
     models, _ = _models_out(args, None)
-    trace = experiments.run(exp, args.ts, args.delay_steps, models)
-    _emit(args, {**trace.summary(), **_models_out(args, trace)[1], "m_z": args.mz, **_echo(args)},
-          f"yaw moment step of {args.mz:g} Nm")
+    trace = experiments.run(exp, args.ts, args.delay_steps, models, args.plant)
+    _emit(args, {**trace.summary(), **_models_out(args, trace)[1], **trace.car_summary(), "m_z": args.mz,
+                 **_echo(args)}, f"yaw moment step of {args.mz:g} Nm")
     return 0
 
 
 def _cmd_steer(args: argparse.Namespace) -> int:
     exp = experiments.steer(_params(args), args.controller, _config(args), args.duration)
     models, _ = _models_out(args, None)
-    trace = experiments.run(exp, args.ts, args.delay_steps, models)
+    trace = experiments.run(exp, args.ts, args.delay_steps, models, args.plant)
     s = trace.summary()
     result = {
         "peak_yaw_rate_norm": s["peak_yaw_rate_rad_s"],
@@ -205,6 +224,7 @@ def _cmd_steer(args: argparse.Namespace) -> int:
         "saturated": s["saturated"],
         "stable": s["stable"],
         **_models_out(args, trace)[1],
+        **trace.car_summary(),
         **_echo(args),
     }
     _emit(args, result, "driver steering step (yaw rate normalised to the uncontrolled dry-road steady state)")

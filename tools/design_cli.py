@@ -58,9 +58,9 @@ def _add_envelope(p: argparse.ArgumentParser) -> None:
 
 
 def _envelope(args: argparse.Namespace) -> Any:
-    from sim_plant.offline.margins import Envelope
+    from sim_plant.offline.margins import QUICK_ENVELOPE, Envelope
 
-    d = Envelope()
+    d = QUICK_ENVELOPE if getattr(args, "quick", False) else Envelope()
     return Envelope(args.v_grid or d.speeds, args.mu_grid or d.frictions, args.mass_grid or d.masses)
 
 
@@ -107,6 +107,9 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                    help=f"discretisation (default: the calibration's, {d.method})")
     _add_envelope(p)
     _add_reference(p)
+    p.add_argument("--quick", action="store_true",
+                   help="a coarse envelope by default: 24 points (v 5:50:4, mu 0.1:1:3, mass 1296:1800:2) instead of "
+                   "300; the grid options still override it")
     p.add_argument("--constraints", action="store_true",
                    help="also the constraint figures of issue 15 (extra sample of delay, actuator time constant "
                    "x0.5..x2, command noise, applied-angle saturation threshold, dry-road peaks); on by default "
@@ -132,7 +135,8 @@ def add_parsers(sub: Any, parser_class: type) -> None:
     p.add_argument("--out", type=Path, default=None, metavar="FILE.cfg",
                    help="with --schedule: write the tuned calibration there (firmware_py.calibration_file format)")
     p.add_argument("--quick", action="store_true",
-                   help="with --schedule: coarse local grids and few trials (a smoke test, under a minute of CPU)")
+                   help="verify on the 24-point envelope of `design margins --quick` unless a grid option says "
+                   "otherwise; with --schedule also coarse local grids and few trials (a smoke test)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
 
@@ -143,6 +147,9 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                         "stability, margins, delay margin, dry-road peaks, worst command noise, saturation "
                         "thresholds; with --out also a plot of peak yaw rate against command noise over candidates.")
     _add_envelope(p)
+    p.add_argument("--quick", action="store_true",
+                   help="the table on the 24-point envelope of `design margins --quick` unless a grid option says "
+                   "otherwise (the plot's candidates are scored as without it)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="also write tradeoff.png (and tradeoff.json) there: peak yaw rate at the Figure-10 point "
                    "against worst command noise over candidate calibrations")
@@ -152,8 +159,10 @@ def add_parsers(sub: Any, parser_class: type) -> None:
     p = dsub.add_parser("busload", help="CAN bus load of the DBC's frames (nominal and worst-case stuffing)",
                         description="Bus load of every cyclic frame of the DBC; the control-loop frames at the "
                         "control rate.")
-    p.add_argument("--bitrate", type=number("bitrate", 10e3, 1e6), required=True, metavar="BPS",
-                   help="bit rate in bit/s, e.g. 500000")
+    from mrsteer_dbc.busload import BITRATE
+
+    p.add_argument("--bitrate", type=number("bitrate", 10e3, 1e6), default=float(BITRATE), metavar="BPS",
+                   help=f"bit rate in bit/s (default {BITRATE}, the bus the shipped design budgets)")
     p.add_argument("--rate-hz", type=number("rate", 0.0, 10000.0, lo_open=True), default=None, metavar="HZ",
                    help="control rate (default: the DBC's cycle time of the control-loop frames)")
     p.add_argument("--dbc", type=Path, default=None, help="DBC file (default: the packaged dbc/mrsteer.dbc)")
@@ -180,9 +189,9 @@ def _fmt(x: float | None, spec: str) -> str:
 
 def _margins_table(result: dict[str, Any]) -> str:
     w = result["worst"]
-    lines = [f"{result['controller']} model regulator K={result['k']:g} tau={result['tau']:g} s "
-             f"tau_n={result['tau_n']:g} s, Ts={result['ts']:g} s, {result['delay_steps']} sample(s) of delay, "
-             f"model delay {result['model_delay_steps']}",
+    lines = [f"{result['controller']} model regulator, gains {mr.format_gains(result)}",
+             f"Ts={result['ts']:g} s, {result['delay_steps']} sample(s) of delay, model delay "
+             f"{result['model_delay_steps']}",
              f"{len(result['points'])} operating points: {'STABLE' if result['stable'] else 'UNSTABLE'} everywhere"
              if result["stable"] else
              f"{len(result['points'])} operating points: UNSTABLE at "
@@ -258,8 +267,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
     if args.schedule:
         return _cmd_tune_schedule(args)
-    if args.start is not None or args.out is not None or args.quick:
-        raise ValueError("--start, --out and --quick need --schedule")
+    if args.start is not None or args.out is not None:
+        raise ValueError("--start and --out need --schedule")
 
     try:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,

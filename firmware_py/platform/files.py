@@ -1,13 +1,15 @@
 """Output files written whole or not at all: a reader never sees half a file, and a failure
-(disk full, say) leaves the directory as it was."""
+(disk full, say) leaves the directory as it was.  ``staged_directory`` does the same for a set
+of outputs that takes long to make (a directory of runs)."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
-from typing import Mapping
+from typing import Iterator, Mapping
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -39,3 +41,44 @@ def write_files(directory: Path, files: Mapping[str, str | bytes]) -> list[Path]
 def write_atomic(path: Path, data: str | bytes) -> None:
     """One file, whole or not at all (``write_files``)."""
     write_files(path.parent, {path.name: data})
+
+
+@contextlib.contextmanager
+def staged_directory(target: Path) -> Iterator[Path]:
+    """A scratch directory beside ``target`` to make a set of outputs in.  When the block ends
+    without an error, each of its entries replaces ``target``'s entry of that name (others in
+    ``target`` are kept; ``target`` is created if need be); on an error, Ctrl-C included, it is
+    removed and ``target`` is as it was.  Nothing is moved into place before the whole set exists."""
+    if target.exists() and not target.is_dir():
+        raise ValueError(f"--out {target} exists and is not a directory")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    try:
+        yield stage
+        target.mkdir(exist_ok=True)
+        _swap_in(stage, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _swap_in(stage: Path, target: Path) -> None:
+    """Move ``stage``'s entries into ``target``; the entries they replace go to ``stage`` first
+    (removed with it), and come back if a move fails."""
+    old = stage / ".replaced"
+    old.mkdir()
+    new = [e for e in sorted(stage.iterdir()) if e != old]
+    moved: list[str] = []
+    try:
+        for entry in new:
+            if os.path.lexists(target / entry.name):
+                os.replace(target / entry.name, old / entry.name)
+            os.replace(entry, target / entry.name)
+            moved.append(entry.name)
+    except BaseException:
+        for name in moved:
+            with contextlib.suppress(OSError):
+                os.replace(target / name, stage / name)
+        for entry in old.iterdir():
+            with contextlib.suppress(OSError):
+                os.replace(entry, target / entry.name)
+        raise

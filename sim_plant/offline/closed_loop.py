@@ -9,7 +9,8 @@ from rest, speed constant):
   command reaches or leaves the limit are located by bisection on the exact solution.
 * ``simulate_discrete`` -- the *firmware's own* ``step()`` at a fixed step ``ts`` against
   the exactly (ZOH) discretised plant, with ``delay_steps`` samples between measurement
-  and applied command.
+  and applied command; or against the nonlinear car of the bus runs (``plants.Car``:
+  magic-formula tyres, the speed a state), stepped as the plant node steps it.
 
 ``discrete_loop_poles`` (``discrete_loop``, re-exported here) and ``continuous_loop_poles``
 give the linear (unsaturated) loop's poles, from which the ``stable`` verdicts come.
@@ -26,6 +27,7 @@ from scipy.linalg import expm
 
 from firmware_py import model_regulator as mr
 from sim_plant.car.actuator_dynamics import PositionActuator
+from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS, Car
 from sim_plant.car.sensors import SensorConfig, Sensors
 from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
 from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles, inverse_kn
@@ -73,8 +75,10 @@ class Trace:
     lat_accel: np.ndarray
     aux: np.ndarray
     saturated: bool
-    stable: bool
+    stable: bool | None
     applied: np.ndarray | None = None  # the angle the actuator applied (rad); None: the command itself
+    plant: str = LINEAR  # the car: ``plants.LINEAR`` or ``plants.NONLINEAR``
+    speed: np.ndarray | None = None  # the nonlinear car's speed (m/s); None: constant, the experiment's
 
     def applied_summary(self) -> dict[str, float]:
         """Peak and final applied auxiliary angle (deg), beside the command's in ``summary``."""
@@ -82,15 +86,25 @@ class Trace:
         return {"peak_applied_aux_deg": math.degrees(float(np.max(np.abs(applied)))),
                 "final_applied_aux_deg": math.degrees(float(applied[-1]))}
 
-    def summary(self) -> dict[str, float | bool]:
+    def summary(self) -> dict[str, float | bool | None]:
+        """The run's figures; ``stable`` is None on the nonlinear car (the poles are the linear loop's)."""
         return {
             "peak_aux_steer_deg": math.degrees(float(np.max(np.abs(self.aux)))),
             "final_aux_steer_deg": math.degrees(float(self.aux[-1])),
             "peak_yaw_rate_rad_s": float(np.max(np.abs(self.yaw_rate))),
             "final_yaw_rate_rad_s": float(self.yaw_rate[-1]),
             "saturated": bool(self.saturated),
-            "stable": bool(self.stable),
+            "stable": None if self.stable is None else bool(self.stable),
         }
+
+    def car_summary(self) -> dict[str, float | str]:
+        """Which car ran, and on the nonlinear one what the tyres did: the peak side slip and the
+        final speed."""
+        out: dict[str, float | str] = {"plant": self.plant}
+        if self.plant == NONLINEAR:
+            out["peak_side_slip_deg"] = math.degrees(float(np.max(np.abs(self.beta))))
+            out["final_speed_m_s"] = float(self.speed[-1]) if self.speed is not None else math.nan
+        return out
 
 
 def inverse_nominal_gain(cfg: mr.ControllerConfig, v: float) -> float:
@@ -228,8 +242,10 @@ def _bisect_event(M: np.ndarray, z0: np.ndarray, y_row: np.ndarray, limit: float
 # ----------------------------------------------------------------------------- discrete
 
 
-def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: LoopModels = IDEAL) -> Trace:
-    """The firmware's step() in closed loop with the exactly discretised plant.
+def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: LoopModels = IDEAL,
+                      plant: str = LINEAR) -> Trace:
+    """The firmware's step() in closed loop with the exactly discretised plant, or with the
+    nonlinear car (``plant``).
 
     At sample k the sensors read the plant (``Sensors``: exact for ideal sensors), the firmware
     computes a command, and that command reaches the actuator ``delay_steps`` samples later;
@@ -242,9 +258,9 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: 
         raise ValueError(f"delay_steps must be >= 0, got {delay_steps}")
     if not exp.saturate:
         raise ValueError("the firmware always applies its actuator limit; saturate=False is continuous-only")
-    ss = state_space(exp.params)
-    phi, gamma = zoh_discretize(ss.A, ss.B, ts)
-    car = _CarStep(exp, ts, models)
+    if plant not in PLANTS:
+        raise ValueError(f"plant must be one of {', '.join(PLANTS)}, got {plant!r}")
+    car = _CarStep(exp, ts, models) if plant == LINEAR else _NonlinearCarStep(exp, ts, models)
     sensors = Sensors(models.sensors, ts)
 
     use_controller = exp.controller != "none"
@@ -256,34 +272,42 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: 
         # takes the firmware out of its power-on (inactive) state without a command.
         mr.step(coeffs, state, 0.0, 0.0, exp.params.v)
     n = int(round(exp.duration / ts)) + 1
-    beta_hist = np.empty(n)
-    r_hist = np.empty(n)
-    aux_hist = np.empty(n)
-    applied_hist = np.empty(n)
+    hist = {key: np.empty(n) for key in ("beta", "r", "aux", "applied", "a_y", "v")}
     pipeline: deque[float] = deque([0.0] * (delay_steps + models.actuator.dead_time_samples))
-    v = exp.params.v
     dd = exp.delta_driver
     saturated = False
     for k in range(n):
-        beta_hist[k] = car.beta
-        r_hist[k] = car.r
+        hist["beta"][k], hist["r"][k], hist["v"][k] = car.beta, car.r, car.v
         if use_controller:
-            u = mr.step(coeffs, state, sensors.steer(dd), sensors.yaw_rate(car.r), sensors.speed(v))
+            u = mr.step(coeffs, state, sensors.steer(dd), sensors.yaw_rate(car.r), sensors.speed(car.v))
             saturated = saturated or state.status == mr.STATUS_SATURATED
         else:
             u = 0.0
-        aux_hist[k] = u
+        hist["aux"][k] = u
         pipeline.append(u)
-        applied_hist[k] = car.step(pipeline.popleft())
+        hist["applied"][k] = car.step(pipeline.popleft())
+        hist["a_y"][k] = car.a_y
     t = np.arange(n) * ts
-    delta_f = dd + applied_hist
-    out = ss.C @ np.vstack([beta_hist, r_hist]) + ss.D @ np.vstack([delta_f, np.full(n, exp.m_z)])
-    if use_controller:
+    if plant == LINEAR:
+        ss = state_space(exp.params)
+        out = ss.C @ np.vstack([hist["beta"], hist["r"]]) + ss.D @ np.vstack([dd + hist["applied"],
+                                                                             np.full(n, exp.m_z)])
+        hist["a_y"] = out[2]
+    stable = _linear_loop_stable(exp, ts, delay_steps, models, coeffs if use_controller else None) \
+        if plant == LINEAR else None
+    return Trace(t, hist["r"], hist["beta"], hist["a_y"], hist["aux"], saturated, stable, hist["applied"], plant,
+                 None if plant == LINEAR else hist["v"])
+
+
+def _linear_loop_stable(exp: Experiment, ts: float, delay_steps: int, models: LoopModels,
+                        coeffs: mr.Coefficients | None) -> bool:
+    """Whether the linear (unsaturated) loop's poles are inside the unit circle."""
+    if coeffs is not None:
         poles = discrete_loop_poles(exp.params, coeffs, delay_steps, models=models)
     else:
-        poles = np.linalg.eigvals(phi)
-    stable = bool(np.all(np.abs(poles) < 1.0))
-    return Trace(t, r_hist, beta_hist, out[2], aux_hist, saturated, stable, applied_hist)
+        ss = state_space(exp.params)
+        poles = np.linalg.eigvals(zoh_discretize(ss.A, ss.B, ts)[0])
+    return bool(np.all(np.abs(poles) < 1.0))
 
 
 class _CarStep:
@@ -303,6 +327,8 @@ class _CarStep:
         self.order = act.order
         self.dd = exp.delta_driver
         self.beta = self.r = 0.0
+        self.v = exp.params.v
+        self.a_y = math.nan  # the caller computes the linear car's a_y from its states, vectorised
         if self.order == 0:
             ss = state_space(exp.params)
             phi, gamma = zoh_discretize(ss.A, ss.B, ts)
@@ -332,4 +358,34 @@ class _CarStep:
         x[2] = self.actuator.step(command)
         self._x = x
         self.beta, self.r = float(x[0]), float(x[1])
+        return applied
+
+
+class _NonlinearCarStep:
+    """The nonlinear car (``plants.Car``) and the actuator over one sample, as the plant node
+    steps them (``sim_plant.nodes.plant.PlantNode.step``): the outputs at the position as the
+    sample begins, then ``PositionActuator`` moves and the car advances with its mean position
+    over the sample (the ideal actuator: the clamped command itself).  The actuator's dead
+    time is in the caller's queue."""
+
+    def __init__(self, exp: Experiment, ts: float, models: LoopModels) -> None:
+        self.car = Car(NONLINEAR, exp.params, ts)
+        self.actuator = PositionActuator(replace(models.actuator, dead_time_samples=0), ts)
+        self.ideal = models.actuator.order == 0
+        self.dd, self.m_z = exp.delta_driver, exp.m_z
+        self.beta = self.r = self.a_y = 0.0
+        self.v = self.car.v
+
+    def step(self, command: float) -> float:
+        """The command reaching the actuator this sample; returns the applied angle at its start."""
+        act = self.actuator
+        if self.ideal:
+            act.step(command)
+        applied = act.position
+        self.a_y = float(self.car.outputs(self.dd + applied, self.m_z)[2])
+        if not self.ideal:
+            act.step(command)
+        self.car.advance(self.dd + act.mean, self.m_z)
+        self.beta, self.r = (float(x) for x in self.car.x)
+        self.v = self.car.v
         return applied

@@ -11,19 +11,24 @@ from dataclasses import replace
 
 from firmware_py import model_regulator as mr
 from sim_plant.offline.closed_loop import Experiment, Trace, simulate_continuous, simulate_discrete
+from sim_plant.car.plants import LINEAR
 from sim_plant.car.vehicle import VehicleParams, steering_tf
 from sim_plant.offline.discrete_loop import IDEAL
 from sim_plant.offline.loop_plant import LoopModels
 
 
-def run(exp: Experiment, ts: float = 0.0, delay_steps: int = 1, models: LoopModels = IDEAL) -> Trace:
+def run(exp: Experiment, ts: float = 0.0, delay_steps: int = 1, models: LoopModels = IDEAL,
+        plant: str = LINEAR) -> Trace:
     """Continuous reference for ``ts == 0``, otherwise the firmware at step ``ts`` with the
-    actuator and sensor ``models`` in the loop."""
+    actuator and sensor ``models`` in the loop, on the ``plant`` car (``plants.PLANTS``)."""
     if ts == 0.0:
+        if plant != LINEAR:
+            raise ValueError(f"the {plant} car runs with the firmware at a step: give --ts > 0 (the continuous "
+                             "reference, --ts 0, is of the linear car)")
         if not models.is_ideal:
             raise ValueError("an actuator or sensor model needs the sampled loop: give --ts > 0")
         return simulate_continuous(exp)
-    return simulate_discrete(exp, ts, delay_steps, models)
+    return simulate_discrete(exp, ts, delay_steps, models, plant)
 
 
 def disturbance(params: VehicleParams, m_z: float, controller: str,

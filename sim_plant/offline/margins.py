@@ -83,6 +83,11 @@ class Envelope:
         return len(self.speeds) * len(self.frictions) * len(self.masses)
 
 
+#: ``--quick``: 24 points (v 5, 20, 35, 50 m/s; mu 0.1, 0.55, 1; m 1296 and 1800 kg), the default
+#: envelope's corners among them: a look in seconds, not the verdict of the default envelope.
+QUICK_ENVELOPE = Envelope(linspace_grid(5.0, 50.0, 4), linspace_grid(0.1, 1.0, 3), (PAPER_MASS, 1800.0))
+
+
 @dataclass(frozen=True)
 class Margins:
     """Margins of one operating point. ``None`` where there is no crossover (infinite margin)."""
