@@ -271,6 +271,11 @@ def test_a_command_is_never_sent_beyond_the_value_computed(contract: mrsteer_dbc
         assert abs(y) <= abs(x) and abs(x - y) < 1e-6 and y * x >= 0.0
     for k in (-52359, -123, -1, 0, 1, 123, 246, 253, 52359):  # 246e-6 / 1e-6 = 245.99999999999997
         assert sent(k * 1e-6) == k * 1e-6
+    # the status's lateness at its maximum (the node's clamp) decodes inside its range: 65534, not 65535
+    status = {"CtrlStatus_State": 1, "CtrlStatus_InputFlags": 0, "CtrlStatus_Plausibility": 0, "CtrlStatus_Cause": 0,
+              "CtrlStatus_Rejected": 0, "CtrlStatus_Overruns": 0, "CtrlStatus_MaxLateness": 0.65535}
+    d = contract.decode(contract.frame_id("MRS_CtrlStatus"), contract.encode("MRS_CtrlStatus", status))
+    assert d is not None and d.status is E2EStatus.OK and d.signals["CtrlStatus_MaxLateness"] == pytest.approx(0.65534)
     # a sensor still rounds to the nearest raw value: 0.0001 + 0.6 LSB reads one LSB up
     yaw = contract.decode(contract.frame_id("MRS_YawRate"),
                           contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.00016}, counter=1))

@@ -81,7 +81,7 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_YAW_RATE, SIG_YAW_RATE_2)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
-# The longest the start state lasts while no sensor frame at all has come (a bus silent from
+# The longest the start state lasts, from the first cycle (what ends it for a bus silent from
 # power-up); ``hil run`` starts the plant after the controller, seconds later on a loaded machine.
 START_TIMEOUT_S = 10.0
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for

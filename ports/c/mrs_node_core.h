@@ -20,7 +20,7 @@
 
 #define MRS_LATENESS_BINS 50000u /* 1 us bins up to 50 ms; one more for the overflow */
 #define MRS_SYNC_STALE_CYCLES 3 /* MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH */
-/* The longest the start state lasts while no sensor frame at all has come (node.py's START_TIMEOUT_S). */
+/* The longest the start state lasts, from the first period (node.py's START_TIMEOUT_S). */
 #define MRS_START_TIMEOUT_S 10.0
 #define MRS_N_INPUTS 4 /* driver angle, yaw rate, speed, the redundant sensors */
 #define MRS_IN_REDUNDANT 3 /* its index in mrs_node_t.in */

@@ -1,20 +1,19 @@
 """What a HIL run's logged traffic says about the plausibility monitor (issue 18): which bits the
 controller reported, when it first reported a plausibility fault (``fault_detected_s``) or the
 degraded state (``first_degraded_s``; ``latched_degraded_s``: from the sensor fault's onset on,
-in every status to the end, as OUTSIDE_MODEL's is and a missing input's is not), the earlier of
-the fault and the latched degraded state (``reported_s``, ``reported_as``: issue 18's report; from the
-first of the run of DEGRADED commands leading up to its first status, when that run began at or
-after the onset),
-how long after the scenario's first sensor fault that was, and where the command was at the
-end.  Part of ``summary.json``.
+in every status to the end, as OUTSIDE_MODEL's is and a missing input's is not, timed from the
+first of the DEGRADED commands leading up to its first status when they began at or after the
+onset), the earlier of the fault and the latched degraded state (``reported_s``, ``reported_as``:
+issue 18's report), how long after the scenario's first sensor fault that was, and where the
+command was at the end.  Part of ``summary.json``.
 
 The detection time is read from the command frames, which come every control period: the first
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
 plausibility fault bit (``CtrlStatus_Plausibility`` 1 or 2; the status frame itself comes only
 every 100 ms); ``first_degraded_s`` likewise the first of the run of DEGRADED commands that leads
 up to the first status with the degraded bit (4), or that status's time when the command there
-was not DEGRADED (a FAULT outranks it).  The plant's trace also gives when the faulted sensor's error (its reading less
-the same sensor's without the fault, at the trace's true values: the fault's own; plus the
+was not DEGRADED (a FAULT outranks it).  The plant's trace also gives when the faulted
+sensor's error (its reading less the same sensor's without the fault, at the trace's true values: the fault's own; plus the
 healthy sensors' biases its check sees with it, ``plausibility_runs.check_offset``) first
 exceeded the bound the monitor checks it against, the moment from which issue 18
 counts its 300 ms (``error_over_bound_s``; ``yaw_error_over_bound_s`` the same for a yaw-rate
