@@ -59,9 +59,11 @@ FAULT_DRIVER_ANGLE = 0x01
 FAULT_YAW_RATE = 0x02
 FAULT_SPEED = 0x04
 
+# The plausibility monitor's CtrlStatus_Plausibility bits, for reported_state().
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT  # noqa: E402
+
 # The calibration lives in its own module; it is re-exported here because a port reads
 # both together (ports/c/mrs_controller.h holds the config, coefficient and state structs).
-from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT  # noqa: E402  (reported_state's bits)
 from firmware_py.calibration import (  # noqa: E402  (re-exports)
     AUX_LIMIT, DEFAULT_TAU_N, MAX_MODEL_DELAY, MAX_SCHEDULE, METHOD_TUSTIN, METHOD_ZOH, NOMINAL_C_F,
     NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS, PAPER_CONFIG, PAPER_K, PAPER_TAU, PREVIOUS_CONFIG,
@@ -73,9 +75,10 @@ __all__ = [
     "NOMINAL_C_R", "NOMINAL_L_F", "NOMINAL_L_R", "NOMINAL_MASS", "PAPER_CONFIG", "PAPER_K", "PAPER_TAU",
     "PREVIOUS_CONFIG", "Q_LIMITED", "Q_STANDARD", "ControllerConfig", "constant_gains", "describe_gains", "plain_law",
     "validate",
-    "STATUS_INACTIVE", "STATUS_ACTIVE", "STATUS_SATURATED", "STATUS_FAULT", "STATUS_DEGRADED", "STATUS_STARTING",
-    "FAULT_DRIVER_ANGLE", "FAULT_YAW_RATE", "FAULT_SPEED", "Coefficients", "LawPoint", "State", "q_filter",
-    "configure", "law_at", "reset", "step", "reported_state", "ModelRegulator",
+    "STATUS_INACTIVE", "STATUS_ACTIVE", "STATUS_SATURATED", "STATUS_FAULT", "FAULT_DRIVER_ANGLE",
+    "FAULT_YAW_RATE", "FAULT_SPEED", "Coefficients", "LawPoint", "State", "q_filter", "configure", "law_at",
+    "reset", "step", "ModelRegulator",
+    "STATUS_DEGRADED", "STATUS_STARTING", "reported_state",
 ]
 
 
