@@ -5,6 +5,10 @@ A signal whose value table names a raw value ``SNA`` (signal not available) deco
 that value, outside the range check, and encodes NaN (or a left-out value, when SNA is its DBC
 start value) as it: a sender without that signal's source says so in the frame.
 
+A signal with the DBC attribute ``MRS_RoundTowardZero`` (the command's angle) encodes to the raw
+value nearest to its value that is not further from zero (``toward_zero_raw``); every other
+signal to the nearest, as cantools does.
+
 Every frame layout, range, cycle time and E2E data ID comes from ``mrsteer.dbc`` through
 cantools; nothing here knows a bit position.
 """
@@ -28,6 +32,27 @@ def sna_raw(signal: Any) -> int | None:
     """A cantools signal's raw 'not available' value (its value table's ``SNA``), if it has one:
     the one place that reads the label, for the Python contract and the C glue alike."""
     return next((int(raw) for raw, label in (signal.choices or {}).items() if str(label) == SNA), None)
+
+
+def rounds_toward_zero(signal: Any) -> bool:
+    """The cantools signal has the DBC attribute ``MRS_RoundTowardZero`` = 1: the one place that
+    reads it, for the Python contract and the C glue alike."""
+    attr = (signal.dbc.attributes if signal.dbc is not None else {}).get("MRS_RoundTowardZero")
+    return attr is not None and int(attr.value) == 1
+
+
+def toward_zero_raw(value: float, scale: float, offset: float) -> int:
+    """The raw value nearest to ``value`` (ties to even, as cantools rounds) whose decoded value
+    ``raw * scale + offset`` is not further from zero than ``value``: one step back toward zero
+    where the nearest one is beyond it (the command at the 3 deg limit, 0.0523599 rad at 1e-6
+    rad, goes out as 52359, not 52360)."""
+    raw = round((value - offset) / scale)
+    decoded = raw * scale + offset
+    if value > 0.0 and decoded > value:
+        raw -= 1
+    elif value < 0.0 and decoded < value:
+        raw += 1
+    return raw
 
 
 def _carried(signal: Any) -> tuple[float, float]:
@@ -76,6 +101,13 @@ class Contract:
                               for s in m.signals if (raw := sna_raw(s)) is not None}
                      for m in self.db.messages}
         self._carried = {m.name: {s.name: _carried(s) for s in m.signals} for m in self.db.messages}
+        # (signal, scale, offset) of the signals rounded toward zero (MRS_RoundTowardZero).
+        self._toward_zero = {m.name: [(s.name, float(s.scale), float(s.offset)) for s in m.signals
+                                      if rounds_toward_zero(s)] for m in self.db.messages}
+        for m in self.db.messages:
+            for name, scale, _ in self._toward_zero[m.name]:
+                if scale <= 0.0 or m.get_signal_by_name(name).is_float:
+                    raise ContractError(f"{name}: MRS_RoundTowardZero needs a positive scale and integer raw values")
 
     @staticmethod
     def _e2e_config(msg: Any) -> E2EConfig | None:
@@ -169,6 +201,11 @@ class Contract:
                 value = full.get(sig)
                 if isinstance(value, int | float) and not isinstance(value, bool) and not math.isnan(value):
                     full[sig] = min(max(value, lo), hi)
+        for sig, scale, offset in self._toward_zero[name]:
+            value = full.get(sig)
+            if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+                # the decoded value of the raw value chosen: cantools rounds it back to that raw value
+                full[sig] = toward_zero_raw(value, scale, offset) * scale + offset
         if cfg is not None:
             if counter is None:
                 raise ValueError(f"{name} is E2E-protected: give the alive counter")

@@ -45,16 +45,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-# Controller status, as sent on the bus.
+# Controller status, as sent on the bus (AuxSteerCmd_State, CtrlStatus_State): step() gives the
+# first four (``State.status``), the node reports ``reported_state()`` of it.
 STATUS_INACTIVE = 0  # below activation speed, or not yet run: command held at / faded to 0
 STATUS_ACTIVE = 1
 STATUS_SATURATED = 2  # command clamped at the actuator limit
-STATUS_FAULT = 3  # an input was non-finite or out of range: command fades to 0
+STATUS_FAULT = 3  # an input was non-finite or out of range, or a plausibility fault: command fades to 0
+STATUS_DEGRADED = 4  # the plausibility monitor degraded (PLAUS_DEGRADED): fewer checks, or the command fades
+STATUS_STARTING = 5  # from power-up until every sensor input has been received once (the node's)
 
 # Fault flags (bit set), which input caused STATUS_FAULT.
 FAULT_DRIVER_ANGLE = 0x01
 FAULT_YAW_RATE = 0x02
 FAULT_SPEED = 0x04
+
+# The plausibility monitor's CtrlStatus_Plausibility bits, for reported_state().
+from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT  # noqa: E402
 
 # The calibration lives in its own module; it is re-exported here because a port reads
 # both together (ports/c/mrs_controller.h holds the config, coefficient and state structs).
@@ -72,6 +78,7 @@ __all__ = [
     "STATUS_INACTIVE", "STATUS_ACTIVE", "STATUS_SATURATED", "STATUS_FAULT", "FAULT_DRIVER_ANGLE",
     "FAULT_YAW_RATE", "FAULT_SPEED", "Coefficients", "LawPoint", "State", "q_filter", "configure", "law_at",
     "reset", "step", "ModelRegulator",
+    "STATUS_DEGRADED", "STATUS_STARTING", "reported_state",
 ]
 
 
@@ -394,6 +401,24 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     s.u_prev = u
     s.status = STATUS_SATURATED if (u >= c.u_max or u <= -c.u_max) else STATUS_ACTIVE
     return u
+
+
+def reported_state(status: int, plausibility: int, starting: bool) -> int:
+    """The state the controller node sends (``AuxSteerCmd_State``, ``CtrlStatus_State``) for
+    step()'s ``status`` and the plausibility monitor's ``CtrlStatus_Plausibility`` bits: FAULT on
+    a plausibility fault; else STARTING while the node is ``starting`` (its inputs not all
+    received yet: what they give, FAULT or DEGRADED, is theirs); else FAULT when step() faulted,
+    DEGRADED when the monitor is degraded, else step()'s status.  ports/c/mrs_controller.c's
+    mrs_reported_state is its port."""
+    if plausibility & PLAUS_FAULT:
+        return STATUS_FAULT
+    if starting:
+        return STATUS_STARTING
+    if status == STATUS_FAULT:
+        return STATUS_FAULT
+    if plausibility & PLAUS_DEGRADED:
+        return STATUS_DEGRADED
+    return status
 
 
 class ModelRegulator:

@@ -76,7 +76,34 @@ def lockstep_traffic(log: "os.PathLike[str] | str") -> dict[str, list]:
     return out
 
 
-__all__ = ["lockstep_traffic", "polymul", "polyadd", "P"]
+def logged_states(log: "os.PathLike[str] | str") -> tuple[list[int], list[int], list[int]]:
+    """The states of a run's logged commands and of its status frames up to the plant's last
+    frame's answer, and for each command whether it came after that (a watchdog cycle of a
+    controller not yet stopped, or the final zero command)."""
+    from pathlib import Path
+
+    import mrsteer_dbc
+    from mrsteer_dbc import names
+
+    c = mrsteer_dbc.load()
+    cmd, status, plant = c.frame_id(names.MSG_CMD), c.frame_id(names.MSG_STATUS), {
+        c.frame_id(n) for n in names.VEHICLE_SENSORS}
+    frames = [(int(f, 16), bytes.fromhex(d)) for f, d in (ln.split()[2].split("#") for ln in Path(log).read_text().splitlines())]
+    last = max(i for i, (fid, _) in enumerate(frames) if fid in plant)
+    cmds, statuses, after = [], [], []
+    for i, (fid, data) in enumerate(frames):
+        if fid in (cmd, status):
+            d = c.decode(fid, data)
+            assert d is not None and d.status is mrsteer_dbc.E2EStatus.OK
+            if fid == cmd:
+                cmds.append(int(d.signals[names.SIG_CMD_STATE]))
+                after.append(i > last + 1)  # the frame after the plant's last answers it
+            elif i <= last + 2:  # the status of the last answer's cycle follows it
+                statuses.append(int(d.signals[names.SIG_STATUS_STATE]))
+    return cmds, statuses, after
+
+
+__all__ = ["lockstep_traffic", "logged_states", "polymul", "polyadd", "P"]
 
 
 #: Rows of a realtime fault matrix that may fail once on a shared machine and be run again.

@@ -505,7 +505,8 @@ def test_the_c_law_s_hold_is_bit_identical_to_python_through_the_replay_driver(t
 def test_the_replay_driver_s_ninth_number_is_the_angle_of_the_monitor_s_first_step(tmp_path: Path) -> None:
     """``mrs_replay``'s ``DELTA_DRIVER_MONITOR``: the steering pair judges a redundant sample
     against it (the driver's angle that came with the sample, ``monitor_driver_angle``), later
-    steps and ``mrs_step`` take ``DELTA_DRIVER``; more than nine numbers is an error."""
+    steps and ``mrs_step`` take ``DELTA_DRIVER``; the tenth, STARTING, reports the start state
+    (0 or 1); more than ten numbers is an error."""
     from firmware_py import calibration_file
     from firmware_py import model_regulator as mr
     from sim_plant.harness import replay_c
@@ -531,6 +532,14 @@ def test_the_replay_driver_s_ninth_number_is_the_angle_of_the_monitor_s_first_st
 
     assert run(ninth=False) == {0, pl.PLAUS_STEER}  # paired with the newest angle: a steering fault
     assert run(ninth=True) == {0}
-    for bad in ("0.01 0.1 20 1 0.01 1 nan nan 0.01 5\n", "0.01 0.1 20 x\n"):
+    for bad in ("0.01 0.1 20 1 0.01 1 nan nan 0.01 0 5\n", "0.01 0.1 20 x\n"):
         proc = subprocess.run([str(exe), str(path)], input=bad, capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2 and "text after the numbers" in proc.stderr
+    # STARTING: in place of the law's FAULT on a missing input, not of a healthy line's state
+    lines = f"nan {r!r} {v!r} nan nan 1 nan nan nan 1\n{d!r} {r!r} {v!r} {v * r!r} {d!r} 1 nan nan {d!r} 0\n"
+    proc = subprocess.run([str(exe), str(path)], input=lines, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and [int(ln.split()[1]) for ln in proc.stdout.splitlines()] == [
+        mr.STATUS_STARTING, mr.STATUS_ACTIVE]
+    proc = subprocess.run([str(exe), str(path)], input="0.01 0.1 20 1 0.01 1 nan nan 0.01 5\n", capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2 and "the tenth 0 or 1" in proc.stderr

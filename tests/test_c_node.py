@@ -17,7 +17,8 @@ import pytest
 
 import mrsteer_dbc
 
-from conftest import lockstep_traffic, matrix_with_one_rerun
+from conftest import lockstep_traffic, logged_states, matrix_with_one_rerun
+from firmware_py import model_regulator as mr
 from sim_plant.car import scenario as scn
 from sim_plant.harness import hil, launch
 
@@ -64,6 +65,15 @@ def test_lockstep_c_node_sends_the_python_controllers_frames_bit_for_bit(c_node,
         assert c.summary[key] == py.summary[key], key
     for key in ("rx_frames", "rx_rejected"):  # cycles and faults: the watchdog cycles before the plant's start
         assert c.summary["loop"]["controller"][key] == py.summary["loop"]["controller"][key], key
+    # A clean start and run: STARTING before the plant's first frame (not FAULT), no FAULT or
+    # DEGRADED after it, and no fault entered (but a watchdog cycle's after the plant ended, should
+    # the harness stop the controller that late).
+    for d, run in (("py", py), ("c", c)):
+        cmds, statuses, after = logged_states(tmp_path / d / "traffic.log")
+        assert not {mr.STATUS_FAULT, mr.STATUS_DEGRADED} & {s for s, late in zip(cmds, after) if not late}, d
+        assert not {mr.STATUS_FAULT, mr.STATUS_DEGRADED} & set(statuses), d
+        post = any(s == mr.STATUS_FAULT for s, late in zip(cmds, after) if late)
+        assert run.summary["loop"]["controller"]["faults_entered"] == int(post), d
 
 
 def test_lockstep_c_node_with_secoc_equals_python(c_node, tmp_path: Path) -> None:
@@ -99,6 +109,30 @@ def test_c_node_signs_every_golden_command_frame(c_node) -> None:
     assert got[0] == "ok"
     assert got[1:] == [r["frame_hex"] for r in cmds]  # every byte, MAC and CRC included
     assert len(cmds) >= 50
+
+
+def test_the_c_node_rounds_the_command_toward_zero_as_the_contract_does(c_node) -> None:
+    """The C TX path (the generated pack) and the Python contract encode every command alike, the
+    3 deg limit as 52359 (2.99995 deg, not 52360: 3.00001 deg); random angles, ties included."""
+    import random
+
+    c = mrsteer_dbc.load()
+    rng = random.Random(50)
+    limit = math.radians(3.0)
+    angles = [limit, -limit, 0.0, 0.5e-6, -0.5e-6, 2.5e-6, -2.5e-6, 246e-6, 0.05236, -0.0524, 0.0524]
+    angles += [rng.uniform(-0.0524, 0.0524) for _ in range(300)] + [rng.randrange(-52400, 52401) * 1e-6
+                                                                     for _ in range(100)]
+    got = _secoc_check(["plain"] + [f"cmd 0 0 {k % 15} 2 {a!r} 3" for k, a in enumerate(angles)])
+    assert got[0] == "ok"
+    fid = c.frame_id("MRS_AuxSteerCmd")
+    for k, (a, frame) in enumerate(zip(angles, got[1:])):
+        py = c.encode("MRS_AuxSteerCmd", {"AuxSteerCmd_State": 2, "AuxSteerCmd_Angle": a,
+                                          "AuxSteerCmd_MeasCounter": 3}, k % 15)
+        assert frame == py.hex(), a
+        sent = c.decode(fid, py).signals["AuxSteerCmd_Angle"]
+        assert abs(sent) <= abs(a) and abs(a - sent) < 1e-6, a
+    at_limit = c.decode(fid, bytes.fromhex(got[1])).signals["AuxSteerCmd_Angle"]
+    assert at_limit == pytest.approx(52359e-6, abs=1e-12) and math.degrees(at_limit) <= 3.0
 
 
 def test_c_node_verifies_the_golden_sensor_frames_as_the_python_controller_does(c_node) -> None:

@@ -85,6 +85,8 @@ class Drive:
     second_speed: float = math.nan  # RedundantSensors_Speed2 (NaN: SNA, a car without it)
     second_speed_drift: float = 0.0  # m/s per s it drifts by from STUCK_T
     second_speed_lost: float = math.inf  # s from which it is SNA (the source failed)
+    speed: bool = True  # the speed frames sent (else the sensor never comes)
+    idle: int = 0  # control periods before the first frame (a node up before the car)
 
     def frames(self, contract: mrsteer_dbc.Contract) -> list[list[tuple[int, bytes]]]:
         """The frames received before each control period (the plant's order and cycle times)."""
@@ -93,7 +95,7 @@ class Drive:
         gain = V / (2.54 + 0.0023 * V * V)  # close to the nominal car's K_n(v); the monitor's bounds are wide
         alive = dict.fromkeys(every, 0)
         late: dict[int, list[tuple[int, bytes]]] = {}
-        out = []
+        out: list[list[tuple[int, bytes]]] = [[] for _ in range(self.idle)]
         for k in range(int(self.seconds * RATE_HZ)):
             t = k / RATE_HZ
             delta = self.weave[0] * math.sin(2 * math.pi * self.weave[1] * t)
@@ -110,7 +112,8 @@ class Drive:
                                       if self.second_yaw and t < self.second_yaw_lost else math.nan}}
             period = []
             for msg, n in every.items():
-                if k % n or (msg == names.MSG_REDUNDANT and not self.redundant):
+                if k % n or (msg == names.MSG_REDUNDANT and not self.redundant) or (
+                        msg == names.MSG_SPEED and not self.speed):
                     continue
                 frame = (contract.frame_id(msg), contract.encode(msg, values[msg], alive[msg]))
                 sample = k // every[names.MSG_REDUNDANT]
@@ -296,6 +299,11 @@ def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in
     window = au.AuthorityConfig().panic_window
     cmds, statuses = _run(secoc_check, Drive(seconds=window + 1.0, redundant=False))
     assert {int(s[names.SIG_STATUS_PLAUS]) for s in statuses} == {pl.PLAUS_DEGRADED}
+    # STARTING while the redundant frame may still come (its timeout from the first frame), then DEGRADED
+    limit = 250  # 10 of its 50 ms cycles at 500 Hz
+    assert [int(c[names.SIG_CMD_STATE]) for c in cmds] == [mr.STATUS_STARTING] * (limit + 1) + [
+        mr.STATUS_DEGRADED] * (len(cmds) - limit - 1)
+    assert {int(s[names.SIG_STATUS_STATE]) for s in statuses[-5:]} == {mr.STATUS_DEGRADED}
     # A missing redundant input is no cause bit and no fault.
     assert all(int(s[names.SIG_STATUS_CAUSE]) & (names.CAUSE_PLAUSIBILITY | 0x0F) == 0 for s in statuses[1:])
     assert mr.STATUS_FAULT not in {int(c[names.SIG_CMD_STATE]) for c in cmds}
@@ -303,6 +311,28 @@ def test_without_the_redundant_frame_the_node_is_degraded_and_time_limited_as_in
     k_dist = int(DIST_T * RATE_HZ)
     assert abs(cmds[k_dist + int(0.5 * RATE_HZ)][names.SIG_CMD_ANGLE]) > 1e-3
     assert all(c[names.SIG_CMD_ANGLE] == 0.0 for c in cmds[-int(0.3 * RATE_HZ):])
+
+
+def test_a_clean_start_after_idle_periods_is_starting_then_active_as_in_python(secoc_check: Path) -> None:
+    cmds, statuses = _run(secoc_check, Drive(seconds=0.3, idle=7))
+    states = [int(c[names.SIG_CMD_STATE]) for c in cmds]
+    assert states[:7] == [mr.STATUS_STARTING] * 7 and set(states[7:]) == {mr.STATUS_ACTIVE}
+    assert int(statuses[0][names.SIG_STATUS_STATE]) == mr.STATUS_ACTIVE
+
+
+def test_a_speed_that_never_comes_is_starting_then_a_fault_as_in_python(secoc_check: Path) -> None:
+    cmds, statuses = _run(secoc_check, Drive(seconds=0.6, idle=3, speed=False))
+    limit = 100  # 10 of its 20 ms cycles at 500 Hz, counted from the first frame
+    states = [int(c[names.SIG_CMD_STATE]) for c in cmds]
+    assert states == [mr.STATUS_STARTING] * (3 + limit + 1) + [mr.STATUS_FAULT] * (len(states) - limit - 4)
+    assert {int(s[names.SIG_STATUS_CAUSE]) & 0x0F for s in statuses} == {names.CAUSE_SPEED_MISSING}
+
+
+def test_a_silent_bus_is_starting_for_the_start_timeout_then_a_fault_as_in_python(secoc_check: Path) -> None:
+    limit = round(rt.START_TIMEOUT_S * RATE_HZ)
+    cmds, statuses = _run(secoc_check, Drive(seconds=0.0, idle=limit + 3))
+    assert [int(c[names.SIG_CMD_STATE]) for c in cmds] == [mr.STATUS_STARTING] * limit + [mr.STATUS_FAULT] * 3
+    assert int(statuses[-1][names.SIG_STATUS_CAUSE]) == 0x07
 
 
 def test_redundant_samples_off_time_are_withheld_as_in_python(secoc_check: Path) -> None:

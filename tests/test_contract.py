@@ -188,11 +188,98 @@ def test_firmware_ranges_agree_with_the_dbc(contract: mrsteer_dbc.Contract) -> N
     assert hi >= d.aux_limit and hi - d.aux_limit < 1e-3 and lo == -hi
 
 
-def test_status_and_state_values_match_the_firmware(contract: mrsteer_dbc.Contract) -> None:
-    choices = contract.message("MRS_AuxSteerCmd").get_signal_by_name("AuxSteerCmd_State").choices
-    assert {int(k): str(v) for k, v in choices.items()} == {
-        mr.STATUS_INACTIVE: "INACTIVE", mr.STATUS_ACTIVE: "ACTIVE", mr.STATUS_SATURATED: "SATURATED",
-        mr.STATUS_FAULT: "FAULT"}
+STATES = {0: "INACTIVE", 1: "ACTIVE", 2: "SATURATED", 3: "FAULT", 4: "DEGRADED", 5: "STARTING"}
+
+
+def test_both_state_signals_carry_the_six_states_of_the_firmware_and_the_c_port(contract: mrsteer_dbc.Contract) -> None:
+    from pathlib import Path
+
+    for msg, sig in (("MRS_AuxSteerCmd", "AuxSteerCmd_State"), ("MRS_CtrlStatus", "CtrlStatus_State")):
+        s = contract.message(msg).get_signal_by_name(sig)
+        assert {int(k): str(v) for k, v in s.choices.items()} == STATES, sig
+        assert (s.length, s.is_signed, s.minimum, s.maximum) == (3, False, 0, 5), sig
+    python = {name: getattr(mr, f"STATUS_{name}") for name in STATES.values()}
+    assert python == {name: value for value, name in STATES.items()}
+    header = (Path(__file__).resolve().parents[1] / "ports" / "c" / "mrs_controller.h").read_text()
+    for name, value in python.items():
+        assert f"#define MRS_STATUS_{name} {value}u\n" in header, name
+
+
+def test_the_two_messages_that_carry_the_state_lose_no_signal(contract: mrsteer_dbc.Contract) -> None:
+    """The command and the status: every signal of each in its own bits of the frame, the SecOC
+    epoch bit moved next to the wider state, the status's overrun counter 13 bits (its comment
+    says why), and the frames' lengths (so the bus load) as they were."""
+    layout = {
+        "MRS_AuxSteerCmd": {"AuxSteerCmd_CRC": (0, 8), "AuxSteerCmd_Counter": (8, 4), "AuxSteerCmd_State": (12, 3),
+                            "AuxSteerCmd_FvEpoch": (15, 1), "AuxSteerCmd_Angle": (16, 24),
+                            "AuxSteerCmd_MeasCounter": (40, 4), "AuxSteerCmd_FvCounter": (44, 4),
+                            "AuxSteerCmd_MAC": (48, 16)},
+        "MRS_CtrlStatus": {"CtrlStatus_State": (0, 3), "CtrlStatus_Plausibility": (3, 3), "CtrlStatus_Cause": (8, 8),
+                           "CtrlStatus_Rejected": (16, 16), "CtrlStatus_InputFlags": (32, 3),
+                           "CtrlStatus_Overruns": (35, 13), "CtrlStatus_MaxLateness": (48, 16)},
+    }
+    for name, signals in layout.items():
+        m = contract.message(name)
+        assert m.length == 8
+        assert {s.name: (s.start, s.length) for s in m.signals} == signals
+    overruns = contract.message("MRS_CtrlStatus").get_signal_by_name("CtrlStatus_Overruns")
+    assert "13 bits" in overruns.comment and "50 between two status frames" in overruns.comment
+    for m in contract.db.messages:  # no two signals share a bit, none leaves its frame
+        bits = [b for s in m.signals for b in range(s.start, s.start + s.length)]
+        assert len(bits) == len(set(bits)) and max(bits) < 8 * m.length, m.name
+    from mrsteer_dbc.busload import bus_load
+
+    assert bus_load(contract, 500e3).load_percent_worst < 40.0  # the budget (docs/can-runtime.md)
+
+
+def test_every_state_round_trips_through_both_frames(contract: mrsteer_dbc.Contract) -> None:
+    cmd, status = contract.frame_id("MRS_AuxSteerCmd"), contract.frame_id("MRS_CtrlStatus")
+    for state in STATES:
+        d = contract.decode(cmd, contract.encode("MRS_AuxSteerCmd", {"AuxSteerCmd_State": state,
+                                                                     "AuxSteerCmd_Angle": -0.01,
+                                                                     "AuxSteerCmd_MeasCounter": 7}, counter=3))
+        assert d is not None and d.status is E2EStatus.OK and d.signals["AuxSteerCmd_State"] == state
+        values = {"CtrlStatus_State": state, "CtrlStatus_InputFlags": 7, "CtrlStatus_Plausibility": 5,
+                  "CtrlStatus_Cause": 0xA5, "CtrlStatus_Rejected": 65535, "CtrlStatus_Overruns": 8191,
+                  "CtrlStatus_MaxLateness": 0.01}
+        d = contract.decode(status, contract.encode("MRS_CtrlStatus", values))
+        assert d is not None and d.status is E2EStatus.OK
+        assert d.signals == pytest.approx(values)
+
+
+def test_a_command_is_never_sent_beyond_the_value_computed(contract: mrsteer_dbc.Contract) -> None:
+    """AuxSteerCmd_Angle rounds toward zero (MRS_RoundTowardZero): the 3 deg limit, which the
+    nearest raw value would send as 3.00001 deg, reads 2.99995 deg; a value on the 1e-6 rad grid
+    (a decoded command re-encoded) keeps its raw value; other signals still round to nearest."""
+    fid = contract.frame_id("MRS_AuxSteerCmd")
+    assert mrsteer_dbc.contract.rounds_toward_zero(
+        contract.message("MRS_AuxSteerCmd").get_signal_by_name("AuxSteerCmd_Angle"))
+
+    def sent(angle: float) -> float:
+        d = contract.decode(fid, contract.encode("MRS_AuxSteerCmd", {"AuxSteerCmd_State": 2, "AuxSteerCmd_Angle": angle,
+                                                                     "AuxSteerCmd_MeasCounter": 0}, counter=0))
+        assert d is not None and d.status is E2EStatus.OK
+        return d.signals["AuxSteerCmd_Angle"]
+
+    limit = math.radians(3.0)
+    assert sent(limit) == pytest.approx(0.052359, abs=1e-12) and sent(-limit) == -sent(limit)
+    assert round(math.degrees(sent(limit)), 5) == 2.99995 and math.degrees(sent(limit)) <= 3.0
+    rng = random.Random(5)
+    for _ in range(2000):
+        x = rng.uniform(-0.0524, 0.0524)
+        y = sent(x)
+        assert abs(y) <= abs(x) and abs(x - y) < 1e-6 and y * x >= 0.0
+    for k in (-52359, -123, -1, 0, 1, 123, 246, 253, 52359):  # 246e-6 / 1e-6 = 245.99999999999997
+        assert sent(k * 1e-6) == k * 1e-6
+    # the status's lateness at its maximum (the node's clamp) decodes inside its range: 65534, not 65535
+    status = {"CtrlStatus_State": 1, "CtrlStatus_InputFlags": 0, "CtrlStatus_Plausibility": 0, "CtrlStatus_Cause": 0,
+              "CtrlStatus_Rejected": 0, "CtrlStatus_Overruns": 0, "CtrlStatus_MaxLateness": 0.65535}
+    d = contract.decode(contract.frame_id("MRS_CtrlStatus"), contract.encode("MRS_CtrlStatus", status))
+    assert d is not None and d.status is E2EStatus.OK and d.signals["CtrlStatus_MaxLateness"] == pytest.approx(0.65534)
+    # a sensor still rounds to the nearest raw value: 0.0001 + 0.6 LSB reads one LSB up
+    yaw = contract.decode(contract.frame_id("MRS_YawRate"),
+                          contract.encode("MRS_YawRate", {"YawRate_YawRate": 0.00016}, counter=1))
+    assert yaw is not None and yaw.signals["YawRate_YawRate"] == pytest.approx(0.0002)
 
 
 def test_a_broken_dbc_is_a_clear_error(tmp_path) -> None:

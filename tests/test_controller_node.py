@@ -18,6 +18,8 @@ C = mrsteer_dbc.load()
 #: RedundantSensors_LatAccel's LSB: a toggle of it makes a new redundant sample the monitor can tell
 LAT_LSB = C.message(names.MSG_REDUNDANT).get_signal_by_name(names.SIG_LAT_ACCEL).scale
 FADE = mr.ControllerConfig().fade_rate * 1e-3
+#: ``Rig.cycle``'s default redundant frame: the car's a_y = v r and the driver's angle, as the plant sends them
+CONSISTENT = (math.nan, math.nan)
 
 
 class Rig:
@@ -30,6 +32,7 @@ class Rig:
         self.counters = {n: mrsteer_dbc.AliveCounter() for n in names.VEHICLE_SENSORS}
         self.k = 0
         self.statuses: list[dict] = []
+        self.last = {"yaw": 0.0, "steer": 0.0, "speed": 20.0}  # the newest values sent
 
     def send(self, name: str, values: dict, *, counter: int | None = None, corrupt: bool = False,
              strict: bool = True) -> None:
@@ -40,11 +43,15 @@ class Rig:
         self.sensors.send(can.Message(arbitration_id=C.frame_id(name), data=bytes(data), is_extended_id=False))
 
     def cycle(self, yaw: float | None = 0.0, steer: float | None = 0.0, speed: float | None = 20.0,
-              redundant: tuple[float, float] | None = None, speed_2: float | None = None,
+              redundant: tuple[float, float] | None = CONSISTENT, speed_2: float | None = None,
               **kw) -> tuple[float, dict]:
         """One 1 ms cycle; ``redundant`` = (lateral acceleration, second steering channel), sent
-        every 50 ms as the plant does, with the LSB toggling as a real sensor's noise does (the
+        every 50 ms as the plant does (default ``CONSISTENT`` with the newest yaw rate, speed and
+        angle; None: not sent), with the LSB toggling as a real sensor's noise does (the
         monitor takes an unchanged frame for no new sample), and ``speed_2`` in it (None: SNA)."""
+        self.last.update({k: v for k, v in (("yaw", yaw), ("steer", steer), ("speed", speed)) if v is not None})
+        if redundant is CONSISTENT:
+            redundant = (self.last["speed"] * self.last["yaw"], self.last["steer"])
         if steer is not None:
             self.send(names.MSG_STEER, {"DriverSteer_Angle": steer})
         if speed is not None and self.k % 10 == 0:
@@ -260,11 +267,78 @@ def test_consistent_inputs_with_the_redundant_frame_raise_no_plausibility_bit(ri
 
 
 def test_without_the_redundant_frame_the_node_reports_degraded_but_no_fault(rig: Rig) -> None:
-    for _ in range(300):
-        _, sig = rig.cycle(yaw=0.02)
-    assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
+    # The start state waits for the redundant frame its own timeout (10 x 50 ms) from the first
+    # sensor frame; then the node says what it is: DEGRADED, on the wire, every cycle.
+    limit = rig.node.input(names.MSG_REDUNDANT).limit
+    assert limit == 500
+    states = [rig.cycle(yaw=0.02, redundant=None)[1]["AuxSteerCmd_State"] for _ in range(limit + 300)]
+    assert states == [mr.STATUS_STARTING] * (limit + 1) + [mr.STATUS_DEGRADED] * 299
     assert rig.statuses[-1][names.SIG_STATUS_PLAUS] == names.PLAUS_DEGRADED
+    assert rig.statuses[-1][names.SIG_STATUS_STATE] == mr.STATUS_DEGRADED
     assert rig.node.cause == 0  # a missing redundant input is no reason to stop
+    assert rig.node.stats.faults_entered == 0
+
+
+def test_a_clean_start_is_starting_until_every_input_came_never_fault_or_degraded(rig: Rig) -> None:
+    # Five cycles before any frame (a controller up before the car), then the sensors one by one:
+    # driver's angle and yaw rate every period, the speed from 30 periods on, the redundant
+    # frame at 45: STARTING until it came, then ACTIVE; never FAULT or DEGRADED.
+    node = rig.node
+
+    def states() -> list[int]:
+        return [d.signals["AuxSteerCmd_State"] for m in iter(lambda: rig.sensors.recv(0.0), None)
+                if (d := C.decode(m.arbitration_id, bytes(m.data))) is not None and d.name == names.MSG_CMD]
+
+    seen = []
+    for k in range(-5, 80):
+        if k >= 0:
+            rig.send(names.MSG_STEER, {names.SIG_STEER_ANGLE: 0.0})
+            if k >= 30 and k % 10 == 0:
+                rig.send(names.MSG_SPEED, {names.SIG_SPEED: 20.0})
+            if k == 45:
+                rig.send(names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4, names.SIG_STEER_ANGLE_2: 0.0})
+            rig.send(names.MSG_YAW, {names.SIG_YAW_RATE: 0.02})
+        node.drain()
+        node.control()
+        seen += states()
+        if k == -1:
+            assert node.cause == 0x07  # every input missing, and the cause says so
+    assert seen == [mr.STATUS_STARTING] * 50 + [mr.STATUS_ACTIVE] * 35
+    assert node.cause == 0 and not node.starting and node.stats.faults_entered == 0
+
+
+def test_an_input_that_never_comes_is_reported_after_its_timeout_from_the_first_frame(rig: Rig) -> None:
+    limit = rig.node.input(names.MSG_SPEED).limit
+    assert limit == 200  # 10 of its 20 ms cycles
+    states, causes = [], []
+    for _ in range(limit + 50):
+        _, sig = rig.cycle(yaw=0.02, speed=None, redundant=(0.4, 0.0))
+        states.append(sig["AuxSteerCmd_State"])
+        causes.append(rig.node.cause)
+    assert states == [mr.STATUS_STARTING] * (limit + 1) + [mr.STATUS_FAULT] * 49
+    assert all(c == names.CAUSE_SPEED_MISSING for c in causes)  # said from the first cycle on
+    assert rig.node.stats.faults_entered == 1
+
+
+def test_a_silent_bus_is_reported_after_the_start_timeout(rig: Rig) -> None:
+    node = rig.node
+    assert node.start_limit == round(rt.START_TIMEOUT_S * 1000.0)
+    for _ in range(node.start_limit):
+        node.control()
+        assert node.reported_state == mr.STATUS_STARTING
+    node.control()
+    assert node.reported_state == mr.STATUS_FAULT and node.cause == 0x07 and node.stats.faults_entered == 1
+
+
+def test_the_reported_state_puts_a_plausibility_fault_first_then_the_start() -> None:
+    F, D = names.PLAUS_YAW, names.PLAUS_DEGRADED
+    for law in (mr.STATUS_INACTIVE, mr.STATUS_ACTIVE, mr.STATUS_SATURATED, mr.STATUS_FAULT):
+        assert mr.reported_state(law, F | D, True) == mr.STATUS_FAULT
+        assert mr.reported_state(law, names.PLAUS_STEER, False) == mr.STATUS_FAULT
+        assert mr.reported_state(law, D, True) == mr.STATUS_STARTING
+        assert mr.reported_state(law, 0, True) == mr.STATUS_STARTING
+        assert mr.reported_state(law, D, False) == (mr.STATUS_FAULT if law == mr.STATUS_FAULT else mr.STATUS_DEGRADED)
+        assert mr.reported_state(law, 0, False) == law
 
 
 def test_yaw_rate_that_disagrees_with_lateral_acceleration_faults_fades_and_latches(rig: Rig) -> None:

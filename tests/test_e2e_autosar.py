@@ -304,21 +304,23 @@ class _LibrarySensors:
         self.ctl_bus = can.Bus(interface="virtual", channel=channel)
         self.bus = can.Bus(interface="virtual", channel=channel)
         self.node = rt.ControllerNode(self.ctl_bus, rt.RuntimeConfig(rate_hz=1000.0))
-        self.counter = dict.fromkeys(SENSORS, 14)  # the library's first increment sends 0
+        self.counter = dict.fromkeys((*SENSORS, names.MSG_REDUNDANT), 14)  # the library's first increment sends 0
         self.k = 0
 
     def frame(self, name: str, value: float) -> bytes:
         msg, cfg = C.message(name), C.e2e(name)
         signal = next(s.name for s in msg.signals if s.name not in (cfg.crc_signal, cfg.counter_signal)
                       and s.initial is None)
-        data = bytearray(msg.encode({**{s.name: 0 for s in msg.signals}, signal: value,
+        sna = {s.name: "SNA" for s in msg.signals if C.has_sna(name, s.name)}  # no second speed or yaw element
+        data = bytearray(msg.encode({**{s.name: 0 for s in msg.signals}, **sna, signal: value,
                                      cfg.counter_signal: self.counter[name]}, strict=True))
         e2e_p01.e2e_p01_protect(data, cfg.data_id, increment_counter=True)
         self.counter[name] = data[1] & 0x0F
         return bytes(data)
 
     def cycle(self, yaw: float, *, flip: int | None = None) -> dict:
-        sends = [(names.MSG_STEER, 0.0), (names.MSG_YAW, yaw)] + ([(names.MSG_SPEED, 20.0)] if self.k % 10 == 0 else [])
+        sends = [(names.MSG_STEER, 0.0)] + ([(names.MSG_SPEED, 20.0)] if self.k % 10 == 0 else []) + (
+            [(names.MSG_REDUNDANT, 20.0 * yaw)] if self.k % 50 == 0 else []) + [(names.MSG_YAW, yaw)]
         for name, value in sends:
             data = bytearray(self.frame(name, value))
             if flip is not None and name == names.MSG_YAW:
@@ -350,7 +352,7 @@ def test_the_controller_accepts_library_protected_sensor_frames(lib_rig: _Librar
     for _ in range(40):  # 40 yaw-rate frames: the library's counter wraps twice
         sig = lib_rig.cycle(0.02)
     st_ = lib_rig.node.stats
-    assert st_.rx_rejected == 0 and st_.rx_frames == 40 + 40 + 4
+    assert st_.rx_rejected == 0 and st_.rx_frames == 40 + 40 + 4 + 1
     assert lib_rig.node.cause == 0
     assert sig["AuxSteerCmd_State"] == mr.STATUS_ACTIVE
     assert sig["AuxSteerCmd_MeasCounter"] == lib_rig.counter[names.MSG_YAW]  # it answers the library's frame

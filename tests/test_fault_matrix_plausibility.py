@@ -13,7 +13,7 @@ from scipy import signal
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
-from firmware_py.plausibility import PlausibilityConfig
+from firmware_py.plausibility import PLAUS_FAULT, PlausibilityConfig
 from mrsteer_dbc import names
 from mrsteer_dbc.e2e import COUNTER_MODULO
 from sim_plant.car import scenario as scn
@@ -85,7 +85,10 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
         faulted = (t_fault is not None and t >= t_fault) or (episode is not None and episode[0] <= t < episode[1])
         if t_fault is not None and t >= t_fault:
             u = min(0.0, u + fade * TS)
-        state = mr.STATUS_FAULT if faulted else mr.STATUS_ACTIVE
+        # as the node reports the row's fault: FAULT on a fault bit, DEGRADED on the degraded bit alone
+        stalled = episode is not None and episode[0] <= t < episode[1]  # an input timed out: the law's FAULT
+        reported = mr.STATUS_FAULT if row.plausibility & PLAUS_FAULT or stalled else mr.STATUS_DEGRADED
+        state = reported if faulted else mr.STATUS_ACTIVE
         if unlatch_at is not None and t >= unlatch_at:
             state = mr.STATUS_ACTIVE
         cmds.append((t + 5e-4, float(state)))
@@ -93,7 +96,7 @@ def evidence(row: F.Row, *, error=lambda t: 0.0524, detect: float | None = 0.2, 
         if k % 50 == 0:
             on = (t_fault is not None and t >= t_fault + status_lag) or (
                 early_alarm is not None and abs(t - early_alarm) < TS / 2)
-            statuses.append(Status(t + 6e-4, mr.STATUS_FAULT if on else mr.STATUS_ACTIVE,
+            statuses.append(Status(t + 6e-4, reported if on else mr.STATUS_ACTIVE,
                                    bits if on else status_plaus_quiet, cause if on else 0))
     bridge = {"first_affected": ONSET + 1e-4, "last_affected": end, "affected": n // 2}
     trace = Trace([0.0], [0.0], [0.0], [0.0])
@@ -522,6 +525,7 @@ def test_a_degraded_report_over_a_gap_in_the_redundant_frame_is_no_report() -> N
     (dict(fade=FADE / 3), "the command reached zero"),
     (dict(plaus=names.PLAUS_YAW), "no status frame reported DEGRADED"),
     (dict(early_alarm=0.5), "before the fault's onset"),
+    (dict(detect=0.2, unlatch_at=1.5), "commands after the report not DEGRADED"),
 ])
 def test_the_lateral_acceleration_rows_broken_promises_fail(kwargs: dict, needle: str) -> None:
     fails, _, _ = _judge(_lat_accel_evidence(**kwargs))

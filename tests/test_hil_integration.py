@@ -25,6 +25,8 @@ from sim_plant.car import scenario as scn
 from sim_plant.harness import hil_plot
 from sim_plant.harness.hil_steps import read_steps_csv
 
+from conftest import logged_states
+
 ROOT = Path(__file__).resolve().parents[1]
 C = mrsteer_dbc.load()
 
@@ -132,6 +134,60 @@ def test_the_step_table_spans_the_scenario_and_the_plot_is_drawn_from_it(lockste
     assert png is not None and png[:8] == PNG
 
 
+def test_a_clean_lockstep_run_shows_no_fault_or_degraded_and_enters_no_fault(lockstep_run: tuple[dict, Path]) -> None:
+    """STARTING (the watchdog cycles before the plant's first frame) instead of FAULT, then
+    ACTIVE or SATURATED to the end, INACTIVE last (the shutdown); the loop's faults_entered 0."""
+    hil, out = lockstep_run
+    cmds, statuses, after = logged_states(out / "traffic.log")
+    run = [s for s, late in zip(cmds, after) if not late]
+    first = next(i for i, s in enumerate(run) if s != mr.STATUS_STARTING)
+    assert set(run[:first]) <= {mr.STATUS_STARTING} and set(run[first:]) <= {mr.STATUS_ACTIVE, mr.STATUS_SATURATED}
+    assert cmds[-1] == mr.STATUS_INACTIVE and set(statuses) <= {mr.STATUS_STARTING, mr.STATUS_ACTIVE,
+                                                                 mr.STATUS_SATURATED}
+    # a watchdog cycle after the plant ended (a loaded machine stopping the controller late) is a fault
+    post = any(s == mr.STATUS_FAULT for s, late in zip(cmds, after) if late)
+    assert hil["loop"]["controller"]["faults_entered"] == int(post)
+
+
+def test_the_command_at_the_limit_reads_at_most_3_deg_on_the_bus(tmp_path: Path) -> None:
+    proc = mrsteer("hil", "run", "--scenario", "paper-fig9", "--mz", "10000", "--duration", "0.7", "--out",
+                   str(tmp_path), "--json")
+    assert proc.returncode == 0, proc.stderr
+    hil = json.loads(proc.stdout)
+    with (tmp_path / "signals.csv").open() as f:
+        angles = [float(r["AuxSteerCmd_Angle"]) for r in csv.DictReader(f) if r["message"] == names.MSG_CMD]
+    assert max(abs(a) for a in angles) == pytest.approx(52359e-6, abs=1e-12)  # not 52360e-6 (3.00001 deg)
+    assert hil["saturated"] and hil["time_at_limit_s"] > 0.05
+    assert hil["peak_aux_steer_deg"] <= 3.0 and f"{hil['peak_aux_steer_deg']:.3f}" == "3.000"
+    assert "SATURATED" in {s.ctrl_state for s in read_steps_csv(tmp_path / "steps.csv")}
+
+
+def test_a_monitor_degraded_run_says_degraded_on_the_wire_and_in_steps_csv(tmp_path: Path) -> None:
+    """A lateral acceleration 2 m/s^2 off from 0.6 s, which the yaw rate's second element
+    out-votes: the monitor's OUTSIDE_MODEL, DEGRADED in every command from the report on (the
+    command fades), in the status and in steps.csv."""
+    proc = mrsteer("hil", "run", "--scenario", "paper-fig9", "--duration", "1.2", "--sensor-fault",
+                   "lat_accel:bias:2@0.6", "--out", str(tmp_path), "--json")
+    assert proc.returncode == 0, proc.stderr
+    hil = json.loads(proc.stdout)
+    t_report = hil["plausibility"]["first_degraded_s"]
+    assert hil["plausibility"]["reported_as"] == "degraded" and 0.6 < t_report < 0.95
+    cmds, statuses, after = logged_states(tmp_path / "traffic.log")
+    run = [s for s, late in zip(cmds, after) if not late][:-1]
+    k = run.index(mr.STATUS_DEGRADED)
+    assert set(run[k:]) == {mr.STATUS_DEGRADED} and mr.STATUS_FAULT not in run
+    assert statuses[-1] == mr.STATUS_DEGRADED
+    steps = read_steps_csv(tmp_path / "steps.csv")
+    degraded = [s.t_s for s in steps if s.ctrl_state == "DEGRADED"]
+    assert degraded[0] == pytest.approx(t_report, abs=1e-9) and degraded[-1] == steps[-1].t_s
+    assert all(s.ctrl_state == "ACTIVE" for s in steps if s.t_s < t_report)
+    assert steps[-1].aux_cmd_rad == 0.0  # faded
+
+
+def test_the_plots_controller_lane_has_a_level_for_every_state() -> None:
+    assert hil_plot.lane_levels() == ["STARTING", "INACTIVE", "ACTIVE", "SATURATED", "DEGRADED", "FAULT"]
+
+
 def test_signals_csv_keeps_the_logs_microsecond_times(lockstep_run: tuple[dict, Path]) -> None:
     _, out = lockstep_run
     logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]
@@ -210,20 +266,24 @@ def _start(argv: list[str]) -> subprocess.Popen:
 def test_controller_process_faults_on_a_silenced_sensor_and_recovers(channel: str) -> None:
     bus = can.Bus(interface="mrsteer", channel=channel)
     ctl = _start(["-m", "firmware_py", "--interface", "mrsteer", "--channel", channel, "--rate-hz", "200"])
-    counters = {n: mrsteer_dbc.AliveCounter() for n in (names.MSG_STEER, names.MSG_YAW, names.MSG_SPEED)}
+    counters = {n: mrsteer_dbc.AliveCounter() for n in names.VEHICLE_SENSORS}
     seen: list[tuple[float, dict]] = []
     statuses: list[dict] = []
+    sent = [0]  # yaw-rate samples: the redundant frame goes with every 10th (its 50 ms at 200 Hz)
 
     def feed(seconds: float, yaw: bool) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             for name, values in ((names.MSG_STEER, {"DriverSteer_Angle": 0.0}),
                                  (names.MSG_SPEED, {"VehicleSpeed_Speed": 20.0}),
+                                 (names.MSG_REDUNDANT, {names.SIG_LAT_ACCEL: 0.4 + 0.002 * (sent[0] // 10 % 2),
+                                                        names.SIG_STEER_ANGLE_2: 0.0}),
                                  (names.MSG_YAW, {"YawRate_YawRate": 0.02})):
-                if name == names.MSG_YAW and not yaw:
+                if (name == names.MSG_YAW and not yaw) or (name == names.MSG_REDUNDANT and sent[0] % 10):
                     continue
                 bus.send(can.Message(arbitration_id=C.frame_id(name), data=C.encode(name, values,
                                      counters[name].next()), is_extended_id=False))
+            sent[0] += 1
             deadline = time.monotonic() + 0.004
             while (m := bus.recv(max(0.0, deadline - time.monotonic()))) is not None:
                 d = C.decode(m.arbitration_id, bytes(m.data))

@@ -20,16 +20,16 @@ def _traffic(fault_from: int | None, status_every: int = 50, steps: int = 400, p
              wall_scale: float = 0.1) -> list[dict]:
     """One yaw frame and one command per step (a lockstep run whose wall clock runs at
     ``wall_scale`` of simulated time), a status every ``status_every`` steps; from step
-    ``fault_from`` on the statuses carry ``plaus`` and, if it has a fault bit, the commands are
-    FAULT (DEGRADED alone leaves them ACTIVE, as the node does)."""
+    ``fault_from`` on the statuses carry ``plaus`` and the commands are FAULT if it has a fault bit,
+    else DEGRADED, as the node reports them."""
     rows = []
     for k in range(steps):
         t = 1000.0 + k * wall_scale / RATE
         faulted = fault_from is not None and k >= fault_from
         rows.append({"t_s": t, "message": names.MSG_YAW, names.SIG_YAW_RATE: 0.0})
         fault_state = faulted and plaus & (names.PLAUS_YAW | names.PLAUS_STEER)
-        rows.append({"t_s": t, "message": names.MSG_CMD,
-                     names.SIG_CMD_STATE: mr.STATUS_FAULT if fault_state else mr.STATUS_ACTIVE})
+        state = mr.STATUS_FAULT if fault_state else mr.STATUS_DEGRADED if faulted and plaus else mr.STATUS_ACTIVE
+        rows.append({"t_s": t, "message": names.MSG_CMD, names.SIG_CMD_STATE: state})
         if k % status_every == status_every - 1:
             rows.append({"t_s": t, "message": names.MSG_STATUS, names.SIG_STATUS_PLAUS: plaus if faulted else 0})
     return rows
@@ -60,7 +60,8 @@ def test_a_clean_run_reports_nothing_and_degraded_is_its_own_figure() -> None:
     assert clean["fault_detected_s"] is None and clean["bits_seen"] == 0 and clean["detection_latency_s"] is None
     degraded = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), scn.load("side-wind"), RATE)
     assert degraded["fault_detected_s"] is None  # DEGRADED is no fault
-    assert degraded["first_degraded_s"] == pytest.approx(149 / RATE)
+    # from the first DEGRADED command, not the status frame's 149
+    assert degraded["first_degraded_s"] == pytest.approx(100 / RATE)
     assert clean["reported_s"] is None and clean["reported_as"] is None
 
 
@@ -70,9 +71,9 @@ def test_the_report_is_the_fault_or_the_degraded_state_whichever_came_first() ->
     from mrsteer_cli.hil_cli import plausibility_line
 
     degraded = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), _scenario(0.1), RATE)
-    assert degraded["reported_s"] == pytest.approx(149 / RATE) and degraded["reported_as"] == "degraded"
-    assert degraded["detection_latency_s"] == pytest.approx(149 / RATE - 0.1)
-    assert "DEGRADED (no sensor fault bit) reported at 0.298 s, 198 ms after the sensor fault" in plausibility_line(
+    assert degraded["reported_s"] == pytest.approx(100 / RATE) and degraded["reported_as"] == "degraded"
+    assert degraded["detection_latency_s"] == pytest.approx(100 / RATE - 0.1)
+    assert "DEGRADED (no sensor fault bit) reported at 0.200 s, 100 ms after the sensor fault" in plausibility_line(
         degraded)
     fault = plausibility_figures(_traffic(fault_from=123), _scenario(0.1), RATE)
     assert fault["reported_s"] == fault["fault_detected_s"] and fault["reported_as"] == "fault"
@@ -81,8 +82,10 @@ def test_the_report_is_the_fault_or_the_degraded_state_whichever_came_first() ->
     for r in transient[-120:]:
         if r["message"] == names.MSG_STATUS:
             r[names.SIG_STATUS_PLAUS] = 0
+        elif r["message"] == names.MSG_CMD:
+            r[names.SIG_CMD_STATE] = mr.STATUS_ACTIVE
     fig = plausibility_figures(transient, _scenario(0.1), RATE)
-    assert fig["first_degraded_s"] == pytest.approx(149 / RATE) and fig["reported_s"] is None
+    assert fig["first_degraded_s"] == pytest.approx(100 / RATE) and fig["reported_s"] is None
     # nor does a DEGRADED before the sensor fault's onset that lasts: the report is from the onset
     late = plausibility_figures(_traffic(fault_from=100, plaus=names.PLAUS_DEGRADED), _scenario(0.5), RATE)
     assert late["reported_s"] == pytest.approx(299 / RATE) and late["latched_degraded_s"] == late["reported_s"]

@@ -79,7 +79,7 @@ def test_layout_comes_from_the_dbc() -> None:
     cmd = C.message(secoc.COMMAND)
     assert cmd.length == 8
     used = sum(s.length for s in cmd.signals)
-    assert used == 63  # 42 bits of E2E and data, 21 of SecOC: one bit spare
+    assert used == 64  # 43 bits of E2E and data (the state 3 bits), 21 of SecOC: none spare
 
 
 def test_a_dbc_without_the_secoc_fields_is_refused(tmp_path: Path) -> None:

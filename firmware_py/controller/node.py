@@ -24,9 +24,15 @@ Each cycle, in this order (the scheduling contract a port must keep):
    yaw-rate samples away from what its alive counter says elapsed (delta x 50 ms): a stalled
    sender or receiver, whose bursts would read as a side slip.  The
    authority limiter (``firmware_py.authority``) bounds ``step()``'s command in magnitude, rate
-   and time and fades it to zero on a plausibility fault, which the node reports as state FAULT
-   with ``CAUSE_PLAUSIBILITY``;
-5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time).
+   and time and fades it to zero on a plausibility fault (``CAUSE_PLAUSIBILITY``);
+5. send ``MRS_AuxSteerCmd`` (and ``MRS_CtrlStatus`` at its DBC cycle time) with the reported
+   state (``model_regulator.reported_state``): FAULT on a plausibility fault or when ``step()``
+   faulted, DEGRADED when the monitor is degraded, else ``step()``'s INACTIVE, ACTIVE or
+   SATURATED; and STARTING in place of all but a plausibility fault from power-up until every
+   sensor message (the redundant one too: a clean start shows no DEGRADED either) has been
+   accepted once.  The start state is bounded (``_still_starting``): an input still missing its
+   own timeout after the first sensor frame was accepted, or any ``START_TIMEOUT_S`` after the
+   first cycle, ends it, and the missing input is reported as it is later on.
 
 Every frame goes through the node's links (``mrsteer_dbc.link``): ``RxLink`` checks a received
 one and names the cause of a rejection, ``TxLink`` builds the command and the status.  With a
@@ -75,6 +81,9 @@ from mrsteer_dbc.names import (CAUSE_AUTH, CAUSE_LOW_SPEED, CAUSE_PLAUSIBILITY, 
                                SIG_YAW_RATE, SIG_YAW_RATE_2)
 
 SYNC_STALE_CYCLES = 3  # MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH
+# The longest the start state lasts, from the first cycle (what ends it for a bus silent from
+# power-up); ``hil run`` starts the plant after the controller, seconds later on a loaded machine.
+START_TIMEOUT_S = 10.0
 DEFAULT_RATE_HZ = 1.0 / mr.ControllerConfig().ts  # the rate the shipped calibration was tuned for
 TRIGGERS = ("clock", "sensors")
 
@@ -148,6 +157,9 @@ class ControllerNode:
         self.sensor_verifier = secoc.SensorVerifier(c, config.secoc_key) if keyed else None
         self.sync_id = c.frame_id(MSG_SYNC) if keyed else None
         self.sync_limit = limit(MSG_SYNC, SYNC_STALE_CYCLES)
+        self.start_limit = max(1, int(math.ceil(START_TIMEOUT_S / period - 1e-9)))  # cycles
+        self.starting = True  # the start state (``_still_starting``)
+        self._since_first = -1  # cycles since the one that drained the first sensor frame; -1: none yet
         self._sync_age = self.sync_limit + 1
         verifiers: dict[str, secoc.FrameVerifier] = {}
         if self.signer is not None and self.sensor_verifier is not None:
@@ -156,11 +168,15 @@ class ControllerNode:
         bus.set_filters(self.rx.filters())
         self.tx = TxLink(c, (MSG_CMD, MSG_STATUS), self.signer)
         status_cycle = c.cycle_time_s(MSG_STATUS) or 0.1
+        # The status's counters wrap at their DBC widths; its lateness saturates at the DBC maximum.
+        self._rejected_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_REJECTED)[1]) + 1
+        self._overruns_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_OVERRUNS)[1]) + 1
+        self._lateness_max = c.signal_range(MSG_STATUS, SIG_STATUS_LATENESS)[1]
         self.status_every = max(1, int(round(status_cycle / period)))
         self.stats = LoopStats()
         self.cause = 0
         self.command = 0.0  # the angle sent last: what acts on the car during the next period
-        self.reported_state = mr.STATUS_INACTIVE  # step()'s, or FAULT on a plausibility fault
+        self.reported_state = mr.STATUS_INACTIVE  # model_regulator.reported_state, sent last
         self.plausibility = 0  # the monitor's CtrlStatus_Plausibility bits
         self._max_lateness = 0.0
         self._running = True
@@ -214,6 +230,7 @@ class ControllerNode:
             self._redundant_unstepped = True
         inp.last_counter = got.counter
         inp.age = 0
+        inp.seen = True
         if frame_id == self.yaw_id:
             self._yaw_stamp = msg.timestamp or 0.0
             self.clock.yaw_frame(got.counter)
@@ -260,8 +277,29 @@ class ControllerNode:
 
     # ---------------------------------------------------------------- control
 
+    def _still_starting(self) -> bool:
+        """Whether this cycle is still in the start state: some sensor input has not been
+        accepted once yet, and none of those is overdue.  One is overdue once it has been missing
+        for longer than its own timeout counted from the cycle that drained the first sensor frame
+        (as if it had come with that one), and every one is after ``start_limit`` cycles.  Called
+        once per cycle while starting (it counts the cycles since the first frame)."""
+        if self.stats.cycles >= self.start_limit:
+            return False
+        first = self._since_first >= 0 or any(inp.seen for inp in self.inputs.values())
+        if first:
+            self._since_first += 1
+        pending = False
+        for inp in self.inputs.values():
+            if not inp.seen:
+                if first and self._since_first > inp.limit:
+                    return False
+                pending = True
+        return pending
+
     def control(self) -> None:
         """Steps 2-5 of the cycle, after the receive queue has been drained."""
+        if self.starting:
+            self.starting = self._still_starting()
         cause = 0
         values = []
         fail_max = self.cfg.e2e_fail_max
@@ -302,10 +340,9 @@ class ControllerNode:
         # the limiter's rate bound, not faded
         u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
                               self.monitor.flags & pl.CUT_CHECKS, self.monitor.flags & pl.FADE_CHECKS)
-        state = self.state.status
         if bits & pl.PLAUS_FAULT:
-            state = mr.STATUS_FAULT
             cause |= CAUSE_PLAUSIBILITY
+        state = mr.reported_state(self.state.status, bits, self.starting)
         fault = state == mr.STATUS_FAULT
         if fault and not self._was_fault:
             self.stats.faults_entered += 1
@@ -329,9 +366,9 @@ class ControllerNode:
             SIG_STATUS_FLAGS: self.state.fault_flags,
             SIG_STATUS_PLAUS: self.plausibility,
             SIG_STATUS_CAUSE: self.cause,
-            SIG_STATUS_REJECTED: self.stats.rx_rejected % 65536,
-            SIG_STATUS_OVERRUNS: self.stats.overruns % 65536,
-            SIG_STATUS_LATENESS: min(self._max_lateness, 0.65535),
+            SIG_STATUS_REJECTED: self.stats.rx_rejected % self._rejected_wrap,
+            SIG_STATUS_OVERRUNS: self.stats.overruns % self._overruns_wrap,
+            SIG_STATUS_LATENESS: min(self._max_lateness, self._lateness_max),
         }))
         self.stats.tx_frames += 1
         self._max_lateness = 0.0

@@ -9,7 +9,9 @@ CRC byte, each signal's DBC range, and three functions that go through the gener
 DBC signal order, the range check of every signal (as ``mrsteer_dbc.Contract.decode``), and
 pack from physical values.  Packing rounds to the nearest raw value, ties to even, as the
 Python cantools encoder does (``round((value - offset) / scale)``); the generated ``_encode``
-functions truncate instead, which would make a C frame differ from the Python one by a bit.
+functions truncate instead, which would make a C frame differ from the Python one by a bit.  A
+signal with the DBC attribute ``MRS_RoundTowardZero`` packs as ``mrsteer_dbc.contract.toward_zero_raw``
+does: the nearest raw value, one step back toward zero where that one decodes beyond the value.
 For the SecOC messages the indices of the freshness and MAC fields and the AND mask that clears
 the CRC byte and the MAC bits (``mrsteer_dbc.secoc.AuthFields``).  The names the code means
 (messages, signals, ``CtrlStatus_Cause`` and ``CtrlStatus_Plausibility`` bits, ``MeasCounter``'s NONE) come from
@@ -26,7 +28,7 @@ import cantools
 from cantools.database.can.c_source import camel_to_snake_case
 
 from mrsteer_dbc import names
-from mrsteer_dbc.contract import Contract, sna_raw
+from mrsteer_dbc.contract import Contract, rounds_toward_zero, sna_raw
 
 DB = "mrsteer"
 MESSAGES = {  # names.py constant -> message
@@ -78,7 +80,17 @@ def _functions(msg) -> str:
                       f"    phys[{i}] = (msg.{field} == {sna[i]}) ? (double)NAN : {decode};")
         scale, offset = float(s.scale), float(s.offset)
         expr = f"phys[{i}]" if (scale, offset) == (1.0, 0.0) else f"(phys[{i}] - {_c(offset)}) / {_c(scale)}"
-        raw = f"({'int64_t' if s.is_signed else 'uint64_t'})nearbyint({expr})"
+        cast = "int64_t" if s.is_signed else "uint64_t"
+        raw = f"({cast})nearbyint({expr})"
+        if rounds_toward_zero(s):  # contract.toward_zero_raw, statement for statement
+            if sna[i] is not None:
+                raise SystemExit(f"{s.name}: MRS_RoundTowardZero and an SNA value are not generated together")
+            pack.append(f"    {{\n        double r = nearbyint({expr});\n"
+                        f"        const double d = r * {_c(scale)} + {_c(offset)};\n"
+                        f"        if (phys[{i}] > 0.0 && d > phys[{i}]) {{\n            r -= 1.0;\n"
+                        f"        }} else if (phys[{i}] < 0.0 && d < phys[{i}]) {{\n            r += 1.0;\n        }}\n"
+                        f"        msg.{field} = ({cast})r;\n    }}")
+            continue
         pack.append(f"    msg.{field} = {raw};" if sna[i] is None else
                     f"    msg.{field} = (phys[{i}] != phys[{i}]) ? {sna[i]} : {raw};")
     unpack = "\n".join(unpack)

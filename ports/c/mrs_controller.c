@@ -5,6 +5,8 @@
 
 #include <math.h> /* exp(), tan(), sqrt() in mrs_configure only; isfinite and INFINITY are macros */
 
+#include "mrs_monitor.h" /* MRS_PLAUS_* for mrs_reported_state */
+
 void mrs_default_config(mrs_config_t *cfg)
 {
     /* The shipped schedule (firmware_py/calibration.py): v, K, tau = tau_Q (1 + K), tau_n. */
@@ -364,4 +366,21 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
     s->u_prev = u;
     s->status = (u >= c->u_max || u <= -c->u_max) ? MRS_STATUS_SATURATED : MRS_STATUS_ACTIVE;
     return u;
+}
+
+unsigned mrs_reported_state(unsigned status, unsigned plausibility, int starting)
+{
+    unsigned state = status; /* mrs_step()'s INACTIVE, ACTIVE or SATURATED unless below */
+    if ((plausibility & MRS_PLAUS_FAULT) != 0u) {
+        state = MRS_STATUS_FAULT;
+    } else if (starting != 0) {
+        state = MRS_STATUS_STARTING;
+    } else if (status == MRS_STATUS_FAULT) {
+        state = MRS_STATUS_FAULT;
+    } else if ((plausibility & MRS_PLAUS_DEGRADED) != 0u) {
+        state = MRS_STATUS_DEGRADED;
+    } else {
+        /* step()'s status stands */
+    }
+    return state;
 }

@@ -23,11 +23,14 @@ typedef double mrs_real_t;
 #define MRS_MAX_MODEL_DELAY 8
 #define MRS_MAX_SCHEDULE 8
 
-/* Status as sent on the bus (AuxSteerCmd_State). */
+/* Status as sent on the bus (AuxSteerCmd_State, CtrlStatus_State; model_regulator.STATUS_*):
+ * mrs_step() gives the first four, the node reports mrs_reported_state() of it. */
 #define MRS_STATUS_INACTIVE 0u
 #define MRS_STATUS_ACTIVE 1u
 #define MRS_STATUS_SATURATED 2u
 #define MRS_STATUS_FAULT 3u
+#define MRS_STATUS_DEGRADED 4u
+#define MRS_STATUS_STARTING 5u
 
 /* Fault flags: which input was invalid. */
 #define MRS_FAULT_DRIVER_ANGLE 0x01u
@@ -94,5 +97,11 @@ void mrs_init_state(mrs_state_t *s);
  * but no further from it than it is, inside the law's clamp; 0 is the law without it. */
 mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
                     mrs_real_t speed, uint8_t hold);
+
+/* The state the node sends for mrs_step()'s status and the plausibility monitor's bits
+ * (CtrlStatus_Plausibility, mrs_monitor.h): FAULT on a plausibility fault; else STARTING while the
+ * node is starting (nonzero: its inputs not all received yet); else FAULT when mrs_step() faulted,
+ * DEGRADED when the monitor is degraded, else mrs_step()'s status. model_regulator.reported_state. */
+unsigned mrs_reported_state(unsigned status, unsigned plausibility, int starting);
 
 #endif

@@ -78,6 +78,18 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
         mrs_e2e_receiver_init(&in->seq, (uint8_t)cfg->max_counter_delta);
     }
     n->sync_limit = limit_cycles(&mrs_messages[MRS_MSG_SYNC], n->period, MRS_SYNC_STALE_CYCLES);
+    {
+        const double x = ceil(MRS_START_TIMEOUT_S / n->period - 1e-9);
+        n->start_limit = x < 1.0 ? 1L : (long)x;
+    }
+    n->starting = 1;
+    n->since_first = -1;
+    {
+        const mrs_msg_t *st = &mrs_messages[MRS_MSG_STATUS];
+        n->rejected_wrap = st->max[MRS_SIG_STATUS_REJECTED] + 1.0;
+        n->overruns_wrap = st->max[MRS_SIG_STATUS_OVERRUNS] + 1.0;
+        n->lateness_max = st->max[MRS_SIG_STATUS_LATENESS];
+    }
     n->sync_age = n->sync_limit + 1;
     n->keyed = cfg->secoc_key != NULL;
     if (n->keyed) {
@@ -203,9 +215,9 @@ static int send_status(mrs_node_t *n)
     phys[MRS_SIG_STATUS_FLAGS] = (double)n->state.fault_flags;
     phys[MRS_SIG_STATUS_PLAUS] = (double)n->plaus;
     phys[MRS_SIG_STATUS_CAUSE] = (double)n->cause;
-    phys[MRS_SIG_STATUS_REJECTED] = (double)(n->stats.rx_rejected % 65536u);
-    phys[MRS_SIG_STATUS_OVERRUNS] = (double)(n->stats.overruns % 65536u);
-    phys[MRS_SIG_STATUS_LATENESS] = n->max_lateness < 0.65535 ? n->max_lateness : 0.65535;
+    phys[MRS_SIG_STATUS_REJECTED] = (double)(n->stats.rx_rejected % (uint64_t)n->rejected_wrap);
+    phys[MRS_SIG_STATUS_OVERRUNS] = (double)(n->stats.overruns % (uint64_t)n->overruns_wrap);
+    phys[MRS_SIG_STATUS_LATENESS] = n->max_lateness < n->lateness_max ? n->max_lateness : n->lateness_max;
     n->max_lateness = 0.0;
     return send_frame(n, MRS_MSG_STATUS, phys);
 }
@@ -234,6 +246,32 @@ static int fresh(mrs_node_t *n, mrs_input_t *in)
     return ok;
 }
 
+/* Whether this period is still in the start state: some sensor input not accepted once yet, none
+ * of those overdue (missing longer than its own timeout counted from the period that drained the
+ * first sensor frame), and fewer than start_limit periods run: node.py's _still_starting. */
+static int still_starting(mrs_node_t *n)
+{
+    int i, first = n->since_first >= 0, pending = 0;
+    if (n->stats.cycles >= (uint64_t)n->start_limit) {
+        return 0;
+    }
+    for (i = 0; i < MRS_N_INPUTS && !first; ++i) {
+        first = n->in[i].seen;
+    }
+    if (first) {
+        ++n->since_first;
+    }
+    for (i = 0; i < MRS_N_INPUTS; ++i) {
+        if (!n->in[i].seen) {
+            if (first && n->since_first > n->in[i].limit) {
+                return 0;
+            }
+            pending = 1;
+        }
+    }
+    return pending;
+}
+
 int mrs_node_control(mrs_node_t *n)
 {
     unsigned cause = 0u, state;
@@ -249,6 +287,9 @@ int mrs_node_control(mrs_node_t *n)
     const long steps = samples > 0 ? samples : (valid(n, yaw) ? 0 : 1);
     long k;
     double steer;
+    if (n->starting) {
+        n->starting = still_starting(n);
+    }
     if (fresh(n, red) && n->red_usable) {
         lat = red->value;
         steer2 = red->extra[0];
@@ -305,11 +346,10 @@ int mrs_node_control(mrs_node_t *n)
     n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
                                     (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u),
                                     (uint8_t)((n->mon_s.flags & MRS_FADE_CHECKS) != 0u));
-    state = n->state.status;
     if (n->plaus & MRS_PLAUS_FAULT) {
-        state = MRS_STATUS_FAULT;
         cause |= MRS_CAUSE_PLAUSIBILITY;
     }
+    state = mrs_reported_state(n->state.status, n->plaus, n->starting);
     n->reported_state = state;
     fault = state == MRS_STATUS_FAULT;
     if (fault && !n->was_fault) {

@@ -20,6 +20,8 @@
 
 #define MRS_LATENESS_BINS 50000u /* 1 us bins up to 50 ms; one more for the overflow */
 #define MRS_SYNC_STALE_CYCLES 3 /* MRS_SecOCSync cycle times without a valid sync before CAUSE_AUTH */
+/* The longest the start state lasts, from the first period (node.py's START_TIMEOUT_S). */
+#define MRS_START_TIMEOUT_S 10.0
 #define MRS_N_INPUTS 4 /* driver angle, yaw rate, speed, the redundant sensors */
 #define MRS_IN_REDUNDANT 3 /* its index in mrs_node_t.in */
 /* Yaw-rate samples (the monitor's steps) a redundant sample's arrival may differ from its alive
@@ -41,6 +43,7 @@ typedef struct {
     double value, extra[MRS_INPUT_EXTRA]; /* NaN until received */
     long age, limit;
     int rejects;
+    int seen; /* a frame of it was accepted since power-up (the start state waits for each input's first) */
     unsigned last_counter, bad_cause;
     mrs_e2e_receiver_t seq;
 } mrs_input_t;
@@ -87,7 +90,11 @@ typedef struct {
     int red_unstepped; /* the monitor has yet to step over that redundant sample */
     int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
     long yaw_samples; /* yaw-rate samples since the last period, by that counter */
-    unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: FAULT on a plausibility fault */
+    unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: mrs_reported_state(), sent last */
+    int starting; /* the start state (node.py's _still_starting) */
+    long since_first; /* periods since the one that drained the first sensor frame; -1: none yet */
+    long start_limit; /* MRS_START_TIMEOUT_S in periods */
+    double rejected_wrap, overruns_wrap, lateness_max; /* the status's counters' DBC widths, lateness's max */
     int keyed;
     mrs_cmac_t *cmac;
     mrs_signer_t signer;

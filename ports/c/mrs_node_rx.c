@@ -123,7 +123,7 @@ static mrs_rx_verdict_t check(mrs_node_t *n, int msg, mrs_e2e_receiver_t *seq, c
 }
 
 /* A sensor input's verdict into its receive state (inputs.py): its rejects and cause, or its
- * value, alive counter and age 0. */
+ * value, alive counter, age 0 and seen. */
 static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const double *phys, double stamp)
 {
     if (v != MRS_RX_ACCEPTED) {
@@ -144,6 +144,7 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
         }
         in->last_counter = (unsigned)phys[mrs_messages[in->msg].counter];
         in->age = 0;
+        in->seen = 1;
         if (in->msg == MRS_MSG_REDUNDANT) {
             mrs_node_time_redundant(n, in->last_counter);
             mrs_node_keep_redundant_angle(n);

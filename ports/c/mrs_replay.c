@@ -6,19 +6,21 @@
  * CONFIG is a calibration file (the key = value format of firmware_py/calibration_file.py,
  * read by mrs_config_load; its ts and aux_limit are the node's effective ones). Each input line
  * is one controller cycle,
- * "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2 [SPEED_2 [DELTA_DRIVER_MONITOR]]]]]"
+ * "DELTA_DRIVER YAW_RATE SPEED [LAT_ACCEL DELTA_DRIVER_2 [STEPS [YAW_RATE_2 [SPEED_2 [DELTA_DRIVER_MONITOR
+ *  [STARTING]]]]]]"
  * (rad, rad/s, m/s, m/s^2, rad; "nan" for an input the receive side found invalid; the redundant
  * pair absent counts as invalid; STEPS the monitor's steps in the cycle, 0 to MRS_REPLAY_MAX_STEPS:
  * node.py's monitor_steps, 0 when it holds its verdict; absent counts as 1; YAW_RATE_2 the yaw-rate
  * sensor's second element, absent or nan when there is none; SPEED_2 the second speed, likewise;
  * DELTA_DRIVER_MONITOR the driver's angle of the monitor's first step, the one that came with a new
- * redundant sample (node.py's monitor_driver_angle), absent: DELTA_DRIVER), as
+ * redundant sample (node.py's monitor_driver_angle), absent: DELTA_DRIVER; STARTING 1 in a cycle of
+ * the node's start state (node.py's _still_starting, its inputs not all received yet), absent: 0), as
  * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
  * does: the monitor (STEPS times, the first with DELTA_DRIVER_MONITOR) on the inputs and the
  * previous line's command, u_req = mrs_step(..., its suspicion of the yaw rate), the limiter on
  * u_req; each output line is
- * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one:
- * FAULT on a plausibility fault). The frame decoding, E2E, freshness and cause bits stay on the
+ * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one,
+ * mrs_reported_state). The frame decoding, E2E, freshness, start state and cause bits stay on the
  * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
  * port's, not the receive path's. Exit 2 on unreadable input.
  */
@@ -85,17 +87,17 @@ int main(int argc, char **argv)
     }
     mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
-        double v[9] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN, NAN};
+        double v[10] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN, NAN, 0.0};
         char *p = line, *end;
         int k;
         double u_req;
         unsigned state;
         ++n;
-        for (k = 0; k < 9; ++k) {
+        for (k = 0; k < 10; ++k) {
             const double x = strtod(p, &end);
             if (end == p) {
                 if (k < 3) {
-                    fprintf(stderr, "mrs_replay: line %ld: expected three or five to nine numbers\n", n);
+                    fprintf(stderr, "mrs_replay: line %ld: expected three or five to ten numbers\n", n);
                     return 2;
                 }
                 break;
@@ -103,13 +105,15 @@ int main(int argc, char **argv)
             v[k] = x;
             p = end;
         }
-        if (k == 4 || !(v[5] >= 0.0 && v[5] <= (double)MRS_REPLAY_MAX_STEPS && v[5] == floor(v[5]))) {
+        if (k == 4 || !(v[5] >= 0.0 && v[5] <= (double)MRS_REPLAY_MAX_STEPS && v[5] == floor(v[5])) ||
+            !(v[9] == 0.0 || v[9] == 1.0)) {
             fprintf(stderr,
-                    "mrs_replay: line %ld: expected three or five to nine numbers (the sixth a count of steps)\n", n);
+                    "mrs_replay: line %ld: expected three or five to ten numbers (the sixth a count of steps, the tenth "
+                    "0 or 1)\n", n);
             return 2;
         }
         if (strspn(p, " \t\r\n") != strlen(p)) {
-            fprintf(stderr, "mrs_replay: line %ld: text after the numbers (at most nine)\n", n);
+            fprintf(stderr, "mrs_replay: line %ld: text after the numbers (at most ten)\n", n);
             return 2;
         }
         if (k < 9) {
@@ -123,7 +127,7 @@ int main(int argc, char **argv)
         u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
                                     (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u),
                                     (uint8_t)((mon_s.flags & MRS_FADE_CHECKS) != 0u));
-        state = (plaus & MRS_PLAUS_FAULT) != 0u ? MRS_STATUS_FAULT : (unsigned)s.status;
+        state = mrs_reported_state((unsigned)s.status, (unsigned)plaus, v[9] != 0.0);
         printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
     }
     if (in != stdin) {

@@ -13,7 +13,10 @@ limiter, at the actuator's own step, on the plausibility bits of the controller'
 A status older than ``STATUS_STALE_S`` counts as DEGRADED: an intervention then ends at the
 panic window, as it does when the controller says it cannot check its inputs.  That is also all
 this outer bound does on the controller's OUTSIDE_MODEL (DEGRADED on the bus, which does not
-tell it from a missing input's; the controller fades that command itself).  A plausibility
+tell it from a missing input's; the controller fades that command itself).  It reads the status's
+plausibility bits, not the controller's state (``AuxSteerCmd_State``: STARTING, DEGRADED and the
+rest are for the people and the logs reading the bus; the campaigns' model of this plant,
+``sim_plant.campaign.reference``, reads the same bits at the same status cycle).  A plausibility
 fault latches here as it does in the controller: until the actuator restarts, the command stays
 faded whatever arrives after it.
 """

@@ -1,16 +1,19 @@
 """What a HIL run's logged traffic says about the plausibility monitor (issue 18): which bits the
 controller reported, when it first reported a plausibility fault (``fault_detected_s``) or the
 degraded state (``first_degraded_s``; ``latched_degraded_s``: from the sensor fault's onset on,
-in every status to the end, as OUTSIDE_MODEL's is and a missing input's is not), the earlier of
-the fault and the latched degraded state (``reported_s``, ``reported_as``: issue 18's report),
-how long after the scenario's first sensor fault that was, and where the command was at the
-end.  Part of ``summary.json``.
+in every status to the end, as OUTSIDE_MODEL's is and a missing input's is not, timed from the
+first of the DEGRADED commands leading up to its first status when they began at or after the
+onset), the earlier of the fault and the latched degraded state (``reported_s``, ``reported_as``:
+issue 18's report), how long after the scenario's first sensor fault that was, and where the
+command was at the end.  Part of ``summary.json``.
 
 The detection time is read from the command frames, which come every control period: the first
 of the unbroken run of FAULT commands that leads up to the first ``MRS_CtrlStatus`` with a
 plausibility fault bit (``CtrlStatus_Plausibility`` 1 or 2; the status frame itself comes only
-every 100 ms).  The plant's trace also gives when the faulted sensor's error (its reading less
-the same sensor's without the fault, at the trace's true values: the fault's own; plus the
+every 100 ms); ``first_degraded_s`` likewise the first of the run of DEGRADED commands that leads
+up to the first status with the degraded bit (4), or that status's time when the command there
+was not DEGRADED (a FAULT outranks it).  The plant's trace also gives when the faulted
+sensor's error (its reading less the same sensor's without the fault, at the trace's true values: the fault's own; plus the
 healthy sensors' biases its check sees with it, ``plausibility_runs.check_offset``) first
 exceeded the bound the monitor checks it against, the moment from which issue 18
 counts its 300 ms (``error_over_bound_s``; ``yaw_error_over_bound_s`` the same for a yaw-rate
@@ -55,21 +58,27 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
     yaw_frames = 0
     degraded_s: float | None = None
     run_start: float | None = None  # the current unbroken run of FAULT commands began here
+    degraded_run: float | None = None  # the current unbroken run of DEGRADED commands began here
     detected_s: float | None = None
     statuses: list[tuple[float, int]] = []
+    degraded_since: dict[float, float] = {}  # a status's time: where the DEGRADED commands leading to it began
     for r in rows:
         msg = r["message"]
         if msg == names.MSG_YAW:
             yaw_frames += 1
         elif msg == names.MSG_CMD and names.SIG_CMD_STATE in r and yaw_frames:
-            faulted = int(r[names.SIG_CMD_STATE]) == mr.STATUS_FAULT
-            run_start = (run_start if run_start is not None else (yaw_frames - 1) * ts) if faulted else None
+            state = int(r[names.SIG_CMD_STATE])
+            t = (yaw_frames - 1) * ts
+            run_start = (run_start if run_start is not None else t) if state == mr.STATUS_FAULT else None
+            degraded_run = (degraded_run if degraded_run is not None else t) if state == mr.STATUS_DEGRADED else None
         elif msg == names.MSG_STATUS and names.SIG_STATUS_PLAUS in r and yaw_frames:
             bits = int(r[names.SIG_STATUS_PLAUS])
             statuses.append(((yaw_frames - 1) * ts, bits))
+            if degraded_run is not None:
+                degraded_since[(yaw_frames - 1) * ts] = degraded_run
             seen |= bits
             if bits & names.PLAUS_DEGRADED and degraded_s is None:
-                degraded_s = (yaw_frames - 1) * ts
+                degraded_s = degraded_run if degraded_run is not None else (yaw_frames - 1) * ts
             if bits & _FAULT_BITS and detected_s is None:
                 detected_s = run_start if run_start is not None else (yaw_frames - 1) * ts
     onset = min((f.start for f in sc.sensor_config.faults), default=None)
@@ -80,6 +89,8 @@ def plausibility_figures(rows: list[dict[str, Any]], sc: scn.Scenario, rate_hz: 
     # (in every status from there to the end, from the sensor fault's onset on): a missing
     # input's comes and goes.
     latched = latched_degraded(statuses, onset or 0.0)
+    if latched is not None and degraded_since.get(latched, -math.inf) >= (onset or 0.0):
+        latched = degraded_since[latched]  # the command said it first (every period; the status every 100 ms)
     reported = min((t for t in (detected_s, latched) if t is not None), default=None)
     return {
         "bits_seen": seen,

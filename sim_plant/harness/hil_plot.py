@@ -11,8 +11,13 @@ import io
 import math
 from typing import Any, Sequence
 
+from firmware_py import model_regulator as mr
 from sim_plant.car import scenario as scn
 from sim_plant.harness.hil_steps import Step, state_names
+
+#: The controller lane's levels, bottom to top: from not yet running to the most severe.
+LANE = (mr.STATUS_STARTING, mr.STATUS_INACTIVE, mr.STATUS_ACTIVE, mr.STATUS_SATURATED, mr.STATUS_DEGRADED,
+        mr.STATUS_FAULT)
 
 
 def event_marks(sc: scn.Scenario) -> list[tuple[float, str]]:
@@ -37,13 +42,13 @@ def run_png(steps: Sequence[Step], marks: Sequence[tuple[float, str]], title: st
         return None
     t = [s.t_s for s in steps]
     has_ctrl = any(s.ctrl_state for s in steps)
-    fig, axes = plt.subplots(3 if has_ctrl else 2, 1, figsize=(9, 7.5 if has_ctrl else 6), sharex=True,
-                             gridspec_kw={"height_ratios": [3, 3, 1.2] if has_ctrl else [1, 1]})
+    fig, axes = plt.subplots(3 if has_ctrl else 2, 1, figsize=(9, 8 if has_ctrl else 6), sharex=True,
+                             gridspec_kw={"height_ratios": [3, 3, 1.6] if has_ctrl else [1, 1]})
     axes[0].plot(t, [s.yaw_rate_rad_s for s in steps], color="C0", label="yaw rate")
     axes[0].set_ylabel("yaw rate [rad/s]")
     _angles(axes[1], steps, t)
     if has_ctrl:
-        ax, states = axes[2], list(state_names().values())
+        ax, states = axes[2], lane_levels()
         ax.step(t, [states.index(s.ctrl_state) if s.ctrl_state in states else math.nan for s in steps],
                 where="post", color="C3")
         ax.set_yticks(range(len(states)), states, fontsize=7)
@@ -51,6 +56,13 @@ def run_png(steps: Sequence[Step], marks: Sequence[tuple[float, str]], title: st
         ax.set_ylabel("controller")
     _finish(axes, marks, fig, title)
     return _png(fig, plt)
+
+
+def lane_levels() -> list[str]:
+    """The controller lane's state names, bottom to top: ``LANE``'s order, then any other state
+    the DBC names."""
+    names = state_names()
+    return [names[v] for v in LANE if v in names] + [n for v, n in names.items() if v not in LANE]
 
 
 def comparison_png(with_ctrl: Sequence[Step], without_ctrl: Sequence[Step], marks: Sequence[tuple[float, str]],

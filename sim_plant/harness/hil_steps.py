@@ -47,7 +47,9 @@ class Step:
     v_m_s: float
     aux_cmd_rad: float  # the newest valid command the actuator had received
     aux_applied_rad: float  # what the actuator applied over this step
-    ctrl_state: str  # AuxSteerCmd_State by its DBC name; "" when no command belongs to the step
+    # AuxSteerCmd_State by its DBC name (STARTING, INACTIVE, ACTIVE, SATURATED, DEGRADED, FAULT);
+    # "" when no command belongs to the step
+    ctrl_state: str
     ctrl_cause: int | None  # CtrlStatus_Cause bits (see the DBC); None before the first status
     m_z_nm: float
     mu: float

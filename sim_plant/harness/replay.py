@@ -123,6 +123,7 @@ class Step:
     # the driver's angle of the monitor's first step (``ControllerNode.monitor_driver_angle``: the
     # one that came with a new redundant sample, else delta_driver); the replay sets it every cycle
     monitor_driver: float = math.nan
+    starting: bool = False  # the cycle was in the node's start state (``ControllerNode.starting``)
 
 
 @dataclass(frozen=True)
@@ -260,7 +261,8 @@ class _Replayer:
                 status = self._status(msg, line, t)
         assert out is not None
         step = Step(len(self.steps), kind, line, t, inputs, out, node.state.fault_flags, status,
-                    monitor_steps=monitor_steps, monitor_driver=monitor_driver)
+                    monitor_steps=monitor_steps, monitor_driver=monitor_driver,
+                    starting=node.starting and kind != "final")
         self.steps.append(step)
         return step
 

@@ -7,7 +7,9 @@ inputs go to the C driver with the node's effective calibration (a calibration f
 ``firmware_py.calibration_file``); its ``mrs_step`` outputs are put in the command's DBC encoding
 (so an angle is compared at the resolution the bus carries) and compared with the recorded
 frames exactly as the Python replay's are.  What is the node's and not the law's stays the
-Python node's: the ``MeasCounter``, the alive counter, the final zero command at shutdown.  The
+Python node's: the ``MeasCounter``, the alive counter, the final zero command at shutdown, and
+whether a cycle was in the start state (passed to the driver, which reports its state from it,
+the law's status and its monitor's bits as the C node does: ``mrs_reported_state``).  The
 cause bits are not the law's either; the C node (``mrs_node``) has its own, so this replay does
 not compare them.
 
@@ -53,7 +55,8 @@ def run_driver(result: ReplayResult) -> list[tuple[float, int, int, int]]:
     """(u, reported state, fault_flags, plausibility bits) of the C port at every non-final step
     of ``result``."""
     exe = build()
-    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {s.monitor_steps} {r2!r} {v2!r} {s.monitor_driver!r}\n"
+    inputs = "".join(f"{d!r} {r!r} {v!r} {lat!r} {d2!r} {s.monitor_steps} {r2!r} {v2!r} {s.monitor_driver!r} "
+                     f"{int(s.starting)}\n"
                      for s in result.steps if s.kind != "final" for d, r, v, lat, d2, r2, v2 in [s.inputs])
     with tempfile.TemporaryDirectory(prefix="mrs-replay-") as tmp:
         cfg = Path(tmp) / "replay.cfg"

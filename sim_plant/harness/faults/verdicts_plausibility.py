@@ -5,7 +5,8 @@ command faded and both latched; no alarm in a fault-free row.  Judged from the l
 A sensor row (``Row.plausibility`` set) must show, counted from when the fault's error left
 the monitor's bound (for a step fault: its onset, the first falsified frame) -- a row whose bit
 is DEGRADED (the lateral acceleration's: ``plausibility.OUTSIDE_MODEL``) the status's DEGRADED
-within 300 ms plus its cycle instead, latched, and the command faded to zero (``_check_degraded_row``):
+within 300 ms plus its cycle instead, latched, every command from then on in state DEGRADED, and
+the command faded to zero (``_check_degraded_row``):
 
 * **detection**: the first ``MRS_AuxSteerCmd`` in state FAULT within ``PLAUS_DETECT`` (300 ms;
   in time (the car's, ``evidence.CarClock``) or in controller cycles, as the other rows count on
@@ -298,6 +299,15 @@ def _check_degraded_row(e: Evidence, start: float, fails: list[str], observed: l
     after = [s for s in e.statuses if s.t >= t_st]
     if lost := [s for s in after if not s.plausibility & PLAUS_DEGRADED]:
         fails.append(f"{len(lost)} of {len(after)} status frames after the report lack DEGRADED")
+    # On the wire, every period: the command's state DEGRADED from the status's cycle before the
+    # report (where the monitor may have tripped) to the end (FAULT too, should a fault follow).
+    t_cmd = next((t_ for t_, s in e.cmds if t_ >= max(start, t_st - STATUS_CYCLE) and s == mr.STATUS_DEGRADED), None)
+    if t_cmd is None:
+        fails.append("no command in state DEGRADED")
+    else:
+        observed.append(f"DEGRADED on the command {1e3 * (t_cmd - ref):.0f} ms after")
+        if wrong := [s for t_, s in e.cmds if t_ >= t_st and s not in (mr.STATUS_DEGRADED, mr.STATUS_FAULT)]:
+            fails.append(f"{len(wrong)} commands after the report not DEGRADED (first state {int(wrong[0])})")
     if faults := sorted({s.plausibility for s in after if s.plausibility & PLAUS_FAULT}):
         observed.append(f"fault bits too: {faults}")
     window = [abs(a) for t_, a in e.angles if t_st - STATUS_CYCLE <= t_ < t_st] or [0.0]
