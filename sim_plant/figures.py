@@ -62,9 +62,11 @@ def tidy_figures(value: Any, name: str = "") -> Any:
 
 
 def text(value: Any, name: str = "") -> str:
-    """One figure as text: a float tidied (``1e-05``, ``0.0203``, ``25.0``), anything else as str."""
+    """One figure as text: a float tidied (``1e-05``, ``0.0203``, ``25``), anything else as str."""
     v = tidy_figures(value, name)
-    return repr(v) if isinstance(v, float) else str(v)
+    if isinstance(v, float):
+        return str(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
+    return str(v)
 
 
 def lines(figures: dict[str, Any], indent: str = "  ", width: int = 26) -> list[str]:
