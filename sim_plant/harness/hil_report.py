@@ -83,7 +83,8 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
         "steps.csv": steps_csv(steps),
         "summary.json": (json.dumps(summary, indent=2) + "\n").encode(),
     }
-    png = hil_plot.run_png(steps, hil_plot.event_marks(sc), title(summary))
+    png = hil_plot.run_png(steps, hil_plot.event_marks(sc), title(summary),
+                           hil_plot.sensor_traces(steps, sc.sensor_config.faults))
     if png is not None:
         files["plot.png"] = png
     written = write_files(cfg.out, files)

@@ -63,6 +63,7 @@ def verdict_line(t: dict[str, Any]) -> str:
 
 
 def lines(t: dict[str, Any], indent: str = "  ", width: int = 26) -> list[str]:
-    """What ``hil run`` prints of it: a line per process, then the verdict."""
-    out = [f"{indent}{'timing ' + name:<{width}}{process_line(t[name])}" for name in PROCESSES if name in t]
+    """What ``hil run`` prints of it: a line per process (realtime runs), then the verdict."""
+    shown = PROCESSES if t["held"] is not None else ()
+    out = [f"{indent}{'timing ' + name:<{width}}{process_line(t[name])}" for name in shown if name in t]
     return out + [f"{indent}{'timing':<{width}}{verdict_line(t)}"]
