@@ -23,6 +23,7 @@ from mrsteer_cli.cli import main
 from mrsteer_dbc.link import TxLink
 from mrsteer_dbc.names import (MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG_STEER, MSG_YAW, SIG_CMD_ANGLE, SIG_LAT_ACCEL,
                                SIG_SPEED, SIG_SPEED_2, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE, SIG_YAW_RATE_2)
+from sim_plant.figures import resolution_of, tidy
 from sim_plant.harness.replay import ReplaySettings, replay
 from sim_plant.harness.replay_clock import RecordingBus
 from sim_plant.harness.replay_report import steps_csv, whatif, whatif_series
@@ -159,6 +160,9 @@ def test_a_late_cycle_no_grouping_reproduces_is_named_and_not_the_firmwares(
     main(["replay", str(tmp_path / "late.log"), "--trigger", "clock"])
     text = capsys.readouterr().out
     assert f"from line {i + 1} on, a late cycle" in text and "not the firmware's" in text
+    assert "{" not in text and "}" not in text  # no dict reprs in the printed report
+    floats = [(k, v) for k, v in s["apart_mismatches"][0].items() if isinstance(v, float)]
+    assert floats and all(tidy(v, resolution_of(k)) == v for k, v in floats)  # JSON: no float noise
 
 
 def test_an_on_time_cycle_that_disagrees_still_fails(log: Path, tmp_path: Path,
