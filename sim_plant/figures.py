@@ -1,5 +1,6 @@
 """Figures as people and JSON read them: rounded to their resolution.  One helper for every output
-(summaries printed or in JSON, the CSVs), so a figure reads the same everywhere.
+(summaries printed or in JSON, the CSVs), so a figure reads the same everywhere; a per-step
+table's states keep more digits (``tidy_datum``), being data to analyse.
 
 A figure's resolution follows from its name's unit suffix: an angle (``_rad``) to the bus's
 finest angle, the command's 1e-6 rad; degrees (``_deg``) to 1e-5 deg (about that angle); a time
@@ -21,6 +22,8 @@ import mrsteer_dbc
 from mrsteer_dbc.names import MSG_CMD, SIG_CMD_ANGLE
 
 DIGITS = 6  # significant digits of a figure without a unit
+DATA_DIGITS = 9  # significant digits of a state in a per-step table (steps.csv): data to analyse
+ROUND_OFF = 1e-12  # of a state's unit: below it, a value in such a table is round-off, written 0
 SI = 1e-6  # of its unit: a figure of the plant's states (yaw rate, speed, acceleration)
 LOG_TIME = 1e-6  # s: the candump log's timestamps
 
@@ -44,9 +47,19 @@ def tidy(x: float, resolution: float | None = None) -> float:
     if not math.isfinite(x):
         return x
     if resolution is None:
-        return float(f"{x:.{DIGITS}g}") + 0.0
+        return tidy_digits(x, DIGITS)
     decimals = max(0, -Decimal(repr(resolution)).normalize().as_tuple().exponent)  # type: ignore[operator]
     return round(round(x / resolution) * resolution, decimals) + 0.0  # + 0.0: no -0.0
+
+
+def tidy_datum(x: float) -> float:
+    """A plant state for a per-step table: ``DATA_DIGITS`` significant digits, and 0 below
+    ``ROUND_OFF`` (``-1.16e-164`` rad of an actuator at rest)."""
+    return 0.0 if abs(x) < ROUND_OFF else tidy_digits(x, DATA_DIGITS)
+
+
+def tidy_digits(x: float, digits: int) -> float:
+    return float(f"{x:.{digits}g}") + 0.0 if math.isfinite(x) else x
 
 
 def tidy_figures(value: Any, name: str = "") -> Any:
@@ -64,9 +77,12 @@ def tidy_figures(value: Any, name: str = "") -> Any:
 def text(value: Any, name: str = "") -> str:
     """One figure as text: a float tidied (``1e-05``, ``0.0203``, ``25``), anything else as str."""
     v = tidy_figures(value, name)
-    if isinstance(v, float):
-        return str(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
-    return str(v)
+    return written(v) if isinstance(v, float) else str(v)
+
+
+def written(x: float) -> str:
+    """A float already tidied, as text: a whole number without its ``.0``."""
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
 def lines(figures: dict[str, Any], indent: str = "  ", width: int = 26) -> list[str]:

@@ -143,7 +143,9 @@ def test_signals_csv_starts_with_scenario_time_and_keeps_the_logs_microsecond_ti
     ts = 1.0 / hil["rate_hz"]
     steps = read_steps_csv(out / "steps.csv")
     yaw = [float(r["t_s"]) for r in rows if r["message"] == names.MSG_YAW]
-    assert abs(float(rows[0]["t_s"])) <= ts and yaw == [s.t_s for s in steps]
+    first = next(i for i, r in enumerate(rows) if r["message"] not in (names.MSG_CMD, names.MSG_STATUS))
+    assert float(rows[first]["t_s"]) == 0.0 and yaw == [s.t_s for s in steps]
+    assert all(float(r["t_s"]) < 0.0 for r in rows[:first])  # a controller's frames before the plant's first
     answers = [float(r["t_s"]) for r in rows if r["message"] == names.MSG_CMD][:len(steps)]
     assert answers == [s.t_s for s in steps]  # lockstep: each step's command at its step's time
     logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]

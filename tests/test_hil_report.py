@@ -3,6 +3,7 @@ the per-step CSV, and the demo's wording."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -119,3 +120,10 @@ def test_a_run_without_sensor_faults_draws_no_reading() -> None:
     sc = scn.load("paper-fig9")
     assert hil_plot.sensor_traces(_faulty_steps(), sc.sensor_config.faults) == []
     assert not any(label.startswith("sensor fault") for _, label in hil_plot.event_marks(sc))
+
+
+def test_steps_csv_writes_round_off_as_zero_and_keeps_nine_digits() -> None:
+    step = replace(_faulty_steps(1)[0], aux_applied_rad=-1.16e-164, beta_rad=0.0123456789123, m_z_nm=4000.000000001)
+    header, row = steps_csv([step]).decode().splitlines()
+    cells = dict(zip(header.split(","), row.split(",")))
+    assert cells["aux_applied_rad"] == "0" and cells["beta_rad"] == "0.0123456789" and cells["m_z_nm"] == "4000"

@@ -70,6 +70,7 @@ class Step:
 # steps.csv's columns: scenario time first, then the step and the rest in Step's order
 STEP_COLUMNS = ("t_s", *(f.name for f in fields(Step) if f.name != "t_s"))
 _FROM_TRACE = tuple(name for name in STEP_COLUMNS if name in PlantNode.TRACE_COLUMNS)
+_TIME_COLUMNS = ("t_s", "wall_s")  # to the log's microsecond
 
 
 @dataclass
@@ -155,8 +156,8 @@ def step_table(trace: list[dict[str, float]], traffic: Traffic, lockstep: bool,
 
 
 def steps_csv(steps: list[Step]) -> bytes:
-    """The rows, each figure at its resolution (``sim_plant.figures``: times to the microsecond,
-    angles to the command's 1e-6 rad, ...)."""
+    """The rows: times to the log's microsecond, the states to 9 digits, round-off written 0
+    (``sim_plant.figures``)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(STEP_COLUMNS)
@@ -168,7 +169,9 @@ def steps_csv(steps: list[Step]) -> bytes:
 def _cell(name: str, value: object) -> str:
     if value is None:
         return ""
-    return figures.text(value, name) if isinstance(value, float) else str(value)
+    if not isinstance(value, float):
+        return str(value)
+    return figures.written(figures.tidy(value, figures.LOG_TIME) if name in _TIME_COLUMNS else figures.tidy_datum(value))
 
 
 _PARSE = {"step": int, "ctrl_state": str, "ctrl_cause": lambda text: int(text) if text else None}
