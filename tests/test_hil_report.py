@@ -65,7 +65,8 @@ def test_steps_csv_round_trips_with_microsecond_times(tmp_path: Path) -> None:
     lines = (tmp_path / "steps.csv").read_text().splitlines()
     wall = lines[0].split(",").index("wall_s")
     assert lines[0].split(",")[:2] == ["t_s", "step"]  # scenario time first
-    assert lines[1].split(",")[0] == "0" and lines[2].split(",")[0] == "0.002" and lines[2].split(",")[wall] == "10.0025"
+    assert lines[1].split(",")[0] == "0" and lines[2].split(",")[0] == "0.002"
+    assert lines[2].split(",")[wall] == "10.0025"
     assert read_steps_csv(tmp_path / "steps.csv") == steps
 
 

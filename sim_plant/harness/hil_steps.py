@@ -171,7 +171,8 @@ def _cell(name: str, value: object) -> str:
         return ""
     if not isinstance(value, float):
         return str(value)
-    return figures.written(figures.tidy(value, figures.LOG_TIME) if name in _TIME_COLUMNS else figures.tidy_datum(value))
+    tidy = figures.tidy(value, figures.LOG_TIME) if name in _TIME_COLUMNS else figures.tidy_datum(value)
+    return figures.written(tidy)
 
 
 _PARSE = {"step": int, "ctrl_state": str, "ctrl_cause": lambda text: int(text) if text else None}

@@ -9,8 +9,8 @@ inputs go to the C driver with the node's effective calibration (a calibration f
 frames exactly as the Python replay's are, cycle by cycle as the Python replay grouped the
 frames (on the ``clock`` trigger, ``replay_clock``: the same late cycles, judged alike).  What
 is the node's and not the law's stays the Python node's: the ``MeasCounter``, the alive
-counter, the final zero command at shutdown.  The cause bits are not the law's either; the C node (``mrs_node``) has its own, so this replay does
-not compare them.
+counter, the final zero command at shutdown.  The cause bits are not the law's either; the C
+node (``mrs_node``) has its own, so this replay does not compare them.
 
 Why the decoding stays in Python: the receive path is the node's concern (the C node has its
 own, ``mrs_node_rx``), and keeping it out of this driver means a mismatch here is the port's

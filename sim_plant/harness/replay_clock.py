@@ -16,13 +16,15 @@ cycle's command.  The command says more:
   node, and the one whose command (angle, state, ``MeasCounter``) is the recorded one is taken.
   Where several are (a new driver angle changes the command by less than the bus's 1e-6 rad, but
   changes the law's state), the one whose next ``LOOKAHEAD`` commands are also reproduced wins,
-  then the one with the most frames logged ``min_answer`` before the command.
+  then the one whose commands before rounding lie nearest them, then the one with the most
+  frames logged ``min_answer`` before the command.
 
 Where no prefix reproduces the command, the one whose command comes nearest is taken and the
-replay reports the mismatch.  A cycle whose command came more than ``LATE`` periods after the one before it, or less
-than ``EARLY`` periods, is *late*: the controller did not hold its timing there (the grouping
-above still holds, the bus order does not depend on timing, but a stalled machine can also stall
-the bus's broker and the logger, and then the log's order is not the one the node saw).
+replay reports the mismatch.  A cycle whose command came more than ``LATE`` periods after the
+one before it, or less than ``EARLY`` periods, is *late*: the controller did not hold its timing
+there (the grouping above still holds, the bus order does not depend on timing, but a stalled
+machine can also stall the bus's broker and the logger, and then the log's order is not the one
+the node saw).
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ import can
 import mrsteer_dbc
 from firmware_py.controller.node import ControllerNode
 from mrsteer_dbc.e2e import E2EStatus
-from mrsteer_dbc.names import MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE
+from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STEER, MSG_YAW, SIG_CMD_ANGLE, SIG_CMD_MEAS,
+                               SIG_CMD_STATE)
 
 LOOKAHEAD = 30  # commands a tie between two groupings is followed for
 LATE = 1.5  # periods after the command before: a late cycle
@@ -172,7 +175,8 @@ class Grouper:
         angle, state, meas = got
         return (state != c.state) + (meas != c.meas), abs(angle - c.angle) if math.isfinite(c.angle) else math.inf
 
-    def choose(self, node: ControllerNode, p: int, n: int, lookahead: bool = True) -> tuple[Choice, ControllerNode | None]:
+    def choose(self, node: ControllerNode, p: int, n: int,
+               lookahead: bool = True) -> tuple[Choice, ControllerNode | None]:
         """The frames command ``n``'s cycle had, given ``node`` with ``p`` frames received (it is
         advanced, not copied, where the log allows one prefix only); and a copy of the chosen
         node after its cycle when one reproduced the command."""
