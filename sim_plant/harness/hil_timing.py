@@ -59,7 +59,7 @@ def verdict_line(t: dict[str, Any]) -> str:
         return f"held: no overrun or missed cycle, lateness p99 within half the {period} period"
     late = [name for name in PROCESSES if name in t and not _held(t[name], t["period_s"])]
     return (f"did NOT hold: the {' and the '.join(late)} ran late of the {period} period (a loaded "
-            "machine?); this run's figures are not those of a controller that kept its period")
+            "machine?); this run's figures are not those of loops that kept their period")
 
 
 def lines(t: dict[str, Any], indent: str = "  ", width: int = 26) -> list[str]:
