@@ -164,6 +164,10 @@ class Contract:
         sig = self._by_name[name].get_signal_by_name(signal)
         return float(sig.minimum), float(sig.maximum)
 
+    def signal_scale(self, name: str, signal: str) -> float:
+        """The signal's resolution: its DBC scale factor."""
+        return float(self._by_name[name].get_signal_by_name(signal).scale)
+
     # ------------------------------------------------------------------ encode
 
     def e2e_crc(self, name: str, payload: bytes) -> int:

@@ -21,6 +21,7 @@ import mrsteer_dbc
 from mrsteer_dbc import names
 from firmware_py import model_regulator as mr
 from firmware_py.controller import node as rt
+from sim_plant import figures
 from sim_plant.car import scenario as scn
 from sim_plant.harness import hil_plot
 from sim_plant.harness.hil_steps import read_steps_csv
@@ -101,7 +102,7 @@ def test_outputs_are_written_and_the_log_decodes_with_cantools(lockstep_run: tup
         assert name in dec.stdout
     assert "Unknown frame id" not in dec.stdout
     header = (out / "signals.csv").read_text().splitlines()[0].split(",")
-    assert header[:3] == ["t_s", "message", "e2e"] and "YawRate_YawRate" in header
+    assert header[:4] == ["t_s", "bus_time_s", "message", "e2e"] and "YawRate_YawRate" in header
 
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -122,13 +123,14 @@ def test_the_step_table_spans_the_scenario_and_the_plot_is_drawn_from_it(lockste
     assert {s.ctrl_cause for s in steps[-100:]} == {0}
     # The table agrees with the bus summary, and nothing after the scenario is in it: the
     # controller's final zero command (in the log) is no step's command.
-    assert math.degrees(max(abs(s.aux_cmd_rad) for s in steps)) == pytest.approx(hil["peak_aux_steer_deg"], rel=1e-6)
-    assert math.degrees(steps[-1].aux_cmd_rad) == pytest.approx(hil["final_aux_steer_deg"], rel=1e-6)
+    deg = figures.resolution_of("peak_aux_steer_deg")  # the summary's rounding
+    assert math.degrees(max(abs(s.aux_cmd_rad) for s in steps)) == pytest.approx(hil["peak_aux_steer_deg"], abs=deg)
+    assert math.degrees(steps[-1].aux_cmd_rad) == pytest.approx(hil["final_aux_steer_deg"], abs=deg)
     lsb = mrsteer_dbc.load().message(names.MSG_YAW).get_signal_by_name(names.SIG_YAW_RATE).scale
     assert steps[-1].yaw_rate_rad_s == pytest.approx(hil["final_yaw_rate_rad_s"], abs=0.5 * lsb + 1e-12)  # rounded on the bus
     with (out / "signals.csv").open() as f:
         last_cmd = [r for r in csv.DictReader(f) if r["message"] == "MRS_AuxSteerCmd"][-1]
-    assert float(last_cmd["AuxSteerCmd_Angle"]) == 0.0 and float(last_cmd["t_s"]) > steps[-1].wall_s
+    assert float(last_cmd["AuxSteerCmd_Angle"]) == 0.0 and float(last_cmd["bus_time_s"]) > steps[-1].wall_s
     assert (out / "plot.png").read_bytes()[:8] == PNG
     png = hil_plot.run_png(steps, hil_plot.event_marks(scn.load("paper-fig9")), "from steps.csv")
     assert png is not None and png[:8] == PNG
@@ -188,11 +190,22 @@ def test_the_plots_controller_lane_has_a_level_for_every_state() -> None:
     assert hil_plot.lane_levels() == ["STARTING", "INACTIVE", "ACTIVE", "SATURATED", "DEGRADED", "FAULT"]
 
 
-def test_signals_csv_keeps_the_logs_microsecond_times(lockstep_run: tuple[dict, Path]) -> None:
-    _, out = lockstep_run
-    logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]
+def test_signals_csv_starts_with_scenario_time_and_keeps_the_logs_microsecond_times(
+        lockstep_run: tuple[dict, Path]) -> None:
+    hil, out = lockstep_run
     with (out / "signals.csv").open() as f:
-        written = [r["t_s"] for r in csv.DictReader(f)]
+        rows = list(csv.DictReader(f))
+    # scenario time first: from the plant's first frame, each yaw-rate frame at its step's time
+    ts = 1.0 / hil["rate_hz"]
+    steps = read_steps_csv(out / "steps.csv")
+    yaw = [float(r["t_s"]) for r in rows if r["message"] == names.MSG_YAW]
+    first = next(i for i, r in enumerate(rows) if r["message"] not in (names.MSG_CMD, names.MSG_STATUS))
+    assert float(rows[first]["t_s"]) == 0.0 and yaw == [s.t_s for s in steps]
+    assert all(float(r["t_s"]) < 0.0 for r in rows[:first])  # a controller's frames before the plant's first
+    answers = [float(r["t_s"]) for r in rows if r["message"] == names.MSG_CMD][:len(steps)]
+    assert answers == [s.t_s for s in steps]  # lockstep: each step's command at its step's time
+    logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]
+    written = [r["bus_time_s"] for r in rows]
     assert written == logged and all(re.fullmatch(r"\d+\.\d{6}", t) for t in written)
     times = [float(t) for t in written]
     assert all(b >= a for a, b in zip(times, times[1:]))

@@ -3,13 +3,16 @@ the per-step CSV, and the demo's wording."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import mrsteer_dbc
 from mrsteer_cli import hil_demo
 from sim_plant.car import scenario as scn
-from sim_plant.harness.hil_steps import Traffic, read_steps_csv, step_table, steps_csv
+from sim_plant.car.sensor_faults import parse_spec
+from sim_plant.harness import hil_plot
+from sim_plant.harness.hil_steps import Step, Traffic, read_steps_csv, step_table, steps_csv
 from sim_plant.nodes.plant import PlantNode
 
 RATE = 500.0
@@ -61,7 +64,9 @@ def test_steps_csv_round_trips_with_microsecond_times(tmp_path: Path) -> None:
     (tmp_path / "steps.csv").write_bytes(steps_csv(steps))
     lines = (tmp_path / "steps.csv").read_text().splitlines()
     wall = lines[0].split(",").index("wall_s")
-    assert lines[1].split(",")[1] == "0.000000" and lines[2].split(",")[wall] == "10.002500"
+    assert lines[0].split(",")[:2] == ["t_s", "step"]  # scenario time first
+    assert lines[1].split(",")[0] == "0" and lines[2].split(",")[0] == "0.002"
+    assert lines[2].split(",")[wall] == "10.0025"
     assert read_steps_csv(tmp_path / "steps.csv") == steps
 
 
@@ -78,3 +83,48 @@ def test_demo_wording_follows_the_scenarios_driver(tmp_path: Path) -> None:
     assert "driver takes over" not in held and "reaction" not in held
     driven = hil_demo.explain(scn.load("handover"), on, off, 0.02, tmp_path)
     assert "1 s reaction time the driver steers against the rest" in driven and "wheel held" not in driven
+
+
+def _faulty_steps(n: int = 50) -> list[Step]:
+    """A run whose yaw-rate sensor sticks at 0.01 rad/s from step 25 while the car yaws at 0.02."""
+    trace = [{**dict.fromkeys(PlantNode.TRACE_COLUMNS, 0.0), "t_s": k / RATE, "wall_s": 10.0 + k / RATE,
+              "yaw_rate_rad_s": 0.02, "yaw_rate_measured_rad_s": 0.02 if k < 25 else 0.01,
+              "lat_accel_m_s2": 0.5, "lat_accel_measured_m_s2": 0.5 + (k >= 25), "v_m_s": 20.0} for k in range(n)]
+    return step_table(trace, Traffic.of([], RATE), lockstep=False, contract=C)
+
+
+def test_the_plot_marks_a_sensor_fault_and_draws_its_reading_beside_the_truth() -> None:
+    sc = scn.load("paper-fig9").with_sensor_faults((parse_spec("yaw_rate:stuck:0.01@0.05"),
+                                                    parse_spec("lat_accel:bias:1@0.05")))
+    marks = hil_plot.event_marks(sc)
+    assert (0.05, "sensor fault: yaw_rate stuck 0.01") in marks and (0.05, "sensor fault: lat_accel bias 1") in marks
+    assert marks == sorted(marks, key=lambda m: m[0]) and (0.5, "M_z 4000 Nm") in marks  # the scenario's own too
+    steps = _faulty_steps()
+    traces = hil_plot.sensor_traces(steps, sc.sensor_config.faults)
+    yaw = [t for t in traces if t.axis == hil_plot.YAW]
+    assert len(yaw) == 1 and yaw[0].faulty and yaw[0].values == [s.yaw_rate_measured_rad_s for s in steps]
+    assert yaw[0].values[-1] == 0.01 and "yaw_rate stuck 0.01 from 0.05 s" in yaw[0].label
+    lat = [t for t in traces if t.axis.startswith("lateral")]  # an axis of its own: the truth beside it
+    assert [t.faulty for t in lat] == [False, True] and lat[0].values[-1] == 0.5 and lat[1].values[-1] == 1.5
+    plt = hil_plot._pyplot()
+    fig = hil_plot.run_figure(plt, steps, marks, "t", traces)
+    try:
+        top = fig.axes[0]
+        assert any(list(line.get_ydata()) == yaw[0].values for line in top.get_lines())
+        assert any(list(line.get_xdata()) == [0.05, 0.05] for line in top.get_lines())  # the onset's mark
+        assert any(ax.get_ylabel() == lat[0].axis for ax in fig.axes)
+    finally:
+        plt.close(fig)
+
+
+def test_a_run_without_sensor_faults_draws_no_reading() -> None:
+    sc = scn.load("paper-fig9")
+    assert hil_plot.sensor_traces(_faulty_steps(), sc.sensor_config.faults) == []
+    assert not any(label.startswith("sensor fault") for _, label in hil_plot.event_marks(sc))
+
+
+def test_steps_csv_writes_round_off_as_zero_and_keeps_nine_digits() -> None:
+    step = replace(_faulty_steps(1)[0], aux_applied_rad=-1.16e-164, beta_rad=0.0123456789123, m_z_nm=4000.000000001)
+    header, row = steps_csv([step]).decode().splitlines()
+    cells = dict(zip(header.split(","), row.split(",")))
+    assert cells["aux_applied_rad"] == "0" and cells["beta_rad"] == "0.0123456789" and cells["m_z_nm"] == "4000"

@@ -124,20 +124,30 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
         print(f"mrsteer hil run: error: {exc}", file=sys.stderr)
         return 1
     s = result.summary
-    if args.json:
-        print(json.dumps(s, indent=2))
-    else:
-        for key in ("scenario", "mode", "rate_hz", "delay_steps", "controller", "peak_yaw_rate_rad_s",
-                    "final_yaw_rate_rad_s", "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable",
-                    "plant", "actuator", "sensors", "peak_yaw_rate_true_rad_s", "peak_side_slip_deg", "aux_rms_deg",
-                    "time_at_limit_s", "final_speed_m_s"):
-            value = s[key]
-            print(f"  {key:<26}{value:.6g}" if isinstance(value, float) else f"  {key:<26}{value}")
-        print(f"  {'frames':<26}{s['frames']}")
-        print(f"  {'plausibility':<26}"
-              + (plausibility_line(s['plausibility'], s['duration']) if s["controller"] != "none"
-                 else "no controller: nothing monitors the sensors"))
+    print(json.dumps(s, indent=2) if args.json else "\n".join(summary_lines(s)))
     return 0
+
+
+# What ``hil run`` prints of its summary (summary.json has it all), in this order.
+PRINTED = ("scenario", "mode", "rate_hz", "delay_steps", "controller", "peak_yaw_rate_rad_s", "final_yaw_rate_rad_s",
+           "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable", "plant", "actuator", "sensors",
+           "peak_yaw_rate_true_rad_s", "peak_side_slip_deg", "aux_rms_deg", "time_at_limit_s", "final_speed_m_s",
+           "frames")
+
+
+def summary_lines(s: dict[str, Any]) -> list[str]:
+    """``hil run``'s printed summary: ``key value`` lines (the frame counts nested under
+    ``frames``), the plausibility monitor's verdict, and whether the loops held their timing."""
+    from sim_plant import figures
+    from sim_plant.harness import hil_timing
+
+    out = figures.lines({key: s[key] for key in PRINTED if key in s})
+    out.append(f"  {'plausibility':<26}"
+               + (plausibility_line(s["plausibility"], s["duration"]) if s["controller"] != "none"
+                  else "no controller: nothing monitors the sensors"))
+    if "timing" in s:
+        out += hil_timing.lines(s["timing"])
+    return out
 
 
 def plausibility_line(pl: dict, duration: float | None = None) -> str:
@@ -179,7 +189,9 @@ def _cmd_hil_evidence(args: argparse.Namespace) -> int:
     except hil.HilError as exc:
         print(f"mrsteer hil evidence: error: {exc}", file=sys.stderr)
         return 1
-    print(json.dumps([e.row() for e in rows], indent=2) if args.json else hil_evidence.format_table(rows))
+    from sim_plant.figures import tidy_figures
+
+    print(json.dumps(tidy_figures([e.row() for e in rows]), indent=2) if args.json else hil_evidence.format_table(rows))
     say(f"wrote {', '.join(f'{Path(e.scenario).stem}/' for e in rows)}, {hil_evidence.ROWS_FILE} and "
         f"{hil_evidence.TABLE_FILE} to {args.out}/" + (" (--quick: a smoke run, not the evidence)" if args.quick else ""))
     return 0
@@ -206,4 +218,9 @@ def _cmd_hil_demo(args: argparse.Namespace) -> int:
                               1.0 / on["rate_hz"], on["delay_steps"]).summary()
     hil_demo.write_figure(runs[mr.Q_LIMITED], runs["none"], sc, args.out)
     print(hil_demo.explain(sc, on, off, offline["peak_yaw_rate_rad_s"], args.out))
+    if args.mode == "realtime":
+        from sim_plant.harness.hil_timing import verdict_line
+
+        for label, s in (("with the controller", on), ("without it", off)):
+            print(f"timing of the run {label}: {verdict_line(s['timing'])}")
     return 0

@@ -129,7 +129,9 @@ def _run(args: argparse.Namespace) -> int:
         except replay_c.PortError as exc:
             print(f"mrsteer replay: error: {exc}", file=sys.stderr)
             return 1
-    what = report.whatif(rp.replay(args.log, replace(settings, controller=new))) if new is not None else None
+    what = None
+    if new is not None:  # on the frames as the recorded commands grouped them
+        what = report.whatif(rp.replay(args.log, replace(settings, controller=new), like=result))
     doc: dict[str, Any] = {"replays": summaries, "recorded_run": source}
     if what is not None:
         doc["whatif"] = {"calibration": str(args.calibration), **report.whatif_summary(what)}
@@ -142,11 +144,11 @@ def _run(args: argparse.Namespace) -> int:
         if what is not None:
             print("\n".join(report.whatif_text(doc["whatif"], str(args.calibration))))
     if args.out is not None:
-        _write(args.out, doc, result, what, 1.0 / rate_hz)
+        _write(args.out, doc, result, what)
     return 0 if all(s["agrees"] for s in summaries) else 1
 
 
-def _write(out: Path, doc: dict[str, Any], result: Any, what: Any, period: float) -> None:
+def _write(out: Path, doc: dict[str, Any], result: Any, what: Any) -> None:
     from firmware_py.platform.files import write_files
     from sim_plant.harness import replay_report as report
 
@@ -155,7 +157,7 @@ def _write(out: Path, doc: dict[str, Any], result: Any, what: Any, period: float
         "replay.json": json.dumps(doc, indent=2) + "\n",
         "replay.csv": report.steps_csv(result.steps, what.result.steps if what is not None else None)}
     if what is not None:
-        png = report.whatif_png(what, period, f"what-if: {doc['whatif']['calibration']} on {result.log.name}")
+        png = report.whatif_png(what, f"what-if: {doc['whatif']['calibration']} on {result.log.name}")
         if png is not None:
             files["whatif.png"] = png
     write_files(out, files)

@@ -20,6 +20,11 @@ class TruncatedCmac:
 
         self._base = CMAC(algorithms.AES(key))  # the key schedule once; copied per message
 
+    def __deepcopy__(self, memo: dict[int, object]) -> "TruncatedCmac":
+        """Itself: it holds no state that changes (each MAC works on a copy of the key schedule),
+        and OpenSSL's objects cannot be copied (a replay copies whole nodes)."""
+        return self
+
     def __call__(self, data: bytes, bits: int) -> int:
         c = self._base.copy()
         c.update(data)

@@ -21,7 +21,10 @@ from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness import hil_plot, launch
+from sim_plant.figures import resolution_of, tidy, tidy_figures
 from sim_plant.harness.hil_caused_yaw import caused_yaw_figures
+from sim_plant.harness.hil_timing import timing
+from sim_plant.harness.log_time import scenario_times
 from sim_plant.harness.hil_plausibility import plausibility_figures
 from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, step_table, steps_csv
 from sim_plant.harness.processes import RunError as HilError
@@ -72,13 +75,16 @@ def finish(cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.ControllerConfig, work: 
         steps, sc, ctrl, cfg.rate_hz, lockstep=cfg.mode == "lockstep", delay_steps=cfg.delay_steps,
         controller=cfg.controller != "none", shipped=cfg.controller_program in (None, (str(launch.C_NODE),)))
     summary["loop"] = {"controller": stats["controller"], "plant": stats["plant"]}
+    summary["timing"] = timing(summary["loop"], cfg.mode, cfg.rate_hz)
+    summary = tidy_figures(summary)
     files = {
         "traffic.log": (work / "traffic.log").read_bytes(),
-        "signals.csv": _signals_csv(rows),
+        "signals.csv": _signals_csv(frames, rows, cfg.rate_hz, contract),
         "steps.csv": steps_csv(steps),
         "summary.json": (json.dumps(summary, indent=2) + "\n").encode(),
     }
-    png = hil_plot.run_png(steps, hil_plot.event_marks(sc), title(summary))
+    png = hil_plot.run_png(steps, hil_plot.event_marks(sc), title(summary),
+                           hil_plot.sensor_traces(steps, sc.sensor_config.faults))
     if png is not None:
         files["plot.png"] = png
     written = write_files(cfg.out, files)
@@ -190,20 +196,33 @@ def car_figures(sc: scn.Scenario, steps: list[Step]) -> dict[str, Any]:
     }
 
 
-def _signals_csv(rows: list[dict[str, Any]]) -> bytes:
-    columns: list[str] = ["t_s", "message", "e2e"]
+def _signals_csv(frames: list[Frame], rows: list[dict[str, Any]], rate_hz: float,
+                 contract: mrsteer_dbc.Contract) -> bytes:
+    """Every frame decoded: its scenario time first (``log_time``), then its bus time (epoch s, to
+    the log's microsecond), each signal at its DBC resolution."""
+    columns: list[str] = ["t_s", "bus_time_s", "message", "e2e"]
     for r in rows:
         for k in r:
             if k not in columns:
                 columns.append(k)
+    times = scenario_times([(f.frame_id, f.data, f.t) for f in frames], 1.0 / rate_hz, contract)
     buf = io.StringIO()
     w = csv.DictWriter(buf, columns, lineterminator="\n")
     w.writeheader()
-    for r in rows:
-        # Epoch times need all their digits to the microsecond (the log's resolution).
-        w.writerow({k: (f"{v:.6f}" if k == "t_s" else f"{v:.9g}" if isinstance(v, float) else v)
-                    for k, v in r.items()})
+    for t, r in zip(times, rows):
+        scales = _scales(contract, r["message"])
+        w.writerow({"t_s": repr(tidy(t, resolution_of("t_s"))), "bus_time_s": f"{r['t_s']:.6f}",
+                    **{k: (repr(tidy(v, scales.get(k))) if isinstance(v, float) else v)
+                       for k, v in r.items() if k != "t_s"}})
     return buf.getvalue().encode()
+
+
+def _scales(contract: mrsteer_dbc.Contract, message: str) -> dict[str, float]:
+    """The DBC scale of each signal of ``message`` (none for a frame not in the DBC)."""
+    try:
+        return {s.name: float(s.scale) for s in contract.message(message).signals}
+    except KeyError:
+        return {}
 
 
 def recorded_controller(log: Path) -> tuple[str | None, float | None]:

@@ -23,12 +23,13 @@ import bisect
 import csv
 import io
 import math
-from dataclasses import astuple, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import mrsteer_dbc
 from mrsteer_dbc import names
+from sim_plant import figures
 from sim_plant.harness.processes import RunError
 from sim_plant.nodes.plant import PlantNode
 
@@ -68,9 +69,10 @@ class Step:
     speed_redundant_measured_m_s: float = math.nan  # the second speed's (NaN also for a car without one)
 
 
-STEP_COLUMNS = tuple(f.name for f in fields(Step))
+# steps.csv's columns: scenario time first, then the step and the rest in Step's order
+STEP_COLUMNS = ("t_s", *(f.name for f in fields(Step) if f.name != "t_s"))
 _FROM_TRACE = tuple(name for name in STEP_COLUMNS if name in PlantNode.TRACE_COLUMNS)
-_TIME_COLUMNS = ("t_s", "wall_s")  # written to the microsecond
+_TIME_COLUMNS = ("t_s", "wall_s")  # to the log's microsecond
 
 
 @dataclass
@@ -156,20 +158,23 @@ def step_table(trace: list[dict[str, float]], traffic: Traffic, lockstep: bool,
 
 
 def steps_csv(steps: list[Step]) -> bytes:
+    """The rows: times to the log's microsecond, the states to 9 digits, round-off written 0
+    (``sim_plant.figures``)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(STEP_COLUMNS)
     for s in steps:
-        w.writerow([_cell(name, v) for name, v in zip(STEP_COLUMNS, astuple(s))])
+        w.writerow([_cell(name, getattr(s, name)) for name in STEP_COLUMNS])
     return buf.getvalue().encode()
 
 
 def _cell(name: str, value: object) -> str:
     if value is None:
         return ""
-    if isinstance(value, float):
-        return f"{value:.6f}" if name in _TIME_COLUMNS else f"{value:.9g}"
-    return str(value)
+    if not isinstance(value, float):
+        return str(value)
+    tidy = figures.tidy(value, figures.LOG_TIME) if name in _TIME_COLUMNS else figures.tidy_datum(value)
+    return figures.written(tidy)
 
 
 _PARSE = {"step": int, "ctrl_state": str, "ctrl_cause": lambda text: int(text) if text else None}

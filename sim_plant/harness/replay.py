@@ -15,14 +15,18 @@ When the node ran a cycle is taken from the log, by the node's own trigger:
   frame, at once; its command must be the next recorded command, before the next sensor
   frame (the plant waits for it).  A recorded command with no new yaw-rate frame to answer is
   the node's watchdog cycle; the last command of the log, the node's final zero command.
-* ``clock`` (realtime runs): every recorded command is one cycle.  Before it, the node is
-  given the logged frames up to the yaw-rate frame the command names by its ``MeasCounter``;
-  the frames after that one (the plant sends driver angle and speed before yaw rate) wait for
-  the next cycle.  A command naming an older measurement, or none, gets no new frames (see
-  ``_Replayer._drained`` for the exceptions).  Which frames a clocked controller had drained is not in the log
-  otherwise: a driver-angle or speed frame that a late cycle drained just before the yaw-rate
-  frame it did not yet have is given to the next cycle here, which shows as a mismatch when
-  the value changed between the two.
+* ``clock`` (realtime runs): every recorded command is one cycle, and the frames it had are
+  the ones the command shows (``replay_clock``): a prefix of the logged sensor frames ending
+  before the command, reaching the yaw-rate frame its ``MeasCounter`` names and not the next
+  one; the frames between (the next step's driver angle and speed, sent before its yaw rate)
+  are decided by the command itself, each possible prefix run through a copy of the node.  A
+  cycle whose command came off its period (more than 1.5 periods after the one before, or less
+  than half) is *late*: the controller did not hold its timing there.  Where a late cycle's
+  command is reproduced by no grouping of its frames, the controller's state from there on is
+  not known (a stalled machine also stalls the bus and the logger, and the log's order may not
+  be the one the node saw): the mismatches from that cycle on that depend on the inputs (angle,
+  state, ``MeasCounter``, the status frames' fields) are reported apart (``ReplayResult.apart``)
+  and do not make the log disagree; a wrong alive counter, a missing or an invalid frame still do.
 
 Each replayed command is compared with the recorded one in state, ``MeasCounter``, alive
 counter (a dropped or repeated command shows there even where the angle happens to agree)
@@ -36,9 +40,8 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import can
 
@@ -46,139 +49,25 @@ import mrsteer_dbc
 from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
-from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
+from firmware_py.controller.node import ControllerNode
 from mrsteer_dbc.e2e import E2EStatus
-from mrsteer_dbc.names import (MEAS_NONE, MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
+from mrsteer_dbc.names import (MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
                                SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE, SIG_SPEED, SIG_STATUS_CAUSE, SIG_STATUS_FLAGS,
                                SIG_STATUS_PLAUS, SIG_STATUS_REJECTED, SIG_STATUS_STATE, SIG_STEER_ANGLE, SIG_YAW_RATE)
+from sim_plant.harness.log_time import scenario_times
+from sim_plant.harness.replay_data import Mismatch, Out, ReplayResult, ReplaySettings, StatusOut, Step
+from sim_plant.harness.replay_clock import Command, Grouper, RecordingBus, late
 from sim_plant.nodes.candump_log import LogError, read_candump_messages
 
 __all__ = ["LogError", "Mismatch", "Out", "ReplayResult", "ReplaySettings", "Step", "effective_config", "replay"]
 
 # What the replayed status frame is compared in (the rest is timing: overruns, lateness).
 STATUS_FIELDS = ("state", "flags", "cause", "rejected", "plausibility")
-
-
-@dataclass(frozen=True)
-class ReplaySettings:
-    """How the recorded controller ran: its rate, trigger, timeouts, calibration and key."""
-
-    rate_hz: float = DEFAULT_RATE_HZ
-    trigger: str = "sensors"
-    timeout_cycles: int = 10
-    controller: mr.ControllerConfig = field(default_factory=mr.ControllerConfig)
-    secoc_key: bytes | None = None
-
-    def runtime(self) -> RuntimeConfig:
-        if self.trigger not in TRIGGERS:
-            raise ValueError(f"trigger must be one of {', '.join(TRIGGERS)}")
-        return RuntimeConfig(rate_hz=self.rate_hz, timeout_cycles=self.timeout_cycles, trigger=self.trigger,
-                             secoc_key=self.secoc_key, controller=self.controller)
-
-
-@dataclass(frozen=True)
-class Out:
-    """One command (with its status frame when one was sent in that cycle), replayed or recorded.
-    ``None`` in a field: not known for this implementation (the C law has no cause bits)."""
-
-    line: int  # log line of the recorded frame (0: replayed)
-    t: float  # bus time, epoch s (replayed: the time of the frame that triggered the cycle)
-    angle: float  # rad, as the DBC carries it
-    state: int
-    meas: int | None
-    counter: int | None
-    valid: bool = True  # recorded: the frame passed length, CRC and range
-
-
-@dataclass(frozen=True)
-class StatusOut:
-    line: int
-    t: float
-    state: int
-    flags: int
-    cause: int | None
-    rejected: int | None
-    valid: bool = True
-    plausibility: int | None = None  # CtrlStatus_Plausibility
-
-
-@dataclass
-class Step:
-    """One controller cycle of the replay."""
-
-    index: int
-    kind: str  # "yaw" (answers an accepted yaw-rate frame), "watchdog", "clock" or "final"
-    line: int  # the log line that triggered it (the yaw-rate frame, or the recorded command)
-    t: float
-    # (delta_driver, yaw_rate, speed) into step(), then (lat_accel, delta_driver_redundant,
-    # yaw_rate_redundant, speed_redundant) into the monitor (with the command sent the cycle
-    # before); NaN: invalid.
-    inputs: tuple[float, float, float, float, float, float, float]
-    out: Out
-    flags: int = 0  # the firmware's range flags after this step
-    status: StatusOut | None = None  # the status frame sent in this cycle
-    recorded: Out | None = None
-    recorded_status: StatusOut | None = None
-    monitor_steps: int = 1  # yaw-rate samples the monitor stepped over (0: its verdict held)
-    # the driver's angle of the monitor's first step (``ControllerNode.monitor_driver_angle``: the
-    # one that came with a new redundant sample, else delta_driver); the replay sets it every cycle
-    monitor_driver: float = math.nan
-    starting: bool = False  # the cycle was in the node's start state (``ControllerNode.starting``)
-
-
-@dataclass(frozen=True)
-class Mismatch:
-    line: int  # log line of the frame that disagrees (the recorded one, or the yaw frame left unanswered)
-    t: float
-    frame_id: int
-    what: str  # "angle", "state", "meas", "counter", "missing", "extra", "invalid", status fields
-    frame: str = "command"  # which recorded frame kind it concerns: "command" or "status"
-
-    def describe(self) -> str:
-        return f"line {self.line} t={self.t:.6f} ID 0x{self.frame_id:03X}: {self.what}"
-
-
-@dataclass
-class ReplayResult:
-    log: Path
-    settings: ReplaySettings
-    frames: int
-    sensor_frames: int
-    steps: list[Step]
-    statuses_recorded: int
-    mismatches: list[Mismatch]
-    max_abs_dangle: float  # rad, over the steps with a recorded command
-    config: mr.ControllerConfig  # the calibration the node ran (effective_config)
-    recorded_statuses: list[StatusOut] = field(default_factory=list)
-    structural: list[Mismatch] = field(default_factory=list)  # cycles the log has no command for
-
-    @property
-    def agrees(self) -> bool:
-        return not self.mismatches
-
-    @property
-    def first(self) -> Mismatch | None:
-        return min(self.mismatches, key=lambda m: m.line) if self.mismatches else None
-
-    def count(self, frame: str, *what: str) -> int:
-        """Mismatches of ``frame`` ("command" or "status"), of the kinds ``what`` (all if none)."""
-        return sum(1 for m in self.mismatches if m.frame == frame and (not what or m.what.split(":")[0] in what))
-
-
-class _RecordingBus:
-    """Stands in for the bus: keeps what the node sends; there is nothing to receive."""
-
-    def __init__(self) -> None:
-        self.sent: list[can.Message] = []
-
-    def set_filters(self, filters: Any) -> None:
-        self.filters = filters
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self.sent.append(msg)
-
-    def recv(self, timeout: float | None = None) -> None:
-        return None
+# Mismatches that no grouping of the sensor frames can explain: judged even after a late cycle.
+FRAME_KINDS = ("counter", "missing", "extra", "invalid")
+# After a tie between groupings, an angle this many command resolutions off is the state's
+# uncertainty showing (``judge``), not the firmware's error.
+TIE_SLACK = 2
 
 
 def effective_config(node: ControllerNode) -> mr.ControllerConfig:
@@ -199,7 +88,7 @@ class _Replayer:
 
     def __init__(self, settings: ReplaySettings, contract: mrsteer_dbc.Contract) -> None:
         self.contract = contract
-        self.bus = _RecordingBus()
+        self.bus = RecordingBus()
         self.node = ControllerNode(self.bus, settings.runtime(), contract)  # type: ignore[arg-type]
         self.rx_ids = {int(f["can_id"]) for f in self.bus.filters}
         self.cmd_id = contract.frame_id(MSG_CMD)
@@ -209,6 +98,7 @@ class _Replayer:
         self.mismatches: list[Mismatch] = []
         self.recorded_statuses: list[StatusOut] = []
         self.sensor_frames = 0
+        self.min_answer: float | None = None
 
     # ------------------------------------------------------------- the node
 
@@ -314,50 +204,52 @@ class _Replayer:
         if pending is not None:
             self.miss(pending.line, pending.t, self.yaw_id, "missing: no command answers this yaw-rate frame")
 
-    def run_clock(self, frames: list[tuple[int, can.Message]], last_cmd: int) -> None:
-        buffered: list[tuple[int, can.Message]] = []
+    def run_clock(self, frames: list[tuple[int, can.Message]], last_cmd: int, like: list[int] | None = None) -> None:
+        """One cycle per recorded command, its frames grouped by ``replay_clock`` (or as in
+        ``like``: each cycle's ``Step.received`` of another replay of the same log)."""
+        sensors: list[can.Message] = []
+        commands: list[Command] = []
+        recorded: list[Out] = []
         for line, msg in frames:
             fid = msg.arbitration_id
             if fid in self.rx_ids:
-                buffered.append((line, msg))
-                self.sensor_frames += 1
+                sensors.append(msg)
             elif fid == self.cmd_id:
                 rec = self._command(msg, line, msg.timestamp)
-                take = self._drained(buffered, rec.meas, msg.timestamp - self.node.period)
-                for _, m in buffered[:take]:
-                    self.node.receive(m)
-                del buffered[:take]
-                self.cycle("final" if line == last_cmd else "clock", line, msg.timestamp).recorded = rec
+                recorded.append(rec)
+                commands.append(Command(msg.timestamp, len(sensors), rec.angle, rec.state, rec.meas, line == last_cmd))
             elif fid == self.status_id:
                 self.recorded_statuses.append(self._status(msg, line, msg.timestamp))
+        self.sensor_frames = len(sensors)
+        grouper = Grouper(self.contract, sensors, commands)
+        self.min_answer = grouper.min_answer
+        p = 0
+        before: float | None = None
+        for n, (c, rec) in enumerate(zip(commands, recorded)):
+            if c.final:
+                step = self.cycle("final", rec.line, rec.t)
+            elif like is not None:
+                for m in sensors[p:like[n]]:
+                    self.node.receive(m)
+                p = max(p, like[n])
+                step = self.cycle("clock", rec.line, rec.t)
+            else:
+                choice, _ = grouper.choose(self.node, p, n)
+                self.node, p = choice.node, choice.k
+                self.bus = choice.node.bus  # type: ignore[assignment]
+                step = self.cycle("clock", rec.line, rec.t)
+                step.groupings, step.tied = choice.groupings, choice.tied
+            step.received = p
+            step.recorded = rec
+            step.late = not c.final and late(c.t, before, self.node.period)
+            before = c.t
 
-    def _drained(self, buffered: list[tuple[int, can.Message]], meas: int | None, settled: float) -> int:
-        """How many of the buffered frames the node had received when it computed a command
-        answering yaw-rate counter ``meas``: up to the last yaw-rate frame of that counter.  A
-        command answering an older measurement, or none, ran before the next burst of sensor
-        frames arrived (the plant sends each step's frames together): nothing new, except
-        yaw-rate frames that no receiver can accept (a bad length or CRC, say), which are what
-        made it answer none.  With no yaw-rate frame buffered at all (the plant stopped, or lost
-        its yaw-rate sensor), the frames logged a period or more before the command
-        (``settled``) had reached the node; bus times say no more than that (a late cycle can
-        miss frames logged well before its command)."""
-        yaws = [i for i, (_, m) in enumerate(buffered) if m.arbitration_id == self.yaw_id]
-        take = 0
-        if meas is not None and meas != MEAS_NONE:
-            named = [i for i in yaws if self.yaw_counter(buffered[i][1]) == meas]
-            take = named[-1] + 1 if named else 0
-        if take == 0:
-            for i in yaws:
-                if self.yaw_counter(buffered[i][1]) is not None:
-                    break
-                take = i + 1
-        while not yaws and take < len(buffered) and buffered[take][1].timestamp <= settled:
-            take += 1
-        return take
 
-def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None
-           ) -> ReplayResult:
-    """Replay ``log`` through the Python controller; ``LogError`` when it is not a usable log."""
+def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None,
+           like: ReplayResult | None = None) -> ReplayResult:
+    """Replay ``log`` through the Python controller; ``LogError`` when it is not a usable log.
+    ``like``: a replay of the same log whose clock-trigger grouping to keep (a what-if of
+    another calibration: its commands are not the recorded ones, so they cannot decide it)."""
     settings = settings or ReplaySettings()
     contract = contract or mrsteer_dbc.load()
     if not log.is_file():
@@ -371,11 +263,44 @@ def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_
     if settings.trigger == "sensors":
         r.run_sensors(frames, last_cmd)
     else:
-        r.run_clock(frames, last_cmd)
+        r.run_clock(frames, last_cmd, None if like is None else [st.received for st in like.steps])
+    times = dict(zip((line for line, _ in frames), scenario_times(
+        [(m.arbitration_id, bytes(m.data), m.timestamp) for _, m in frames], r.node.period, contract)))
+    for step in r.steps:
+        step.t_s = times[step.line]
     found, worst = compare(r.steps, r.recorded_statuses, r.cmd_id, r.status_id)
     pair_statuses(r.steps, r.recorded_statuses)
+    judged, apart, since = judge(r.steps, r.mismatches + found)
     return ReplayResult(log, settings, len(frames), r.sensor_frames, r.steps, len(r.recorded_statuses),
-                        r.mismatches + found, worst, effective_config(r.node), r.recorded_statuses, r.mismatches)
+                        judged, worst, effective_config(r.node), r.recorded_statuses, r.mismatches, apart, since,
+                        r.min_answer, times)
+
+
+def judge(steps: list[Step], mismatches: list[Mismatch]) -> tuple[list[Mismatch], list[Mismatch], int | None]:
+    """(judged, apart, line): the mismatches split at the first cycle where the replay cannot
+    vouch for the controller's state: a late cycle whose command disagrees, or, after a tie
+    between groupings (``Step.tied``: the next commands could not tell them apart, so the state
+    may be off by less than the bus shows), a command off by at most ``TIE_SLACK`` resolutions in
+    its angle alone.  From that line on, the mismatches the inputs decide are apart (the module
+    docstring); a wrong alive counter, a missing, extra or invalid frame stay judged."""
+    bad = {m.line for m in mismatches if m.frame == "command" and m.what.split(":")[0] not in FRAME_KINDS}
+    slack = TIE_SLACK * mrsteer_dbc.load().signal_scale(MSG_CMD, SIG_CMD_ANGLE) * (1.0 + 1e-9)
+    since, tied = None, False
+    for s in steps:
+        rec = s.recorded
+        if rec is not None and rec.line in bad:
+            near = (s.out.state, s.out.meas) == (rec.state, rec.meas) and abs(s.out.angle - rec.angle) <= slack
+            if s.late or (tied and near):
+                since = rec.line
+                break
+        tied = tied or s.tied
+    if since is None:
+        return mismatches, [], None
+    judged: list[Mismatch] = []
+    apart: list[Mismatch] = []
+    for m in mismatches:
+        (apart if m.line >= since and m.what.split(":")[0] not in FRAME_KINDS else judged).append(m)
+    return judged, apart, since
 
 
 def pair_statuses(steps: list[Step], recorded: list[StatusOut]) -> None:

@@ -6,12 +6,13 @@ the freshness rule and the trigger, and kept what went into ``step()`` and the m
 inputs go to the C driver with the node's effective calibration (a calibration file,
 ``firmware_py.calibration_file``); its ``mrs_step`` outputs are put in the command's DBC encoding
 (so an angle is compared at the resolution the bus carries) and compared with the recorded
-frames exactly as the Python replay's are.  What is the node's and not the law's stays the
-Python node's: the ``MeasCounter``, the alive counter, the final zero command at shutdown, and
-whether a cycle was in the start state (passed to the driver, which reports its state from it,
-the law's status and its monitor's bits as the C node does: ``mrs_reported_state``).  The
-cause bits are not the law's either; the C node (``mrs_node``) has its own, so this replay does
-not compare them.
+frames exactly as the Python replay's are, cycle by cycle as the Python replay grouped the
+frames (on the ``clock`` trigger, ``replay_clock``: the same late cycles, judged alike).  What
+is the node's and not the law's stays the Python node's: the ``MeasCounter``, the alive
+counter, the final zero command at shutdown, and whether a cycle was in the start state (passed
+to the driver, which reports its state from it, the law's status and its monitor's bits as the
+C node does: ``mrs_reported_state``).  The cause bits are not the law's either; the C
+node (``mrs_node``) has its own, so this replay does not compare them.
 
 Why the decoding stays in Python: the receive path is the node's concern (the C node has its
 own, ``mrs_node_rx``), and keeping it out of this driver means a mismatch here is the port's
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import mrsteer_dbc
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE
-from sim_plant.harness.replay import Out, ReplayResult, StatusOut, compare
+from sim_plant.harness.replay import Out, ReplayResult, StatusOut, compare, judge
 from firmware_py import calibration_file
 
 PORT = Path(__file__).resolve().parents[2] / "ports" / "c"
@@ -92,4 +93,5 @@ def replay_c(result: ReplayResult, contract: mrsteer_dbc.Contract | None = None)
     found, worst = compare(result.steps, result.recorded_statuses, c.frame_id(MSG_CMD), c.frame_id(MSG_STATUS),
                            outs, statuses)
     steps = [replace(s, out=o) for s, o in zip(result.steps, outs)]
-    return replace(result, steps=steps, mismatches=result.structural + found, max_abs_dangle=worst)
+    judged, apart, since = judge(steps, result.structural + found)
+    return replace(result, steps=steps, mismatches=judged, apart=apart, unjudged_from=since, max_abs_dangle=worst)

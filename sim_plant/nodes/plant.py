@@ -62,6 +62,7 @@ from mrsteer_dbc.names import (MSG_BENCH, MSG_CMD, MSG_REDUNDANT, MSG_SPEED, MSG
                                SIG_SPEED, SIG_STATUS_PLAUS, SIG_SPEED_2, SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE,
                                SIG_YAW_RATE_2, VEHICLE_SENSORS)
 from firmware_py.controller.node import DEFAULT_RATE_HZ  # the plant steps at the controller's rate
+from firmware_py.controller.timing import LatenessHistogram
 from sim_plant.car import scenario as scn
 from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator import CMD_TIMEOUT_S, FADE_RATE_RAD_S, RATE_LIMIT_RAD_S, Actuator, ActuatorConfig
@@ -88,12 +89,16 @@ class PlantStats:
     actuator_authority_steps: int = 0  # steps in which the actuator's authority limiter changed the command
     bench_injections: int = 0
     rx_ignored: int = 0  # frames of other IDs (queued before the kernel filter was installed)
-    overruns: int = 0
+    overruns: int = 0  # realtime: steps started more than a period late (made up, none skipped)
     wall_time_s: float = 0.0
     trace: list[tuple[float, ...]] = field(default_factory=list)
+    lateness: LatenessHistogram = field(default_factory=LatenessHistogram)  # realtime: each step's start
 
     def summary(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if k != "trace"}
+        lat = self.lateness
+        return {**{k: v for k, v in self.__dict__.items() if k not in ("trace", "lateness")},
+                "lateness_p50_s": lat.percentile(0.5), "lateness_p99_s": lat.percentile(0.99),
+                "lateness_max_s": lat.max}
 
 
 class PlantNode:
@@ -294,7 +299,9 @@ class PlantNode:
                 now = time.monotonic()
                 if now < deadline:
                     time.sleep(deadline - now)
-                elif now - deadline > self.wall_period:
+                    now = time.monotonic()
+                self.stats.lateness.add(now - deadline)
+                if now - deadline > self.wall_period:
                     self.stats.overruns += 1
                 deadline += self.wall_period
             self.step(k)

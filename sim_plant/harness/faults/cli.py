@@ -10,6 +10,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from sim_plant.car.options import add_car_args
+from sim_plant.figures import tidy_figures
 from sim_plant.harness.faults.verdicts import RowResult
 from sim_plant.harness.faults.rows import ROWS, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix
@@ -107,7 +108,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps([asdict(r) for r in results], indent=2))
+        print(json.dumps(tidy_figures([asdict(r) for r in results]), indent=2))
     else:
         print(format_table(results))
     return 0 if all(r.passed for r in results) else 1
