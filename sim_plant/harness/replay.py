@@ -38,7 +38,7 @@ import copy
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import can
 
@@ -353,14 +353,15 @@ class _Replayer:
             take += 1
         return take
 
-def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None
-           ) -> ReplayResult:
-    """Replay ``log`` through the Python controller; ``LogError`` when it is not a usable log."""
+def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None,
+           warn: Callable[[str], None] | None = None) -> ReplayResult:
+    """Replay ``log`` through the Python controller; ``LogError`` when it is not a usable log
+    (``warn``: told of a cut-off last line, ``read_candump_messages``)."""
     settings = settings or ReplaySettings()
     contract = contract or mrsteer_dbc.load()
     if not log.is_file():
-        raise LogError(f"{log}: no such file")
-    frames = read_candump_messages(log)
+        raise LogError(f"{log}: {'is a directory, not a log file' if log.is_dir() else 'no such file'}")
+    frames = read_candump_messages(log, warn)
     r = _Replayer(settings, contract)
     if not any(m.arbitration_id in r.rx_ids for _, m in frames):
         raise LogError(f"{log}: no sensor frames ({MSG_STEER}, {MSG_YAW}, {MSG_SPEED}) in {len(frames)} frames")
