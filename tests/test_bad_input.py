@@ -42,7 +42,7 @@ def test_a_bad_dbc_is_one_clear_error(tmp_path: Path, text: str | None, needle: 
 def test_an_output_directory_that_cannot_exist_is_one_clear_error(tmp_path: Path, command: list[str]) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    _one_line_error(_run(*command, "--out", str(blocker / "sub")), 2, "Not a directory")
+    _one_line_error(_run(*command, "--out", str(blocker / "sub")), 2, f"{blocker} is not a directory")
     _one_line_error(_run(*command, "--out", str(blocker)), 2, "not a directory")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]  # nothing half-written
 
@@ -50,7 +50,7 @@ def test_an_output_directory_that_cannot_exist_is_one_clear_error(tmp_path: Path
 def test_hil_run_with_an_impossible_output_directory_starts_nothing(tmp_path: Path) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    _one_line_error(_run("hil", "run", "--out", str(blocker / "sub")), 2, "Not a directory")
+    _one_line_error(_run("hil", "run", "--out", str(blocker / "sub")), 2, f"{blocker} is not a directory")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]
 
 

@@ -167,8 +167,7 @@ def _cmd_hil_evidence(args: argparse.Namespace) -> int:
 
     cfg = _hil_config(args, controller=args.controller, out=args.out, plant=args.plant, actuator=args.actuator,
                       sensors=args.sensors, seed=args.seed)
-    args.interrupted = (f"interrupted; every process it started is stopped, no table; {args.out} holds only the "
-                        "runs finished before it, each complete")
+    args.interrupted = "interrupted; every process it started is stopped, no table"
     rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=say)
     print(json.dumps([e.row() for e in rows], indent=2) if args.json else hil_evidence.format_table(rows))
     return 0
