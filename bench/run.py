@@ -13,7 +13,8 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py.controller import node as rt
-from firmware_py.platform.cli import Parser
+from firmware_py.controller.options import RATES_HELP, RateError, calibration_for_rate
+from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, describe, fail
 
 if TYPE_CHECKING:
     from mrsteer_bench.loop_compare import CompareSettings
@@ -39,7 +40,8 @@ def build_parser(prog: str = "mrsteer bench") -> Parser:
     g.add_argument("--loop-seconds", type=float, metavar="S",
                    help="each controller's run in each condition (default 30, 5 with --quick)")
     g.add_argument("--loop-rate-hz", type=float, default=rt.DEFAULT_RATE_HZ, metavar="HZ",
-                   help=f"the control rate of the loop runs (default {rt.DEFAULT_RATE_HZ:g})")
+                   help=f"the control rate of the loop runs, one with a calibration of its own: {RATES_HELP} "
+                   f"(default {rt.DEFAULT_RATE_HZ:g})")
     g.add_argument("--load-procs", type=int, metavar="N",
                    help="busy-loop processes of the loaded condition, at the bench's niceness (default: one per "
                    "CPU; 0: quiet only)")
@@ -55,6 +57,10 @@ def _check(p: Parser, args: argparse.Namespace) -> None:
         p.error(f"--loop-seconds must be in (0, 3600], got {args.loop_seconds:g}")
     if not 1 <= args.loop_rate_hz <= 10000:
         p.error(f"--loop-rate-hz must be in [1, 10000], got {args.loop_rate_hz:g}")
+    try:  # the controller runs at this rate with the calibration made for it
+        calibration_for_rate(args.loop_rate_hz, flag="--loop-rate-hz", file_flag=None)
+    except RateError as exc:
+        p.error(str(exc))
     if args.load_procs is not None and not 0 <= args.load_procs <= 64:
         p.error(f"--load-procs must be in [0, 64], got {args.load_procs}")
 
@@ -172,11 +178,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer bench") -> int:
     try:
         res = run(names, args.quick, say, loop_settings)
     except (RuntimeError, OSError, ValueError) as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(prog, describe(exc))
     except KeyboardInterrupt:
-        print(f"{prog}: interrupted; every process it started is stopped", file=sys.stderr)
-        return 130
+        return fail(prog, "interrupted; every process it started is stopped, no table", EXIT_INTERRUPTED)
     finally:
         signal.signal(signal.SIGTERM, previous)
     print(json.dumps(res, indent=2) if args.json else format_table(res))

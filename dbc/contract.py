@@ -86,6 +86,8 @@ class Contract:
             self.db = cantools.database.load_file(str(path), strict=True)
         except FileNotFoundError:
             raise ContractError(f"DBC file not found: {path}") from None
+        except OSError as exc:  # a directory, a file that cannot be read: its reason, not its errno
+            raise ContractError(f"cannot load DBC {path}: {exc.strerror or exc}") from None
         except Exception as exc:  # cantools raises several parser error types
             raise ContractError(f"cannot load DBC {path}: {exc}") from None
         self.path = Path(path)

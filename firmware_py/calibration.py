@@ -152,6 +152,23 @@ PAPER_CONFIG = replace(plain_law(ControllerConfig(), PAPER_K, PAPER_TAU, DEFAULT
                        model_delay_steps=0)
 
 
+def _tuned(rate_hz: float, k: float, tau: float, tau_n: float) -> ControllerConfig:
+    return replace(plain_law(ControllerConfig(), k, tau, tau_n), ts=1.0 / rate_hz, model_delay_steps=1)
+
+
+#: The calibration of each control rate that has one (Hz: calibration): the shipped one at
+#: 500 Hz; at the other rates the paper's plain law tuned for that rate on the ideal loop
+#: (docs/design.md, `mrsteer design tune --ts T`: 6 dB / 45 deg over the envelope, one sample
+#: modelled).  A command given no calibration runs at one of these rates or refuses
+#: (``firmware_py.controller.options.calibration_for_rate``).
+RATE_CALIBRATIONS: dict[float, ControllerConfig] = {
+    1000.0: _tuned(1000.0, 50.0, 0.012, 0.02),
+    500.0: ControllerConfig(),
+    200.0: _tuned(200.0, 14.2, 0.0161, 0.02),
+    100.0: _tuned(100.0, 4.52, 0.0075, 0.02),
+}
+
+
 _POSITIVE = ("ts", "aux_limit", "fade_rate", "speed_active_min", "speed_max", "driver_angle_max",
              "yaw_rate_max", "nominal_l_f", "nominal_l_r", "nominal_mass", "nominal_c_f", "nominal_c_r")
 

@@ -1,4 +1,4 @@
-"""Bad input anywhere gives one clear line, a non-zero exit and no partial output."""
+"""Bad input anywhere gives one clear line, exit status 2 and no partial output."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def test_a_bad_dbc_is_one_clear_error(tmp_path: Path, text: str | None, needle: 
 def test_an_output_directory_that_cannot_exist_is_one_clear_error(tmp_path: Path, command: list[str]) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    _one_line_error(_run(*command, "--out", str(blocker / "sub")), 1, "Not a directory")
+    _one_line_error(_run(*command, "--out", str(blocker / "sub")), 2, f"{blocker} is not a directory")
     _one_line_error(_run(*command, "--out", str(blocker)), 2, "not a directory")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]  # nothing half-written
 
@@ -50,7 +50,7 @@ def test_an_output_directory_that_cannot_exist_is_one_clear_error(tmp_path: Path
 def test_hil_run_with_an_impossible_output_directory_starts_nothing(tmp_path: Path) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    _one_line_error(_run("hil", "run", "--out", str(blocker / "sub")), 1, "Not a directory")
+    _one_line_error(_run("hil", "run", "--out", str(blocker / "sub")), 2, f"{blocker} is not a directory")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]
 
 
@@ -100,7 +100,7 @@ def test_an_unwritable_directory_is_refused_before_the_run(tmp_path: Path) -> No
 def test_a_full_disk_at_the_end_is_one_error_and_leaves_nothing(tmp_path: Path, node: str, flag: str) -> None:
     out = tmp_path / "out"
     proc = _run_limited([*NODES[node], flag, str(out)], 100)
-    _one_line_error(proc, 1, f"cannot write {out}: File too large")
+    _one_line_error(proc, 2, f"cannot write {out}: File too large")
     assert list(tmp_path.iterdir()) == []  # no partial file, no temporary file
 
 
@@ -109,7 +109,7 @@ def test_a_full_disk_leaves_no_partial_vector_set(tmp_path: Path) -> None:
     out.mkdir()
     (out / "keep.txt").write_text("earlier content\n")
     proc = _run_limited(["vectors", "--out", str(out)], 50_000)  # the first files fit, a later one not
-    _one_line_error(proc, 1, "File too large")
+    _one_line_error(proc, 2, "File too large")
     assert [p.name for p in out.iterdir()] == ["keep.txt"]  # not some vectors written, some not
 
 
@@ -133,7 +133,7 @@ def test_signalled_servers_refuse_impossible_outputs_and_survive_a_full_disk(tmp
     if server == "logger":
         bad = subprocess.run([sys.executable, *argv, "--out", str(tmp_path / "no" / "log.txt")],
                              capture_output=True, text=True, timeout=120)
-        _one_line_error(bad, 1, "cannot write")
+        _one_line_error(bad, 2, "cannot write")
     stats = tmp_path / "stats.json"
     p = subprocess.Popen([sys.executable, *argv, *extra, "--stats-out", str(stats)], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, preexec_fn=_limited(5))
@@ -141,7 +141,7 @@ def test_signalled_servers_refuse_impossible_outputs_and_survive_a_full_disk(tmp
     assert ready in stream.readline()
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=60)
-    assert p.returncode == 1 and f"cannot write {stats}: File too large" in err and "Traceback" not in err
+    assert p.returncode == 2 and f"cannot write {stats}: File too large" in err and "Traceback" not in err
     assert [q.name for q in tmp_path.iterdir()] == (["log.txt"] if server == "logger" else [])
 
 

@@ -164,7 +164,7 @@ def test_c_node_verifies_the_golden_sensor_frames_as_the_python_controller_does(
 
 
 @pytest.mark.parametrize("args,code", [
-    (["--interface", "mrsteer", "--channel", "bad/name"], 1),  # a channel that cannot exist
+    (["--interface", "mrsteer", "--channel", "bad/name"], 2),  # a channel that cannot exist
     (["--secoc-key", "/nonexistent/key.hex"], 2),
     (["--rate-hz", "fast"], 2),
     (["--no-such-flag"], 2),
@@ -187,7 +187,7 @@ def test_without_a_broker_the_c_node_says_so(c_node, tmp_path: Path) -> None:
     """The Python client starts a broker itself; the C node does not (docs/porting.md)."""
     proc = subprocess.run([*c_node, "--interface", "mrsteer", "--channel", "nobody-listens"], capture_output=True,
                           text=True, timeout=30, env={**os.environ, "MRSTEER_BUS_DIR": str(tmp_path)})
-    assert proc.returncode == 1 and len(proc.stderr.splitlines()) == 1
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1
     assert "no fallback-bus broker" in proc.stderr and "mrsteer bus --channel nobody-listens" in proc.stderr
 
 

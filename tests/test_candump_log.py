@@ -10,7 +10,7 @@ import can
 import cantools.logreader
 import pytest
 
-from sim_plant.nodes.candump_log import Frame, format_line, read_candump
+from sim_plant.nodes.candump_log import Frame, LogError, format_line, read_candump, read_candump_messages
 
 CASES = [
     (can.Message(timestamp=1700000000.123456, arbitration_id=0x101, data=bytes([0x00, 0x11, 0xAA]),
@@ -46,3 +46,21 @@ def test_what_the_logger_writes_is_what_cantools_reads() -> None:
         ("vehicle", 0x101, False, False, bytes([0x00, 0x11, 0xAA])), ("vehicle", 0x1ABCDEF, True, False, b""),
         ("vehicle", 0x0A0, False, True, b""), ("vehicle", 0x7F0, False, False, bytes(range(12)))]
     assert [f.timestamp.timestamp() for f in parsed][0] == pytest.approx(1700000000.123456, abs=1e-7)
+
+
+@pytest.mark.parametrize("cut", ["(1700000000.600000) vcan0 101#0011A", "(1700000000.600000) vca", "(17"])
+def test_a_cut_off_last_line_is_left_out_with_one_warning_naming_it(tmp_path: Path, cut: str) -> None:
+    log = tmp_path / "traffic.log"
+    whole = [line for _, line in CASES[:2]]
+    log.write_text("".join(whole) + "\n" + cut)  # a blank line, then a logger killed mid-write
+    warnings: list[str] = []
+    assert read_candump(log, warnings.append) == [
+        Frame(1700000000.123456, 0x101, bytes([0x00, 0x11, 0xAA])), Frame(1700000000.5, 0x1ABCDEF, b"")]
+    assert warnings == [f"{log}: line 4 is cut off (no end of line) and left out; the 2 frames before it are read"]
+
+
+def test_a_bad_line_before_the_last_is_still_refused_by_its_number(tmp_path: Path) -> None:
+    log = tmp_path / "traffic.log"
+    log.write_text(CASES[0][1] + "(1700000000.6) vca\n" + CASES[1][1])
+    with pytest.raises(LogError, match=r"traffic.log: line 2: not a candump -L frame"):
+        read_candump_messages(log, lambda m: pytest.fail(m))

@@ -61,7 +61,7 @@ def test_a_failed_evidence_leaves_its_out_as_it_was(tmp_path: Path, monkeypatch:
         return SimpleNamespace(summary={})
 
     monkeypatch.setattr(hil, "run", fake_run)
-    assert main(["hil", "evidence", "--out", str(out)]) == 1
+    assert main(["hil", "evidence", "--out", str(out)]) == 2  # a run that failed: an error, not a verdict
     assert calls == ["split-mu", "split-mu", "side-wind"]
     assert "plant exited with status 1" in capsys.readouterr().err
     assert _tree(out) == before

@@ -109,4 +109,4 @@ def test_the_car_options_are_checked_alike_by_every_command(argv: list[str], cap
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) >= 1 and "error:" in err[-1] and ("--seed" in err[-1] or "--plant" in err[-1])
+    assert len(err) == 1 and err[0].startswith("mrsteer: ") and ("--seed" in err[0] or "--plant" in err[0])

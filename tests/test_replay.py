@@ -207,7 +207,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
     if content is not None:
         log.write_text(content)
     code, doc, err = _replay(capsys, str(log))
-    assert code == 2 and not doc and err.count("\n") == 1 and err.startswith("mrsteer replay: error: ")
+    assert code == 2 and not doc and err.count("\n") == 1 and err.startswith("mrsteer: replay: ")
+
+
+def test_a_log_whose_last_line_is_cut_off_replays_the_frames_before_it(clean_log: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    lines = _lines(clean_log)
+    cut = tmp_path / "summary-less" / "traffic.log"
+    cut.parent.mkdir()
+    cut.write_text("".join(lines[:-1]) + lines[-1][:15])  # a copy cut short in the last line
+    whole = tmp_path / "whole.log"
+    whole.write_text("".join(lines[:-1]))
+    code, doc, err = _replay(capsys, str(cut))
+    assert err.splitlines() == [f"mrsteer: replay: warning: {cut}: line {len(lines)} is cut off (no end of line) and "
+                                f"left out; the {len(lines) - 1} frames before it are read"]
+    assert code == 0 and doc["replays"][0]["agrees"]
+    other = _replay(capsys, str(whole))[1]["replays"][0]
+    assert {**doc["replays"][0], "log": None} == {**other, "log": None}  # exactly the frames before it
 
 
 def test_bad_calibration_is_one_line(clean_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -264,7 +280,7 @@ def test_a_log_without_a_summary_beside_it_replays_with_the_defaults_or_as_told(
     alone.write_bytes(clean_log.read_bytes())
     code, doc, _ = _replay(capsys, str(alone))
     assert code == 0 and doc["replays"][0]["trigger"] == "sensors" and "defaults" in doc["recorded_run"]
-    code, doc, _ = _replay(capsys, str(alone), "--trigger", "sensors", "--rate-hz", "250")  # told wrong
+    code, doc, _ = _replay(capsys, str(alone), "--trigger", "sensors", "--rate-hz", "200")  # told wrong
     assert code == 1 and doc["replays"][0]["trigger"] == "sensors" and doc["recorded_run"] == "as given"
     code, doc, _ = _replay(capsys, str(clean_log))  # a lockstep run's summary says sensors
     assert code == 0 and doc["replays"][0]["trigger"] == "sensors" and "summary.json" in doc["recorded_run"]

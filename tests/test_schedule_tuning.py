@@ -63,7 +63,7 @@ def test_quick_schedule_tune_meets_every_constraint_on_its_envelope(tmp_path, ca
 @pytest.mark.parametrize("argv,needle", [
     (["--schedule", "--ts", "0.001"], "keep their defaults"),
     (["--out", "x.cfg"], "need --schedule"),  # --start and --out
-    (["--schedule", "--out", "/no/such/dir/x.cfg"], "no directory"),
+    (["--schedule", "--out", "/no/such/dir/x.cfg"], "is not an existing directory"),
 ])
 def test_schedule_tune_rejects_bad_input_with_one_line(argv, needle, capsys) -> None:
     try:

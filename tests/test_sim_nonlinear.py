@@ -84,7 +84,7 @@ def test_what_the_nonlinear_car_cannot_run_is_one_line_and_exit_2(argv: list[str
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["sim", "disturbance", "--mz", "500", "--v", "20", "--mu", "1", "--plant", "nonlinear", *argv])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and err.startswith("mrsteer: error:") and "--ts" in err
+    assert code == 2 and err.count("\n") == 1 and err.startswith("mrsteer: sim disturbance: ") and "--ts" in err
     assert "Traceback" not in err
 
 

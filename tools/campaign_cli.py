@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from firmware_py.platform.cli import Parser, check_output_file
+from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, check_output_dir, check_output_file, fail
 from mrsteer_cli.cli_args import int_in, say
 
 
@@ -79,6 +79,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     c = spec.load(args.campaign)
     out = args.out or Path("out") / f"campaign-{c.name}"
+    check_output_dir("--out", out)
     say(f"campaign {c.name}: {c.samples} samples x {len(c.calibrations)} calibrations "
         f"({', '.join(c.calibrations)}), {c.duration:g} s each, {c.chunks} chunks -> {out}/")
     def interrupted(*_: object) -> None:
@@ -93,9 +94,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         from sim_plant.campaign.results import done_chunks
 
-        print(f"\nmrsteer campaign: interrupted with {len(done_chunks(out))} of {c.chunks} chunks written to {out}/; "
-              "run the same command again to resume", file=sys.stderr)
-        return 130
+        if sys.stderr.isatty():
+            print(file=sys.stderr)  # end the progress bar's line
+        return fail(getattr(args, "prog", "mrsteer campaign run"),
+                    f"interrupted with {len(done_chunks(out))} of {c.chunks} chunks written to {out}/, each complete; "
+                    "run the same command again to resume", EXIT_INTERRUPTED)
     runs = res.samples * len(c.calibrations)
     print(f"ran {res.ran} of {res.chunks} chunks ({res.chunks - res.ran} already done) in {res.seconds:.1f} s"
           + (f" on {res.workers} workers" if res.ran else "") + f"; {runs} runs in {out}/")

@@ -1,6 +1,10 @@
 """``mrsteer`` command line: a thin layer over firmware_py and sim_plant.
 
-Every error in the arguments is one line on stderr and exit status 2.
+Every error is one line on stderr, ``mrsteer: COMMAND: what``, and exit status 2: an argument
+error from the parser (``firmware_py.platform.cli.Parser``), any other from ``main``, which
+formats what a command raises (``ERRORS``) with ``firmware_py.platform.cli.error_line``.  Ctrl-C
+is one line and exit status 130; exit status 1 is a verdict (a replay that disagrees, a failed
+design or fault-matrix row), never an error.
 """
 
 from __future__ import annotations
@@ -16,21 +20,28 @@ from typing import Any, Callable, Sequence
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.options import calibration_from_args, describe_gains, hand_gains
-from firmware_py.platform.cli import EXIT_USAGE, Parser
+from firmware_py.platform.bus_open import BusOpenError
+from firmware_py.platform.cli import EXIT_INTERRUPTED, CommandError, Parser, check_output_dir, describe, fail
 from mrsteer_cli import campaign_cli, design_cli, hil_cli, replay_cli
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number, say
 from sim_plant.car.plants import LINEAR, PLANTS
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
 from sim_plant.offline import experiments
+from sim_plant.harness.launch import LaunchError
+from sim_plant.harness.processes import RunError
 from sim_plant.offline.closed_loop import CONTROLLERS
 
 MAX_DURATION = 60.0
 PAPER_OUT = Path("out/paper")
 
 
-class UsageError(Exception):
-    """Bad input from the user: reported as one line, exit status 2."""
+UsageError = CommandError  # bad input from the user: one line, exit status 2
+
+#: What a command raises for an error it reports in one line: bad input (ValueError: a file, a
+#: value, a calibration, a scenario), a file that cannot be read or written (OSError), a bus that
+#: cannot be opened, a controller program that cannot be had, a run whose process failed.
+ERRORS = (CommandError, ValueError, OSError, BusOpenError, LaunchError, RunError)
 
 
 def _add_operating_point(p: argparse.ArgumentParser, required: bool) -> None:
@@ -82,7 +93,18 @@ def build_parser() -> argparse.ArgumentParser:
     hil_cli.add_parsers(sub)
     replay_cli.add_parsers(sub)
     campaign_cli.add_parsers(sub)
+    _name_commands(parser)
     return parser
+
+
+def _name_commands(parser: argparse.ArgumentParser) -> None:
+    """Each subcommand's parser records its own name (``args.prog``, ``mrsteer hil run``): the
+    command an error line names."""
+    parser.set_defaults(prog=parser.prog)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _name_commands(child)
 
 
 def _add_sim_parsers(sub: Any) -> None:
@@ -250,8 +272,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
             import matplotlib  # noqa: F401
         except ImportError:
             raise UsageError("matplotlib is needed for the figures: pip install 'mrsteer[plot]'") from None
-        if out.exists() and not out.is_dir():
-            raise UsageError(f"--out {out} exists and is not a directory")
+        check_output_dir("--out", out)
     run = paper.reproduce(progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     written: list[Path] = []
     if out is not None:
@@ -269,6 +290,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 def _cmd_vectors(args: argparse.Namespace) -> int:
     from sim_plant.offline import vectors
 
+    check_output_dir("--out", args.out)
     written = vectors.write_all(args.out, progress=say)
     print(f"wrote {len(vectors.CONFIGS)} configurations and {len(written)} vector files "
           f"({sum(w.rows for w in written)} steps), and the SecOC vectors, to {args.out}/")
@@ -285,18 +307,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _delegate(argv[0])(argparse.Namespace(args=argv[1:]))
     parser = build_parser()
     args = parser.parse_args(argv)
+    prog = getattr(args, "prog", parser.prog)
     try:
         return args.handler(args)
     except BrokenPipeError:  # e.g. piped into `head`: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (UsageError, ValueError, FileNotFoundError) as exc:
-        print(f"mrsteer: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as exc:  # an output path that cannot be created or written
-        where = f": {exc.filename}" if exc.filename else ""
-        print(f"mrsteer: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 1
+    except KeyboardInterrupt:
+        # Whatever the command started is stopped by now (each runner's own clean-up); what it
+        # leaves is its own help's "Ctrl-C" (docs/can-runtime.md, "Errors and Ctrl-C").
+        return fail(prog, getattr(args, "interrupted", "interrupted; nothing written"), EXIT_INTERRUPTED)
+    except ERRORS as exc:
+        return fail(prog, describe(exc))
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.options import calibration_from_args
+from firmware_py.platform.cli import fail, output_file_problem
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU
@@ -274,8 +275,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
                    progress=_progress("tune"), models=_models(args)).as_dict()
     except TuneInfeasible as exc:
-        print(f"mrsteer design tune: no calibration of this structure meets every constraint: {exc}", file=sys.stderr)
-        return 1
+        # a verdict on the structure, not an error: exit status 1
+        return fail("mrsteer design tune", f"no calibration of this structure meets every constraint: {exc}", 1)
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
@@ -309,8 +310,8 @@ def _cmd_tune_schedule(args: argparse.Namespace) -> int:
                          "their defaults")
     given = args.reference or args.actuator is not None or args.sensors is not None
     models = _models(args) if given else LoopModels.reference()
-    if args.out is not None and not args.out.parent.is_dir():
-        raise ValueError(f"--out: no directory {args.out.parent}")
+    if args.out is not None and (problem := output_file_problem("--out", args.out)) is not None:
+        raise ValueError(problem)
     res = S.tune_schedule(_envelope(args), start=args.start, models=models, grids=S.QUICK if args.quick else S.FULL,
                           progress=say)
     if args.out is not None:

@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
+from firmware_py.controller.options import RATES_HELP, calibration_at_rate
 from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
-from firmware_py.controller.options import calibration_from_args
 from mrsteer_cli.cli_args import add_gains, count, number, say
 from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
-from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
+from sim_plant.harness.launch import add_controller_impl_args, program_of
 from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET
 from sim_plant.harness.faults.settings import PLAUS_DETECT
 from sim_plant.offline import experiments
@@ -87,18 +86,24 @@ def _add_hil_args(p: argparse.ArgumentParser, default_out: str | None = None) ->
     p.add_argument("--channel", help="channel for the interface")
     p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
                    help="lockstep: deterministic, comparable with `sim --ts` (default); realtime: wall clock")
-    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=DEFAULT_RATE_HZ,
-                   help=f"controller and plant rate in Hz (default {DEFAULT_RATE_HZ:g}, the rate the default gains are tuned for)")
+    p.add_argument("--rate-hz", type=number("rate", 1.0, 5000.0), default=None,
+                   help=f"controller and plant rate in Hz (default: the calibration's, {DEFAULT_RATE_HZ:g} for the "
+                   f"shipped one); without --calibration or --k a rate with a calibration of its own: {RATES_HELP}")
     p.add_argument("--out", type=Path, default=Path(default_out) if default_out else None, metavar="DIR",
                    help=f"output directory (default {default_out or 'out/hil/<scenario>-<mode>'})")
     add_secoc_args(p)
 
 
 def _hil_config(args: argparse.Namespace, **overrides: object) -> "HilConfig":
+    """The run the options ask for, at a rate with a calibration made for it (RateError, a
+    ValueError: one line); a bad SecOC key is a SecOCError, a ValueError too."""
     from sim_plant.harness.hil import HilConfig
 
-    key = secoc_key(args)  # a bad key raises SecOCError, a ValueError: a usage error
-    base = dict(mode=args.mode, rate_hz=args.rate_hz, interface=args.interface, channel=args.channel, secoc_key=key)
+    key = secoc_key(args)
+    ctrl = calibration_at_rate(args, args.rate_hz)
+    rate_hz = args.rate_hz if args.rate_hz is not None else 1.0 / ctrl.ts
+    base = dict(mode=args.mode, rate_hz=rate_hz, calibration=ctrl, interface=args.interface, channel=args.channel,
+                secoc_key=key)
     base.update(overrides)
     return HilConfig(**base)  # type: ignore[arg-type]
 
@@ -107,22 +112,13 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
     from sim_plant.harness import hil
 
     out = args.out or Path("out/hil") / f"{Path(args.scenario).stem}-{args.mode}"
-    try:
-        program = program_of(args)
-    except LaunchError as exc:
-        print(f"mrsteer hil run: error: {exc}", file=sys.stderr)
-        return 1
     cfg = _hil_config(args, scenario=args.scenario, v=args.v, mu=args.mu, mz=args.mz, duration=args.duration,
-                      controller=args.controller,
-                      calibration=calibration_from_args(args),
-                      delay_steps=args.delay_steps, out=out, plant=args.plant, actuator=args.actuator,
-                      sensors=args.sensors, seed=args.seed, sensor_faults=tuple(args.sensor_fault),
-                      controller_program=program)
-    try:
-        result = hil.run(cfg, progress=say)
-    except hil.HilError as exc:
-        print(f"mrsteer hil run: error: {exc}", file=sys.stderr)
-        return 1
+                      controller=args.controller, delay_steps=args.delay_steps, out=out, plant=args.plant,
+                      actuator=args.actuator, sensors=args.sensors, seed=args.seed,
+                      sensor_faults=tuple(args.sensor_fault))
+    cfg = replace(cfg, controller_program=program_of(args))  # LaunchError: one line
+    args.interrupted = f"interrupted; every process it started is stopped, nothing written to {out}"
+    result = hil.run(cfg, progress=say)  # HilError (a process failed), BusOpenError: one line
     s = result.summary
     print(json.dumps(s, indent=2) if args.json else "\n".join(summary_lines(s)))
     return 0
@@ -180,15 +176,12 @@ def plausibility_line(pl: dict, duration: float | None = None) -> str:
 
 
 def _cmd_hil_evidence(args: argparse.Namespace) -> int:
-    from sim_plant.harness import hil, hil_evidence
+    from sim_plant.harness import hil_evidence
 
-    cfg = _hil_config(args, controller=args.controller, calibration=calibration_from_args(args), out=args.out, plant=args.plant, actuator=args.actuator,
+    cfg = _hil_config(args, controller=args.controller, out=args.out, plant=args.plant, actuator=args.actuator,
                       sensors=args.sensors, seed=args.seed)
-    try:
-        rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=say, quick=args.quick)
-    except hil.HilError as exc:
-        print(f"mrsteer hil evidence: error: {exc}", file=sys.stderr)
-        return 1
+    args.interrupted = f"interrupted; every process it started is stopped, nothing written to {args.out}"
+    rows = hil_evidence.run(cfg, tuple(args.scenario or hil_evidence.SCENARIOS), progress=say, quick=args.quick)
     from sim_plant.figures import tidy_figures
 
     print(json.dumps(tidy_figures([e.row() for e in rows]), indent=2) if args.json else hil_evidence.format_table(rows))
@@ -203,18 +196,19 @@ def _cmd_hil_demo(args: argparse.Namespace) -> int:
     from sim_plant.harness import hil
 
     runs = {}
-    for ctrl in (mr.Q_LIMITED, "none"):
-        cfg = _hil_config(args, scenario=hil_demo.SCENARIO, controller=ctrl,
-                          out=args.out / ("with-controller" if ctrl != "none" else "without-controller"))
-        try:
-            runs[ctrl] = hil.run(cfg, progress=say)
-        except hil.HilError as exc:
-            print(f"mrsteer hil demo: error: {exc}", file=sys.stderr)
-            return 1
+    configs = {ctrl: _hil_config(args, scenario=hil_demo.SCENARIO, controller=ctrl,
+                                 out=args.out / ("with-controller" if ctrl != "none" else "without-controller"))
+               for ctrl in (mr.Q_LIMITED, "none")}
+    args.interrupted = "interrupted; every process it started is stopped, nothing written"
+    for ctrl, cfg in configs.items():
+        runs[ctrl] = hil.run(cfg, progress=say)  # HilError, BusOpenError: one line
+        args.interrupted = (f"interrupted; every process it started is stopped; {cfg.out} holds the run with the "
+                            "controller, complete, and nothing else is written")
     on, off = runs[mr.Q_LIMITED].summary, runs["none"].summary
     sc = scn.load(hil_demo.SCENARIO)
+    ctrl_cfg = replace(configs[mr.Q_LIMITED].calibration, ts=1.0 / on["rate_hz"])
     offline = experiments.run(experiments.disturbance(VehicleParams(v=on["v"], mu=on["mu"]), on["m_z"], mr.Q_LIMITED,
-                                                      replace(mr.ControllerConfig(), ts=1.0 / on["rate_hz"]), 3.0),
+                                                      ctrl_cfg, 3.0),
                               1.0 / on["rate_hz"], on["delay_steps"]).summary()
     hil_demo.write_figure(runs[mr.Q_LIMITED], runs["none"], sc, args.out)
     print(hil_demo.explain(sc, on, off, offline["peak_yaw_rate_rad_s"], args.out))

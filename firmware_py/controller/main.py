@@ -6,17 +6,16 @@ import argparse
 import json
 import math
 import os
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ, TRIGGERS, ControllerNode, RuntimeConfig
-from firmware_py.controller.options import add_calibration_args, calibration_from_args
+from firmware_py.controller.options import RATES_HELP, add_calibration_args, calibration_at_rate
 from firmware_py.controller.timing import DEFAULT_SYNC_OFFSET
 from firmware_py.platform.bus_open import BusOpenError, open_bus
-from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
+from firmware_py.platform.cli import (Parser, add_secoc_args, fail, add_slow_motion_arg, check_output_file,
                                       check_slow_motion, secoc_key, slow_motion_suffix)
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.realtime import apply_platform
@@ -30,7 +29,8 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
                    "if present, else the mrsteer fallback bus)")
     p.add_argument("--channel", help="channel for the interface (default vcan0 / mrsteer0)")
     p.add_argument("--rate-hz", type=float, default=None,
-                   help=f"control rate in Hz (default: the calibration's, {DEFAULT_RATE_HZ:g} for the shipped one)")
+                   help=f"control rate in Hz (default: the calibration's, {DEFAULT_RATE_HZ:g} for the shipped one); without "
+                   "--calibration or --k a rate with a calibration of its own: " + RATES_HELP)
     p.add_argument("--trigger", choices=TRIGGERS, default="clock",
                    help="clock: fixed rate on the monotonic clock (default); sensors: one cycle per yaw-rate frame")
     p.add_argument("--sync-offset-us", type=float, default=DEFAULT_SYNC_OFFSET * 1e6, metavar="US",
@@ -74,7 +74,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
     if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
         parser.error(f"--cpu must be in 0..{(os.cpu_count() or 1) - 1}, got {args.cpu}")
     try:
-        ctrl = calibration_from_args(args)
+        ctrl = calibration_at_rate(args, args.rate_hz)  # RateError: no calibration for this rate
         if args.rate_hz is None:
             args.rate_hz = 1.0 / ctrl.ts
         ctrl = replace(ctrl, q_form=args.controller or ctrl.q_form, method=args.method or ctrl.method,
@@ -93,8 +93,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(prog, str(exc))
     node = ControllerNode(bus, cfg)
     node.stats.platform.update(apply_platform(args.rt_priority, args.cpu))
     slow = slow_motion_suffix(args.slow_motion)

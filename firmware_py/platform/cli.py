@@ -1,20 +1,67 @@
-"""What every mrsteer command line shares: argument errors in one line with exit status 2, the
-SecOC key options, and output paths refused before any work is done."""
+"""What every mrsteer command line shares: every error in one line, ``mrsteer: COMMAND: what``,
+with exit status 2 (``error_line``, ``fail``: the one place an error is formatted); an interrupted
+command's one line and exit status 130; the SecOC key options; and output paths refused before
+any work is done."""
 
 from __future__ import annotations
 
 import argparse
 import math
 import os
+import sys
 from pathlib import Path
 from typing import NoReturn
 
-EXIT_USAGE = 2
+EXIT_ERROR = 2  # every error: bad input, a bus that cannot be opened, an output that cannot be written
+EXIT_USAGE = EXIT_ERROR
+EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT), as a shell reports it: 128 + 2
+PREFIX = "mrsteer"
+
+
+class CommandError(Exception):
+    """An error a command reports in one line (``fail``), exit status 2; the message says what
+    and, where it helps, what to do instead."""
+
+
+def command_of(prog: str) -> str:
+    """The command a program name stands for, without the leading ``mrsteer``: ``hil run`` for
+    ``mrsteer hil run``, ``python -m firmware_py`` as it is, empty for ``mrsteer`` itself."""
+    words = prog.split()
+    return " ".join(words[1:]) if words[:1] == [PREFIX] else prog
+
+
+def error_line(prog: str, message: str) -> str:
+    """The one line of an error (or a warning: ``message`` starting ``warning:``) of ``prog``:
+    ``mrsteer: hil run: --rate-hz 250: ...``."""
+    command = command_of(prog)
+    return f"{PREFIX}: {command}: {message}" if command else f"{PREFIX}: {message}"
+
+
+def fail(prog: str, message: str, code: int = EXIT_ERROR) -> int:
+    """Print ``error_line`` on stderr and return the exit status (2 unless told)."""
+    print(error_line(prog, message), file=sys.stderr, flush=True)
+    return code
+
+
+def warn(prog: str, message: str) -> None:
+    """A warning, one line on stderr: the command goes on."""
+    print(error_line(prog, f"warning: {message}"), file=sys.stderr, flush=True)
+
+
+def describe(exc: BaseException) -> str:
+    """An exception as the rest of an error line: an OS error as its reason and file name (no
+    errno), anything else as its message."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    text = str(exc).strip()
+    if isinstance(exc, KeyError):  # str() of a KeyError is the repr of its key
+        text = f"missing {text}"
+    return " ".join(text.split()) or type(exc).__name__  # one line, whatever the message held
 
 
 class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+        self.exit(EXIT_USAGE, error_line(self.prog, message) + "\n")
 
 
 def add_secoc_args(p: argparse.ArgumentParser) -> None:
@@ -70,14 +117,46 @@ def slow_motion_suffix(value: float) -> str:
     return f" in {value:g}x slow motion" if value != 1.0 else ""
 
 
-def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:
-    """Refuse, before any work is done, an output file that could not be written."""
-    if path is None:
-        return
+def output_file_problem(flag: str, path: Path) -> str | None:
+    """What keeps ``path`` from being written as an output file, or None."""
     if path.is_dir():
-        parser.error(f"{flag} {path} is a directory")
+        return f"{flag} {path} is a directory"
     parent = path.parent
     if not parent.is_dir():
-        parser.error(f"{flag} {path}: {parent} is not an existing directory")
+        return f"{flag} {path}: {parent} is not an existing directory"
     if not os.access(parent, os.W_OK):
-        parser.error(f"{flag} {path}: directory {parent} is not writable")
+        return f"{flag} {path}: directory {parent} is not writable"
+    return None
+
+
+def check_output_file(parser: argparse.ArgumentParser, flag: str, path: Path | None) -> None:
+    """Refuse, before any work is done, an output file that could not be written."""
+    problem = None if path is None else output_file_problem(flag, path)
+    if problem is not None:
+        parser.error(problem)
+
+
+def output_dir_problem(flag: str, path: Path) -> str | None:
+    """What keeps ``path`` from being an output directory (made if missing), or None: checked
+    before any work, so that a run is not done for nothing."""
+    if path.exists():
+        if not path.is_dir():
+            return f"{flag} {path} exists and is not a directory"
+        if not os.access(path, os.W_OK | os.X_OK):
+            return f"{flag} {path}: directory is not writable"
+        return None
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"{flag} {path}: {ancestor} is not a directory"
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        return f"{flag} {path}: cannot be created, directory {ancestor} is not writable"
+    return None
+
+
+def check_output_dir(flag: str, path: Path | None) -> None:
+    """``output_dir_problem`` as a CommandError (one line, exit 2)."""
+    problem = None if path is None else output_dir_problem(flag, path)
+    if problem is not None:
+        raise CommandError(problem)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import collections
 import errno
 import fcntl
+import math
 import os
 import selectors
 import signal
@@ -19,7 +20,7 @@ from typing import Any
 
 import can
 
-from firmware_py.platform.cli import Parser
+from firmware_py.platform.cli import Parser, describe, fail
 from firmware_py.platform.fallback_wire import DEFAULT_CHANNEL, FRAME, STAMP, FILTER, OPTIONS, MAX_PACKET, F_EXTENDED, F_OWN, socket_path, private_dir
 
 _QUEUE_LIMIT = 100_000  # frames waiting for one client before it starts losing them
@@ -230,12 +231,13 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer bus") -> int:
     parser.add_argument("--idle-exit", type=float, default=None, metavar="S",
                         help="exit after S seconds without clients (default: run until SIGINT/SIGTERM)")
     args = parser.parse_args(argv)
+    if args.idle_exit is not None and not (math.isfinite(args.idle_exit) and args.idle_exit > 0):
+        parser.error(f"--idle-exit must be a positive number of seconds, got {args.idle_exit:g}")
     try:
         broker = Broker(args.channel, args.idle_exit)
         broker.bind()
     except (OSError, ValueError, can.CanError) as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(prog, describe(exc))
     signal.signal(signal.SIGTERM, broker.stop)
     signal.signal(signal.SIGINT, broker.stop)
     print(f"{prog}: serving {args.channel} on {broker.path}", file=sys.stderr, flush=True)

@@ -11,6 +11,7 @@ from typing import Any, Callable, Sequence
 
 import can
 
+from firmware_py.platform.cli import describe, fail
 from firmware_py.platform.files import write_atomic
 
 Outputs = Sequence[tuple[Path | None, Callable[[], str | bytes]]]
@@ -22,8 +23,8 @@ def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[]
 
     SIGINT and SIGTERM call ``stop`` (the loop ends after its current cycle); ``ready`` is then
     printed on stderr (a supervisor may signal from that moment on); a bus failure is
-    one line and exit status 1; the bus (or each of them) is always shut down; then each output whose path was
-    given is written whole (``write_atomic``), and one that cannot be is one line and exit 1.
+    one line and exit status 2; the bus (or each of them) is always shut down; then each output whose path was
+    given is written whole (``write_atomic``), and one that cannot be is one line and exit 2.
     """
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
@@ -40,8 +41,7 @@ def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[]
     try:
         run()
     except can.CanError as exc:
-        print(f"{prog}: error: bus failed: {exc}", file=sys.stderr)
-        code = 1
+        code = fail(prog, f"bus failed: {describe(exc)}")
     finally:
         for b in [bus] if isinstance(bus, can.BusABC) else bus:
             b.shutdown()
@@ -51,6 +51,5 @@ def run_node(prog: str, bus: can.BusABC | Sequence[can.BusABC], run: Callable[[]
         try:
             write_atomic(path, render())
         except OSError as exc:
-            print(f"{prog}: error: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
-            code = 1
+            code = fail(prog, f"cannot write {path}: {exc.strerror or exc}")
     return code

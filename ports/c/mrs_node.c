@@ -308,7 +308,7 @@ int main(int argc, char **argv)
         return parsed; /* --help (0) or a usage error (2), already said */
     }
     if (open_bus(&bus, &o, cfg.secoc_key != NULL) != 0) {
-        return 1;
+        return 2; /* every error is exit status 2, as in Python */
     }
     if (mrs_node_init(&node, &bus, &cfg, err, sizeof err) != 0) {
         fprintf(stderr, "%s: error: %s\n", MRS_NODE_PROG, err);
@@ -337,7 +337,7 @@ int main(int argc, char **argv)
     node.stats.rss_kb_loop_end = rss_kb();
     if (r != 0) {
         fprintf(stderr, "%s: error: bus failed: %s\n", MRS_NODE_PROG, bus.error);
-        code = 1;
+        code = 2;
     } else {
         (void)mrs_node_finish(&node); /* the bus may already be gone: nothing more to say on it */
     }
@@ -345,7 +345,7 @@ int main(int argc, char **argv)
     mrs_node_free(&node);
     if (o.stats_out != NULL && write_stats(o.stats_out, &node, platform) != 0) {
         fprintf(stderr, "%s: error: cannot write %s: %s\n", MRS_NODE_PROG, o.stats_out, strerror(errno));
-        code = 1;
+        code = 2;
     }
     return code;
 }

@@ -98,7 +98,7 @@ def load(path: Path) -> Campaign:
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError(f"{path}: cannot read: {exc}") from None
+        raise SpecError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     return parse(text, str(path))
 
 

@@ -25,7 +25,7 @@ def read_table(path: str) -> dict[str, Any]:
     try:
         return tomllib.loads(p.read_text())
     except (OSError, UnicodeDecodeError) as exc:
-        raise ModelFileError(f"{path}: cannot read: {exc}") from None
+        raise ModelFileError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ModelFileError(f"{path}: not valid TOML: {str(exc).splitlines()[0]}") from None
 

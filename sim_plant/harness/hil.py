@@ -7,6 +7,11 @@ the log and the plant's per-step trace to ``hil_report``.  If any process dies e
 are stopped, nothing is left running, and ``HilError`` names the process and its exit status.
 Every child gets SIGTERM if this process dies (Linux ``PR_SET_PDEATHSIG``), so even a killed
 runner leaves no orphans.
+
+What ``out`` holds afterwards: every output, written whole, of a run that finished; of a run
+that failed after frames were logged, only ``traffic.partial.log`` (the frames up to the
+failure); of a run that failed before, or was interrupted (Ctrl-C: ``KeyboardInterrupt``
+after every process is stopped), nothing new, and no directory the run created.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Callable
 
 from mrsteer_dbc import secoc as secoc_mod
 from firmware_py.platform import bus_open
+from firmware_py.platform.cli import output_dir_problem
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from sim_plant.car import scenario as scn
@@ -77,13 +83,17 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     ctrl = replace(cfg.calibration, q_form=cfg.controller if cfg.controller != "none" else cfg.calibration.q_form,
                    ts=1.0 / cfg.rate_hz)
     mr.configure(ctrl)  # reject an impossible calibration before starting anything
-    if cfg.out.exists() and not cfg.out.is_dir():
-        raise ValueError(f"--out {cfg.out} exists and is not a directory")
-    cfg.out.mkdir(parents=True, exist_ok=True)
+    if (problem := output_dir_problem("--out", cfg.out)) is not None:
+        raise ValueError(problem)
+    notices: list[str] = []
+    iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=notices.append)
+    bus_open.check(iface, channel, between_processes=True)  # BusOpenError: no such bus here, before anything
+    created = _make_dirs(cfg.out)
+    for line in notices:
+        say(line)
     work = Path(tempfile.mkdtemp(prefix=".hil-", dir=cfg.out))
     procs: list[Proc] = []
     try:
-        iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=say)
         env = dict(os.environ)
         if cfg.secoc_key is not None:
             # Through the environment, not argv: a command line is visible to every user.
@@ -94,7 +104,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             procs.append(launch.start("bus broker", launch.broker(channel), work, env))
             wait_for_socket(channel, procs[-1])
         bus = launch.BusArgs(iface, channel)
-        say(f"bus: {iface} {channel}")
+        say(f"bus: {iface} {channel}" if channel else f"bus: {iface}")
 
         logger = launch.start("logger", launch.logger(bus, launch.LoggerSettings(
             work / "traffic.log", iface_name=str(channel), stats_out=work / "logger.json")), work, env, stdout=True)
@@ -134,14 +144,42 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             if p.popen.returncode not in (0, -signal.SIGTERM):
                 raise HilError(f"{p.name} exited with status {p.popen.returncode}{tail(p)}")
         return finish(cfg, sc, ctrl, work, say)
+    except KeyboardInterrupt:
+        # Interrupted: nothing of this run is kept.  A second Ctrl-C may not cut the clean-up short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            _clean_up(procs, work, created)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        raise
     except BaseException:
         partial = work / "traffic.log"
-        if partial.exists():
+        if partial.exists() and partial.stat().st_size > 0:
             shutil.copy(partial, cfg.out / "traffic.partial.log")
+        _clean_up(procs, work, created)
         raise
     finally:
-        for p in reversed(procs):
-            stop(p)
-        shutil.rmtree(work, ignore_errors=True)
+        _clean_up(procs, work, None)
+
+
+def _make_dirs(out: Path) -> list[Path]:
+    """Create ``out`` and its missing parents; the ones created, deepest first."""
+    missing = [d for d in (out, *out.parents) if not d.exists()]
+    out.mkdir(parents=True, exist_ok=True)
+    return missing
+
+
+def _clean_up(procs: list[Proc], work: Path, created: list[Path] | None) -> None:
+    """Stop every process (the last started first), remove the work directory and, given
+    ``created``, each directory the run created that is still empty."""
+    for p in reversed(procs):
+        stop(p)
+    procs.clear()
+    shutil.rmtree(work, ignore_errors=True)
+    for d in created or ():
+        try:
+            d.rmdir()  # only if empty
+        except OSError:
+            break
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import shutil
 import subprocess
 import sys
 from dataclasses import asdict, dataclass
@@ -89,7 +90,10 @@ def controller_program(impl: str = "python", command: str | None = None) -> tupl
     """The controller program of ``--controller-impl impl`` / ``--controller-cmd command``: None for
     the Python controller, the C node (built) for ``c``, the split command line otherwise."""
     if command is not None:
-        argv = tuple(shlex.split(command))
+        try:
+            argv = tuple(shlex.split(command))
+        except ValueError as exc:  # an unclosed quote
+            raise LaunchError(f"--controller-cmd {command!r}: {exc}") from None
         if not argv:
             raise LaunchError("--controller-cmd is empty")
         return argv
@@ -113,8 +117,12 @@ def add_controller_impl_args(p: argparse.ArgumentParser) -> None:
 
 
 def program_of(args: argparse.Namespace) -> tuple[str, ...] | None:
-    """The controller program those options ask for (``controller_program``); LaunchError if none."""
-    return controller_program(args.controller_impl, args.controller_cmd)
+    """The controller program those options ask for (``controller_program``); LaunchError if none,
+    or if the command names no program here (refused before anything starts)."""
+    program = controller_program(args.controller_impl, args.controller_cmd)
+    if program is not None and shutil.which(program[0]) is None:
+        raise LaunchError(f"--controller-cmd: {program[0]}: no such program (or not executable)")
+    return program
 
 
 def start(name: str, launch: Launch, work: Path, env: dict[str, str], *, stdout: bool = False,

@@ -5,7 +5,11 @@ and stopped with SIGTERM, then SIGKILL if it will not go.
 ``spawn`` executes a fresh interpreter, as a user would start the node.  ``spawn_preloaded``
 forks the supervisor, which imported the node's modules once, and runs the node's
 ``main(argv)`` in the child: its own process, sockets, signal handlers and exit status, without
-paying the interpreter's start-up each time.  The fault matrix starts five processes per row
+paying the interpreter's start-up each time.
+
+Each child runs in a process group of its own: Ctrl-C at the terminal reaches the supervisor
+only, which stops its children in order (SIGTERM: the controller's final zero command, the
+loggers' last frames) rather than having every process stop at once on its own.  The fault matrix starts five processes per row
 and restarts the controller mid-run; under QEMU without KVM a fresh interpreter takes 10-20 s
 to import python-can, numpy and cantools.  (Not ``multiprocessing``'s forkserver: its children
 re-import the caller's ``__main__``, which breaks a plain script that calls the runner.)
@@ -40,6 +44,7 @@ class Proc:
 
 
 def _pdeathsig() -> None:  # runs in the child between fork and exec
+    os.setpgid(0, 0)  # out of the terminal's foreground group: Ctrl-C is the supervisor's to handle
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG

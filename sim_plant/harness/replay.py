@@ -42,6 +42,7 @@ import copy
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable
 
 import can
 
@@ -246,15 +247,16 @@ class _Replayer:
 
 
 def replay(log: Path, settings: ReplaySettings | None = None, contract: mrsteer_dbc.Contract | None = None,
-           like: ReplayResult | None = None) -> ReplayResult:
+           like: ReplayResult | None = None, warn: Callable[[str], None] | None = None) -> ReplayResult:
     """Replay ``log`` through the Python controller; ``LogError`` when it is not a usable log.
     ``like``: a replay of the same log whose clock-trigger grouping to keep (a what-if of
-    another calibration: its commands are not the recorded ones, so they cannot decide it)."""
+    another calibration: its commands are not the recorded ones, so they cannot decide it);
+    ``warn``: told of a cut-off last line (``read_candump_messages``)."""
     settings = settings or ReplaySettings()
     contract = contract or mrsteer_dbc.load()
     if not log.is_file():
-        raise LogError(f"{log}: no such file")
-    frames = read_candump_messages(log)
+        raise LogError(f"{log}: {'is a directory, not a log file' if log.is_dir() else 'no such file'}")
+    frames = read_candump_messages(log, warn)
     r = _Replayer(settings, contract)
     if not any(m.arbitration_id in r.rx_ids for _, m in frames):
         raise LogError(f"{log}: no sensor frames ({MSG_STEER}, {MSG_YAW}, {MSG_SPEED}) in {len(frames)} frames")

@@ -3,7 +3,9 @@ fault matrix: one frame a line, ``(1700000000.123456) vcan0 101#0011AA``.
 
 Reading goes through python-can's ``can.CanutilsLogReader``: it parses this format as written
 (the timestamp from its own text, so to the microsecond; extended IDs by their 8 digits; CAN FD
-``##``; remote ``#R``) and also what the real ``candump -L`` writes.
+``##``; remote ``#R``) and also what the real ``candump -L`` writes.  Every line either writes
+ends with a newline: a last line without one was cut off (a logger killed mid-write, a copy cut
+short), and is left out with one warning naming it; the frames before it are read.
 
 Writing does not use ``can.CanutilsLogWriter``, which writes another file than ``candump -L``
 and than ``traffic.log`` always was: it appends the direction (`` R``/`` T``) to every line,
@@ -16,10 +18,14 @@ writes, byte for byte the same as the real ``candump -L``.
 
 from __future__ import annotations
 
+import io
+import sys
 from pathlib import Path
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import can
+
+from firmware_py.platform.cli import error_line
 
 
 class Frame(NamedTuple):
@@ -43,29 +49,45 @@ def format_line(msg: can.Message, iface: str) -> str:
     return f"({msg.timestamp:.6f}) {iface} {body}\n"
 
 
-def read_candump(path: Path) -> list[Frame]:
-    """Every frame of a candump ``-L`` log, in the order logged (a remote frame with no data)."""
-    with can.CanutilsLogReader(path) as reader:
-        return [Frame(msg.timestamp, msg.arbitration_id, bytes(msg.data)) for msg in reader]
+Warn = Callable[[str], None]
+
+
+def read_candump(path: Path, warn: Warn | None = None) -> list[Frame]:
+    """Every frame of a candump ``-L`` log, in the order logged (a remote frame with no data);
+    a cut-off last line is left out (``read_candump_messages``)."""
+    return [Frame(msg.timestamp, msg.arbitration_id, bytes(msg.data)) for _, msg in read_candump_messages(path, warn)]
 
 
 class LogError(ValueError):
     """A file that is not a candump ``-L`` log; the message names the line."""
 
 
-def read_candump_messages(path: Path) -> list[tuple[int, can.Message]]:
+def _warn(message: str) -> None:
+    print(error_line("mrsteer", f"warning: {message}"), file=sys.stderr, flush=True)
+
+
+def read_candump_messages(path: Path, warn: Warn | None = None) -> list[tuple[int, can.Message]]:
     """Every frame of a candump ``-L`` log with its line number (from 1), in the order logged.
 
-    The reader skips only blank lines and yields one message for every other line (or fails
-    on it), so the n-th message is the n-th non-blank line: that is how a failure is named."""
-    with open(path, encoding="utf-8", errors="replace") as f:
-        numbers = [n for n, line in enumerate(f, 1) if line.strip()]
+    A last line without its newline was cut off: it is left out, and ``warn`` (default: one
+    line on stderr) is told which.  The reader skips only blank lines and yields one message
+    for every other line (or fails on it), so the n-th message is the n-th non-blank line:
+    that is how a failure is named (LogError)."""
+    with open(path, encoding="utf-8", errors="replace", newline="") as f:
+        lines = f.readlines()
+    numbers = [n for n, line in enumerate(lines, 1) if line.strip()]
+    if numbers and not lines[numbers[-1] - 1].endswith("\n"):
+        cut = numbers.pop()
+        del lines[cut - 1:]
+        n = len(numbers)
+        (warn or _warn)(f"{path}: line {cut} is cut off (no end of line) and left out; the {n} "
+                        f"{'frame' if n == 1 else 'frames'} before it {'is' if n == 1 else 'are'} read")
     out: list[tuple[int, can.Message]] = []
     try:
-        with can.CanutilsLogReader(path) as reader:
+        with can.CanutilsLogReader(io.StringIO("".join(lines))) as reader:
             for msg in reader:
                 out.append((numbers[len(out)], msg))
-    except (ValueError, IndexError, UnicodeDecodeError) as exc:
+    except (ValueError, IndexError) as exc:
         line = numbers[len(out)] if len(out) < len(numbers) else len(numbers)
         raise LogError(f"{path}: line {line}: not a candump -L frame ({exc})") from None
     return out

@@ -57,7 +57,8 @@ import can
 
 import mrsteer_dbc
 from mrsteer_dbc import names
-from firmware_py.platform.cli import Parser, check_output_file
+from firmware_py.platform.bus_open import BusOpenError, open_bus
+from firmware_py.platform.cli import Parser, check_output_file, fail
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.rx_queue import deepen
 
@@ -392,11 +393,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer faults bridge")
         p.error("--vehicle and --controller must be different channels")
     check_output_file(p, "--stats-out", args.stats_out)
     try:
-        a = can.Bus(interface=args.interface, channel=args.vehicle)
-        b = can.Bus(interface=args.interface, channel=args.controller)
-    except (can.CanError, OSError, ValueError) as exc:
-        print(f"{prog}: error: cannot open the buses: {exc}", file=sys.stderr)
-        return 1
+        a = open_bus(args.interface, args.vehicle, notice=lambda m: None)
+    except BusOpenError as exc:
+        return fail(prog, str(exc))
+    try:
+        b = open_bus(args.interface, args.controller, notice=lambda m: None)
+    except BusOpenError as exc:
+        a.shutdown()
+        return fail(prog, str(exc))
     bridge = Bridge(a, b, fault, args.seed)
     queues = [deepen(a), deepen(b)]
     bridge.stats.rx_queue_bytes = None if None in queues else min(queues)  # type: ignore[type-var]

@@ -15,7 +15,7 @@ from typing import Any, Sequence, TextIO
 import can
 
 from firmware_py.platform.bus_open import BusOpenError, open_bus
-from firmware_py.platform.cli import Parser, check_output_file
+from firmware_py.platform.cli import Parser, check_output_file, fail
 from firmware_py.platform.lifecycle import run_node
 from firmware_py.platform.rx_queue import deepen
 from sim_plant.nodes.candump_log import format_line
@@ -54,16 +54,15 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m sim_plant.nod
     args = p.parse_args(argv)
     check_output_file(p, "--stats-out", args.stats_out)
     try:
+        bus = open_bus(args.interface, args.channel, notice=lambda m: None)
+    except BusOpenError as exc:
+        return fail(prog, str(exc))
+    try:
         out = args.out.open("w")  # a live log, written as frames come: it cannot be atomic
     except OSError as exc:
-        print(f"{prog}: error: cannot write {args.out}: {exc.strerror}", file=sys.stderr)
-        return 1
+        bus.shutdown()
+        return fail(prog, f"cannot write {args.out}: {exc.strerror or exc}")
     with out:
-        try:
-            bus = open_bus(args.interface, args.channel, notice=lambda m: None)
-        except BusOpenError as exc:
-            print(f"{prog}: error: {exc}", file=sys.stderr)
-            return 1
         queue = deepen(bus)
         log = Logger(bus, out, args.iface_name or args.channel or "can0")
 

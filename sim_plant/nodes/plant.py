@@ -42,7 +42,6 @@ import csv
 import io
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +52,7 @@ import can
 import mrsteer_dbc
 from firmware_py.platform.bus_open import BusOpenError, open_bus
 from firmware_py.platform.cli import (Parser, add_secoc_args, add_slow_motion_arg, check_output_file,
-                                      check_slow_motion, secoc_key, slow_motion_suffix)
+                                      check_slow_motion, fail, secoc_key, slow_motion_suffix)
 from firmware_py.platform.lifecycle import run_node
 from mrsteer_dbc import secoc
 from mrsteer_dbc.link import Rejected, RxLink, TxLink
@@ -385,8 +384,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer plant") -> int:
     try:
         bus = open_bus(args.interface, args.channel)
     except BusOpenError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(prog, str(exc))
     node = PlantNode(bus, sc, args.mode, 1.0 / args.rate_hz, args.delay_steps, args.cmd_timeout,
                      args.lockstep_timeout, expect_controller=not args.no_controller,
                      actuator_rate=args.actuator_rate, secoc_key=key, slow_motion=args.slow_motion)

@@ -14,7 +14,8 @@ from sim_plant.figures import tidy_figures
 from sim_plant.harness.faults.verdicts import RowResult
 from sim_plant.harness.faults.rows import ROWS, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix
-from sim_plant.harness.faults.settings import CALIBRATIONS, RATE_HZ, Setup
+from firmware_py.controller.options import RATES_HELP
+from sim_plant.harness.faults.settings import RATE_HZ, Setup
 from sim_plant.harness.launch import LaunchError, add_controller_impl_args, program_of
 from sim_plant.harness.processes import RunError
 
@@ -36,7 +37,8 @@ def format_table(results: list[RowResult]) -> str:
 def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     import argparse
 
-    from firmware_py.platform.cli import Parser
+    from firmware_py.platform import bus_open
+    from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, fail
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bridge"]:  # the bridge owns its whole argument list, --help included
@@ -61,8 +63,8 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     r.add_argument("--channels", metavar="VEHICLE,CONTROLLER",
                    help="the two buses the bridge joins (default: two private fallback buses)")
     r.add_argument("--rate-hz", type=float, default=RATE_HZ,
-                   help=f"control and plant rate, one of {', '.join(f'{k:g}' for k in CALIBRATIONS)}, each with its "
-                   f"tuned calibration (default {RATE_HZ:g})")
+                   help=f"control and plant rate, one with a calibration of its own: {RATES_HELP} (default "
+                   f"{RATE_HZ:g})")
     r.add_argument("--time-scale", type=float, default=1.0, metavar="F",
                    help="stretch scenario, fault window and kill/restart times by F, for slow machines (default 1)")
     r.add_argument("--slow-motion", type=float, default=1.0, metavar="F",
@@ -84,13 +86,14 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]
                       args.plant, args.actuator, args.sensors, slow_motion=args.slow_motion)
-    except ValueError as exc:
+        for channel in channels or (None,):
+            bus_open.check(args.interface, channel, between_processes=True)
+    except (ValueError, bus_open.BusOpenError) as exc:
         r.error(str(exc))
     try:
         setup = replace(setup, controller_program=program_of(args))
     except LaunchError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(r.prog, str(exc))
     if args.keep is not None and args.keep.exists() and not args.keep.is_dir():
         r.error(f"--keep {args.keep} exists and is not a directory")
     if holds_files(args.keep):
@@ -105,8 +108,10 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     try:
         results = run_matrix(rows, lambda m: print(f"{prog}: {m}", file=sys.stderr, flush=True), args.keep, setup)
     except RunError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
+        return fail(r.prog, str(exc))
+    except KeyboardInterrupt:  # every process of the row was stopped on the way out (run_row)
+        kept = f"; the rows run before it are in {args.keep}/" if args.keep is not None else ""
+        return fail(r.prog, f"interrupted: every process it started is stopped, no table{kept}", EXIT_INTERRUPTED)
     if args.json:
         print(json.dumps(tidy_figures([asdict(r) for r in results]), indent=2))
     else:

@@ -8,6 +8,7 @@ more, and a fresh interpreter each time is too slow on a slow machine.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import tempfile
 import time
@@ -172,5 +173,11 @@ def run_matrix(rows: tuple[Row, ...] = ROWS, say: Callable[[str], None] | None =
             work = (keep or Path(tmp)) / f"{i:02d}"
             work.mkdir(parents=True, exist_ok=True)
             say(f"[{i}/{len(rows)}] {row.name}")
-            results.append(run_row(row, work, say, setup))
+            try:
+                results.append(run_row(row, work, say, setup))
+            except KeyboardInterrupt:
+                # Interrupted: the row's processes are stopped (run_row); its files are half a
+                # row's and go, the rows before it stay in ``keep``, each whole.
+                shutil.rmtree(work, ignore_errors=True)
+                raise
     return results

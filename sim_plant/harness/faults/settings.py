@@ -6,14 +6,16 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.authority import AuthorityConfig
 from firmware_py.controller import node as rt
+from firmware_py.calibration import RATE_CALIBRATIONS
 from firmware_py.controller.node import DEFAULT_RATE_HZ
+from firmware_py.controller.options import calibration_for_rate
 from firmware_py.platform.cli import slow_motion_problem
 from mrsteer_dbc.busload import frame_bits
 from mrsteer_dbc import names
@@ -105,19 +107,9 @@ def scenario_spec(name: str, work: Path, fault: SensorFault | None = None) -> st
     return str(path)
 
 
-def _plain(rate_hz: float, k: float, tau: float, tau_n: float) -> mr.ControllerConfig:
-    return replace(mr.plain_law(mr.ControllerConfig(), k, tau, tau_n), ts=1.0 / rate_hz, model_delay_steps=1)
-
-
-# The calibration of each rate the matrix runs at: the shipped one at 500 Hz; for the slower
-# rates a VM needs, the paper's plain law tuned for that rate on the ideal loop (docs/design.md,
-# `mrsteer design tune --ts T`: 6 dB / 45 deg over the envelope, one sample modelled).
-CALIBRATIONS: dict[float, mr.ControllerConfig] = {
-    1000.0: _plain(1000.0, 50.0, 0.012, 0.02),
-    500.0: mr.ControllerConfig(),
-    200.0: _plain(200.0, 14.2, 0.0161, 0.02),
-    100.0: _plain(100.0, 4.52, 0.0075, 0.02),
-}
+# The calibration of each rate the matrix runs at (the shipped one at 500 Hz, the tuned ones
+# at the rates a VM needs): the firmware's table, which every command's --rate-hz goes by.
+CALIBRATIONS: dict[float, mr.ControllerConfig] = RATE_CALIBRATIONS
 
 
 @dataclass(frozen=True)
@@ -146,9 +138,7 @@ class Setup:
     slow_motion: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.rate_hz not in CALIBRATIONS:
-            raise ValueError(f"rate must be one of {', '.join(f'{r:g}' for r in CALIBRATIONS)} Hz (a tuned "
-                             f"calibration exists for each), got {self.rate_hz:g}")
+        calibration_for_rate(self.rate_hz, file_flag=None)  # RateError, in every command's words
         if not (math.isfinite(self.time_scale) and 1.0 <= self.time_scale <= 20.0):
             raise ValueError(f"time scale must be in [1, 20], got {self.time_scale:g}")
         if (problem := slow_motion_problem(self.slow_motion)) is not None:
@@ -191,4 +181,4 @@ class Setup:
 
     def calibration(self) -> mr.ControllerConfig:
         """The calibration tuned for this rate."""
-        return CALIBRATIONS[self.rate_hz]
+        return calibration_for_rate(self.rate_hz)
