@@ -303,9 +303,12 @@ def test_a_campaigns_figures_are_hil_runs_of_the_exported_sample(tmp_path: Path,
     ``campaign export`` wrote are the same figures by the same definitions: the car's true peak
     yaw rate and side slip, the time the node reported SATURATED, the spin and its time, the
     speed at the end (all up to a spin), the monitor's first fault.  The bus carries the command
-    to 1 urad (``AuxSteerCmd_Angle``'s resolution), so the two cars differ by that much: 1e-6
-    rad/s and 1e-5 deg cover it (measured: 8e-8 rad/s, 6e-7 deg), and a step at the limit's or
-    the side slip bound's edge may flip: one step."""
+    to 1 urad (``AuxSteerCmd_Angle``'s resolution; rounded toward zero once the command is held
+    within +-3.000 deg on the bus: a command at the limit then reaches the car 0.8 urad, 1.5e-5
+    of it, short for as long as it is held) and the summary's figures to 6 digits, so the two
+    cars' peaks differ by up to 2e-4 of their value (measured: 8e-5 with the command rounded
+    toward zero, 4e-7 rounded to nearest), and a step at the limit's or the side slip bound's
+    edge may flip: one step."""
     from firmware_py import calibration_file
     from firmware_py import plausibility as pl
     from mrsteer_cli.cli import main
@@ -321,9 +324,9 @@ def test_a_campaigns_figures_are_hil_runs_of_the_exported_sample(tmp_path: Path,
     s = hil.run(hil.HilConfig(scenario=str(file), calibration=calibration_file.load(file.with_suffix(".cfg")),
                               out=tmp_path / "hil")).summary
     assert s["mode"] == "lockstep" and s["steps"] == round(c.duration / spec.TS) + 1
-    assert s["peak_yaw_rate_rad_s"] == pytest.approx(row["peak_yaw_rate"], abs=1e-6)
-    assert s["peak_side_slip_deg"] == pytest.approx(row["peak_side_slip"], abs=1e-5)
-    assert s["final_speed_m_s"] == pytest.approx(row["final_speed"], abs=1e-6)
+    assert s["peak_yaw_rate_rad_s"] == pytest.approx(row["peak_yaw_rate"], rel=2e-4)
+    assert s["peak_side_slip_deg"] == pytest.approx(row["peak_side_slip"], rel=2e-4)
+    assert s["final_speed_m_s"] == pytest.approx(row["final_speed"], abs=1e-5)
     assert s["spun"] == row["spun"] == (case == "spin")
     if row["spun"]:
         assert s["spin_time_s"] == pytest.approx(row["spin_time"], abs=1.01 * spec.TS)
