@@ -720,6 +720,7 @@ def test_a_spun_run_ends_at_its_spin_in_the_engine_as_in_the_reference(monkeypat
     yaw-moment step and a split-mu stop (its speed falling) spin fault-free."""
     import math
 
+    from sim_plant.campaign import batch_tally
     from sim_plant.car import nonlinear
 
     c = spec.parse(FAULTS.format(seed=77), "faults.toml")
@@ -732,7 +733,7 @@ def test_a_spun_run_ends_at_its_spin_in_the_engine_as_in_the_reference(monkeypat
     res = _compare(s, mr.ControllerConfig())
     assert res["spun"].all()
     monkeypatch.setattr(nonlinear, "SPIN_SIDE_SLIP", math.inf)  # the same runs, never ended
-    monkeypatch.setattr(engine, "SPIN_SIDE_SLIP", math.inf)
+    monkeypatch.setattr(batch_tally, "SPIN_SIDE_SLIP", math.inf)
     whole = engine.simulate(s, mr.ControllerConfig(), DURATION, record=True)
     assert not whole["spun"].any() and np.isnan(whole["spin_time"]).all()
     for i in range(len(s)):
