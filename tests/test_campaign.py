@@ -93,7 +93,7 @@ def test_run_resumes_only_the_missing_chunks(tmp_path: Path) -> None:
     results.chunk_path(out, 1).unlink()  # an interrupted run: chunk 1 never finished
     again = runner.run(c, tmp_path, out, workers=0)
     assert again.ran == 1
-    assert pq.read_table(results.chunk_path(out, 1)).equals(before[1])
+    assert results.same_rows(pq.read_table(results.chunk_path(out, 1)), before[1])
     with pytest.raises(spec.SpecError, match="another campaign"):
         runner.run(spec.parse(TINY.format(sampling="random"), "t.toml"), tmp_path, out, workers=0)
     with pytest.raises(spec.SpecError, match="no campaign to resume"):
@@ -203,7 +203,7 @@ def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
     assert f"ran {10 - len(done)} of 10 chunks ({len(done)} already done)" in again.stdout
     whole = tmp_path / "whole"
     runner.run(spec.parse(text, "t.toml"), tmp_path, whole, workers=0)
-    assert results.read_all(out).equals(results.read_all(whole))
+    assert results.same_rows(results.read_all(out), results.read_all(whole))
 
 
 FAULTY = """
@@ -251,7 +251,7 @@ def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monit
                               timeout=300)
         assert proc.returncode == 0, proc.stderr
     s = json.loads((tmp_path / "hil" / "summary.json").read_text())
-    assert s["peak_yaw_rate_true_rad_s"] == pytest.approx(cols["peak_yaw_rate"][row], abs=1e-6)  # the DBC's 1 urad
+    assert s["peak_yaw_rate_rad_s"] == pytest.approx(cols["peak_yaw_rate"][row], abs=1e-6)  # the DBC's 1 urad
     steps = round(c.duration / spec.TS) + 1
     fault_from = (steps - cols["fault_steps"][row]) * spec.TS
     assert s["plausibility"]["fault_detected_s"] == pytest.approx(fault_from, abs=1.5 * spec.TS)
@@ -274,3 +274,177 @@ def test_export_writes_a_scenario_whose_second_speed_is_not_the_campaigns(tmp_pa
     file = tmp_path / "s.toml"
     file.write_text(export.to_toml(other))
     assert scn.load(str(file)) == other != sc
+
+
+ONE = """
+name = "{name}"
+samples = 1
+seed = 5
+duration = 1.0
+calibrations = ["shipped"]
+[parameters]
+v = 20.0
+{params}
+"""
+# A fault-free yaw-moment step whose law sits at the limit for 0.78 s; a yaw-rate offset the
+# monitor reports; a yaw-moment step on a slippery road that spins the car at 0.56 s, the monitor
+# DEGRADED (OUTSIDE_MODEL) while the law is SATURATED.
+ON_THE_BUS = {
+    "fault-free": "mu = 0.8\nyaw_moment = 6000.0\nonset = 0.2\nbias = 0.2",
+    "yaw-rate-offset": 'mu = 0.8\nyaw_moment = 0.0\nfault_sensor = "yaw_rate"\nfault_kind = "offset"\n'
+                       "fault_onset = 0.4\nfault_size = 2.9",
+    "spin": "mu = 0.4\nyaw_moment = 12000.0\nonset = 0.1",
+}
+
+
+@pytest.mark.parametrize("case", list(ON_THE_BUS))
+def test_a_campaigns_figures_are_hil_runs_of_the_exported_sample(tmp_path: Path, case: str) -> None:
+    """Issue 50: a sample's figures in a campaign and in ``hil run`` (lockstep) of the sample
+    ``campaign export`` wrote are the same figures by the same definitions: the car's true peak
+    yaw rate and side slip, the time the node reported SATURATED, the spin and its time, the
+    speed at the end (all up to a spin), the monitor's first fault.  The bus carries the command
+    to 1 urad (``AuxSteerCmd_Angle``'s resolution; rounded toward zero once the command is held
+    within +-3.000 deg on the bus: a command at the limit then reaches the car 0.8 urad, 1.5e-5
+    of it, short for as long as it is held) and the summary's figures to 6 digits, so the two
+    cars' peaks differ by up to 2e-4 of their value (measured: 8e-5 with the command rounded
+    toward zero, 4e-7 rounded to nearest), and a step at the limit's or the side slip bound's
+    edge may flip: one step."""
+    from firmware_py import calibration_file
+    from firmware_py import plausibility as pl
+    from mrsteer_cli.cli import main
+    from sim_plant.harness import hil
+    from sim_plant.harness.hil_steps import state_names
+
+    c = spec.parse(ONE.format(name=case, params=ON_THE_BUS[case]), f"{case}.toml")
+    out = tmp_path / "out"
+    runner.run(c, tmp_path, out, workers=0)
+    row = {k: v[0] for k, v in results.read_all(out).to_pydict().items()}
+    file = tmp_path / "s.toml"
+    assert main(["campaign", "export", str(out), "0", "--out", str(file)]) == 0
+    s = hil.run(hil.HilConfig(scenario=str(file), calibration=calibration_file.load(file.with_suffix(".cfg")),
+                              out=tmp_path / "hil")).summary
+    assert s["mode"] == "lockstep" and s["steps"] == round(c.duration / spec.TS) + 1
+    assert s["peak_yaw_rate_rad_s"] == pytest.approx(row["peak_yaw_rate"], rel=2e-4)
+    assert s["peak_side_slip_deg"] == pytest.approx(row["peak_side_slip"], rel=2e-4)
+    assert s["final_speed_m_s"] == pytest.approx(row["final_speed"], abs=1e-5)
+    assert s["spun"] == row["spun"] == (case == "spin")
+    if row["spun"]:
+        assert s["spin_time_s"] == pytest.approx(row["spin_time"], abs=1.01 * spec.TS)
+        assert s["peak_measured_yaw_rate_rad_s"] == 3.0 > s["peak_yaw_rate_rad_s"]  # the sensor's range, clipped
+    else:
+        assert s["spin_time_s"] is None and np.isnan(row["spin_time"])
+    # The state the node reports SATURATED: not while the monitor degraded, once DEGRADED is a
+    # state on the wire (issue 50's status work); until then only a run without PLAUS_DEGRADED.
+    if "DEGRADED" in state_names().values() or not row["plausibility_bits"] & pl.PLAUS_DEGRADED:
+        assert s["time_at_limit_s"] == pytest.approx(row["time_at_limit"], abs=1.01 * spec.TS)
+    assert (case == "fault-free") <= (row["time_at_limit"] > 0.5)
+    fault_from = s["plausibility"]["fault_detected_s"]
+    if row["fault_steps"]:
+        assert fault_from == pytest.approx((c.duration / spec.TS + 1 - row["fault_steps"]) * spec.TS, abs=1.01 * spec.TS)
+    else:
+        assert fault_from is None
+    assert np.isnan(row["detection_time"]) == (case != "yaw-rate-offset")
+
+
+MIXED = """
+name = "mixed"
+samples = 10
+seed = 3
+sampling = "random"
+duration = 1.0
+calibrations = ["shipped"]
+[parameters]
+v = { uniform = [10.0, 30.0] }
+mu = { uniform = [0.2, 1.0] }
+yaw_moment = { uniform = [-12000.0, 12000.0] }
+onset = 0.1
+fault_sensor = { choice = ["none", "yaw_rate"] }
+fault_kind = "offset"
+fault_onset = 0.3
+fault_size = { uniform = [-3.0, 3.0] }
+[criteria]
+peak_yaw_rate = 0.3
+time_at_limit = 0.2
+detection_time = 0.3
+false_alarms = 0
+"""
+
+
+def test_the_report_explains_each_pass_rate_by_criterion_with_the_spun_runs_apart(tmp_path: Path) -> None:
+    """Spun runs fail and are counted on their own line; per criterion the runs that did not spin
+    and failed it, and those that failed it alone: with the runs that failed several, they add
+    up to the failures.  A sample without a sensor fault has no fault figures (NaN, which no
+    criterion fails) and none in the worst-case table."""
+    pytest.importorskip("matplotlib")
+    from sim_plant.campaign import report
+
+    c = spec.parse(MIXED, "m.toml")
+    out = tmp_path / "out"
+    runner.run(c, tmp_path, out, workers=0)
+    cols = {k: np.asarray(v) for k, v in results.read_all(out).to_pydict().items()}
+    spun, clean = cols["spun"], cols["fault_sensor"] == "none"
+    assert 0 < spun.sum() < spun.size and 0 < clean.sum() < clean.size  # (the seed's mix)
+    for name in ("detection_time", "fault_yaw_rate", "twin_yaw_rate"):
+        assert (np.isnan(cols[name]) == clean).all(), name
+    assert cols["pass_detection_time"][clean].all()
+    assert (np.isnan(cols["spin_time"]) == ~spun).all() and not cols["pass"][spun].any()
+    figures_pass = np.ones(spun.size, dtype=bool)
+    fails = {}
+    for k, bound in c.criteria.items():
+        ok = ~(cols[k] > bound)  # (NaN: nothing to judge)
+        assert (cols[f"pass_{k}"] == ok).all(), k
+        figures_pass &= ok
+        fails[k] = ~ok & ~spun
+    assert (cols["pass"] == (figures_pass & ~spun)).all()
+    s = report.build(out)["calibrations"]["shipped"]
+    several = np.sum(list(fails.values()), axis=0) > 1
+    assert (s["runs"], s["passed"], s["spun"]) == (10, int(cols["pass"].sum()), int(spun.sum()))
+    assert s["failed"] == {k: {"runs": int(f.sum()), "alone": int((f & ~several).sum())} for k, f in fails.items()}
+    assert s["runs"] == s["passed"] + s["spun"] + sum(f["alone"] for f in s["failed"].values()) + several.sum()
+    page = (out / "report" / "index.html").read_text()
+    assert "Why runs failed" in page and f"<td>{s['spun']}</td>" in page
+    for w in s["worst"]:
+        assert (w["fault_sensor"] == "none") == (w["detection_time"] is None) == (w["fault_kind"] is None)
+        assert (w["spin_time"] is None) == (not w["spun"])
+
+
+def test_a_fault_free_campaign_reports_no_fault_figures_and_histograms_only_runs_that_did_not_spin(
+        tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    from sim_plant.campaign import report
+
+    text = MIXED.replace('{ choice = ["none", "yaw_rate"] }', '"none"')
+    text = "\n".join(line for line in text.splitlines() if not line.startswith(("fault_", "detection_time")))
+    out = tmp_path / "out"
+    runner.run(spec.parse(text, "m.toml"), tmp_path, out, workers=0)
+    s = report.build(out)
+    names = {Path(f).name for f in s["files"]}
+    assert "hist_peak_yaw_rate.png" in names and not names & {"hist_detection_time.png", "hist_fault_yaw_rate.png"}
+    worst = s["calibrations"]["shipped"]["worst"]
+    assert worst and not set(worst[0]) & {"fault_sensor", "fault_size", "detection_time", "twin_yaw_rate"}
+    assert "detection_time" not in s["calibrations"]["shipped"]["figures"]
+
+
+def test_report_on_a_directory_that_is_not_a_campaign_is_one_line_and_writes_nothing(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("not a campaign\n")
+    for d in (tmp_path, tmp_path / "missing"):
+        proc = subprocess.run([sys.executable, "-m", "mrsteer_cli", "campaign", "report", str(d)], capture_output=True,
+                              text=True, cwd=ROOT, timeout=120)
+        assert proc.returncode == 2 and proc.stdout == ""
+        assert proc.stderr.startswith("mrsteer") and proc.stderr.count("\n") == 1, proc.stderr
+        assert "not a campaign's results directory" in proc.stderr and str(d) in proc.stderr
+        assert "Errno" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_progress_shows_no_eta_until_it_can_be_estimated(capsys: pytest.CaptureFixture[str]) -> None:
+    from mrsteer_cli.campaign_cli import Progress
+
+    progress = Progress()
+    progress(0, 40, 0.0)
+    progress(10, 40, 5.0)
+    progress(40, 40, 20.0)
+    first, second, last = capsys.readouterr().err.splitlines()
+    assert "ETA" not in first and "nan" not in first
+    assert second.endswith("ETA 15 s")
+    assert "ETA" not in last and "40/40 runs" in last

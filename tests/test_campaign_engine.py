@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from firmware_py import model_regulator as mr
+from firmware_py import plausibility as pl
 from sim_plant.campaign import engine, reference, sampling, spec
 from sim_plant.campaign.params import KINDS, SampleSet, scenario_for
 
@@ -53,24 +54,37 @@ def _compare(s: SampleSet, config: mr.ControllerConfig | None) -> dict[str, np.n
     """The engine's traces and figures against the reference's, sample by sample: the car's
     state, the command sent (after the authority limiter), the monitor's bits every period."""
     res = engine.simulate(s, config, DURATION, record=True)
+    steps = engine.steps_of(DURATION, 0.002)
     for i in range(len(s)):
         ref = reference.run(scenario_for(s.row(i), DURATION), config)
+        last = ref.r.size  # the steps of its run: all, or to the one its car spun at
         for name, trace in (("r", ref.r), ("beta", ref.beta), ("command", ref.command)):
-            err = np.max(np.abs(trace - res[name][:, i]))
+            err = np.max(np.abs(trace - res[name][:last, i]))
             assert err <= TOL, f"sample {s.row(i)}: {name} differs by {err:.3g}"
-        differ = np.flatnonzero(res["bits"][:, i] != ref.bits)
+            assert np.isnan(res[name][last:, i]).all()  # nothing after a spin
+        differ = np.flatnonzero(res["bits"][:last, i] != ref.bits)
         assert differ.size == 0, f"sample {s.row(i)}: bits differ from step {differ[:1]}"
+        assert res["spun"][i] == ref.spun == (np.degrees(abs(ref.beta[-1])) > 30.0)
+        assert ref.spun or last == steps
+        if ref.spun:
+            assert res["spin_time"][i] == pytest.approx((last - 1) * 0.002)
+        else:
+            assert np.isnan(res["spin_time"][i])
         assert res["peak_yaw_rate"][i] == pytest.approx(np.max(np.abs(ref.r)), abs=TOL)
-        assert res["fault_steps"][i] == np.count_nonzero(ref.status == mr.STATUS_FAULT)
-        assert res["time_at_limit"][i] == pytest.approx(np.count_nonzero(ref.status == mr.STATUS_SATURATED) * 0.002)
+        assert res["peak_side_slip"][i] == pytest.approx(np.degrees(np.max(np.abs(ref.beta))), abs=TOL)
+        # the state the node reports: FAULT (step()'s or the monitor's), DEGRADED, else step()'s
+        fault = (ref.status == mr.STATUS_FAULT) | ((ref.bits & pl.PLAUS_FAULT) != 0)
+        saturated = (ref.status == mr.STATUS_SATURATED) & ((ref.bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED)) == 0)
+        assert res["fault_steps"][i] == np.count_nonzero(fault)
+        assert res["time_at_limit"][i] == pytest.approx(np.count_nonzero(saturated) * 0.002)
         assert res["false_alarm_steps"][i] == np.count_nonzero(ref.bits)
         assert res["plausibility_bits"][i] == np.bitwise_or.reduce(ref.bits)
         assert res["authority_steps"][i] == np.count_nonzero(ref.authority)
         assert res["final_speed"][i] == pytest.approx(ref.final_speed, abs=TOL)
         assert res["false_alarms"][i] == ref.false_alarms
-        assert res["detection_time"][i] == pytest.approx(ref.detection_time, abs=TOL)
-        assert res["fault_yaw_rate"][i] == pytest.approx(ref.fault_yaw_rate, abs=TOL)
-        assert res["twin_yaw_rate"][i] == pytest.approx(ref.twin_yaw_rate, abs=TOL)
+        for name in ("detection_time", "fault_yaw_rate", "twin_yaw_rate"):  # NaN: no sensor fault
+            assert res[name][i] == pytest.approx(getattr(ref, name), abs=TOL, nan_ok=True), name
+            assert np.isnan(res[name][i]) == (s["fault_sensor"][i] == 0)
     return res
 
 
@@ -94,7 +108,10 @@ def test_batch_equals_scalar_through_a_spin_and_without_controller() -> None:
     s["mu"][:2] = 0.3
     s["onset"][:] = 0.1
     res = _compare(s, mr.ControllerConfig())
-    assert (res["plausibility_bits"][:2] & pl.PLAUS_DEGRADED).all()
+    # both spin (their runs end there, ``_compare`` holds the engine to the reference's end)
+    # after the monitor reported them
+    assert res["spun"][:2].all() and not res["spun"].all()
+    assert (res["plausibility_bits"][:2] != 0).all() and (res["spin_time"][:2] < 0.6).all()
     # the second spin's only report is OUTSIDE_MODEL's DEGRADED: the limiter fades (AUTH_FAULT)
     # on the monitor's fade with no fault bit, which the equality above then covers
     ref = reference.run(scenario_for(s.row(1), DURATION), mr.ControllerConfig())
@@ -693,3 +710,38 @@ def test_the_caused_yaw_equals_the_replays_where_the_driver_corrects_and_without
             assert not res["fault_yaw_rate"].any() and not res["detection_time"].any()
         else:
             assert (res["fault_yaw_rate"] > 1e-3).any()
+
+
+def test_a_spun_run_ends_at_its_spin_in_the_engine_as_in_the_reference(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A car whose side slip passes 30 deg has spun (``nonlinear.spun``): its run ends with that
+    step, in the engine as in the reference (``_compare``: equal to it, NaN after it), and its
+    figures are those of the same run without the rule up to that step, not after it.  A faulted
+    row spins while its fault-free twin does not (the pair's figures end with the row's run), a
+    yaw-moment step and a split-mu stop (its speed falling) spin fault-free."""
+    import math
+
+    from sim_plant.campaign import batch_tally
+    from sim_plant.car import nonlinear
+
+    c = spec.parse(FAULTS.format(seed=77), "faults.toml")
+    s = sampling.samples(c, np.array([68, 0, 1]))
+    s["v"][:] = np.maximum(s["v"], 12.0)
+    s["fault_sensor"][1:] = 0
+    s["disturbance"][1:] = [KINDS.index("yaw_moment"), KINDS.index("split_mu_braking")]
+    s["yaw_moment"][1], s["mu"][1:], s["onset"][1:] = 12000.0, [0.4, 1.0], 0.1
+    s["mu_split"][2], s["deceleration"][2], s["v"][2], s["reaction_time"][2] = 0.1, 9.0, 35.0, 1.0
+    res = _compare(s, mr.ControllerConfig())
+    assert res["spun"].all()
+    monkeypatch.setattr(nonlinear, "SPIN_SIDE_SLIP", math.inf)  # the same runs, never ended
+    monkeypatch.setattr(batch_tally, "SPIN_SIDE_SLIP", math.inf)
+    whole = engine.simulate(s, mr.ControllerConfig(), DURATION, record=True)
+    assert not whole["spun"].any() and np.isnan(whole["spin_time"]).all()
+    for i in range(len(s)):
+        k = int(round(res["spin_time"][i] / 0.002))
+        beta, r = np.degrees(np.abs(whole["beta"][:, i])), whole["r"][:, i]
+        assert beta[k] > 30.0 and beta[:k].max() <= 30.0  # the first step beyond the bound
+        assert res["peak_yaw_rate"][i] == np.abs(r[: k + 1]).max() < np.abs(r).max()
+        assert res["peak_side_slip"][i] == pytest.approx(beta[: k + 1].max(), abs=1e-12)
+        assert res["final_yaw_rate"][i] == r[k] != whole["final_yaw_rate"][i]
+        assert res["time_at_limit"][i] <= whole["time_at_limit"][i]
+    assert res["final_speed"][2] > whole["final_speed"][2]  # the stop's speed at its spin, not at the end

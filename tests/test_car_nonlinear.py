@@ -211,3 +211,25 @@ def test_bad_construction_is_refused():
         NonlinearPlant(VehicleParams(), TS, relaxation_length=-1.0)
     with pytest.raises(ValueError, match="ts"):
         NonlinearPlant(VehicleParams(), 0.0)
+
+
+def test_side_slip_is_reported_wrapped_and_a_spin_is_beyond_thirty_degrees():
+    """``outputs`` gives beta in (-180, 180] deg (a car spinning past it reads as one turning the
+    other way), unchanged bit for bit inside it; ``spun`` is |beta| beyond 30 deg, either sign."""
+    from sim_plant.car.nonlinear import SPIN_SIDE_SLIP, spun, wrap_angle
+
+    assert wrap_angle(math.pi) == math.pi and wrap_angle(-math.pi) == math.pi  # (-pi, pi]
+    for x in (0.1, -3.0, 3.5, -3.5, math.radians(1612.0), 40.0 * math.pi + 0.3):
+        w = wrap_angle(x)
+        assert -math.pi < w <= math.pi and math.isclose(math.cos(w), math.cos(x), abs_tol=1e-12)
+        assert math.isclose(math.sin(w), math.sin(x), abs_tol=1e-12)
+    assert wrap_angle(0.1) == 0.1 and wrap_angle(math.radians(1612.0)) == pytest.approx(math.radians(172.0))
+    xs = np.array([math.pi, -math.pi, 0.1, 3.5, math.radians(1612.0)])
+    assert wrap_angle(xs).tolist() == [wrap_angle(float(x)) for x in xs]
+    plant = NonlinearPlant(VehicleParams(v=20.0, mu=0.5), TS)
+    plant.set_state(math.radians(1612.0), 2.0)
+    assert plant.outputs(0.0, 0.0)[1] == pytest.approx(math.radians(172.0))
+    assert plant.x[0] == math.radians(1612.0)  # the state itself integrates on unwrapped
+    assert SPIN_SIDE_SLIP == pytest.approx(math.radians(30.0))
+    assert spun(math.radians(-30.01)) and not spun(math.radians(29.99))
+    assert spun(np.radians([10.0, -31.0, 31.0])).tolist() == [False, True, True]

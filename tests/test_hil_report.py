@@ -7,6 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 import mrsteer_dbc
 from mrsteer_cli import hil_demo
 from sim_plant.car import scenario as scn
@@ -128,3 +130,37 @@ def test_steps_csv_writes_round_off_as_zero_and_keeps_nine_digits() -> None:
     header, row = steps_csv([step]).decode().splitlines()
     cells = dict(zip(header.split(","), row.split(",")))
     assert cells["aux_applied_rad"] == "0" and cells["beta_rad"] == "0.0123456789" and cells["m_z_nm"] == "4000"
+
+
+def test_car_figures_are_the_true_cars_up_to_a_spin_and_count_the_reported_saturated_state() -> None:
+    """The figures a campaign has for its run (``campaign.engine.METRICS``): the true yaw rate's
+    peak, the wrapped side slip's, the steps the controller *reported* SATURATED (not the steps
+    the command sat at 3 deg: a faded command at the limit reports DEGRADED or FAULT), all of
+    them up to the step whose side slip passed 30 deg (the car spun), which ``spun`` and
+    ``spin_time_s`` name."""
+    import math
+
+    from firmware_py import model_regulator as mr
+    from sim_plant.harness.hil_report import car_figures
+    from sim_plant.harness.hil_steps import Step
+
+    limit = mr.ControllerConfig().aux_limit
+
+    def step(k: int, beta_deg: float, r: float, state: str, cmd: float) -> Step:
+        return Step(step=k, t_s=k / RATE, driver_angle_rad=0.0, yaw_rate_rad_s=r, yaw_rate_measured_rad_s=min(r, 3.0),
+                    v_m_s=20.0 - k, aux_cmd_rad=cmd, aux_applied_rad=cmd, ctrl_state=state, ctrl_cause=0, m_z_nm=0.0,
+                    mu=0.5, beta_rad=math.radians(beta_deg), lat_accel_m_s2=0.0, wall_s=0.0)
+
+    sc = scn.load("side-wind")
+    calm = [step(0, 1.0, 0.1, "ACTIVE", 0.0), step(1, -5.0, -0.4, "SATURATED", limit),
+            step(2, 4.0, 0.2, "FAULT", limit), step(3, 2.0, 0.3, "SATURATED", -limit)]
+    f = car_figures(sc, calm)
+    assert f["peak_yaw_rate_rad_s"] == 0.4 and f["peak_side_slip_deg"] == pytest.approx(5.0)
+    assert f["time_at_limit_s"] == pytest.approx(2 / RATE)  # the two SATURATED steps, not the FAULT at 3 deg
+    assert not f["spun"] and f["spin_time_s"] is None and f["final_speed_m_s"] == 17.0
+    spin = calm[:3] + [step(3, 29.0, 1.5, "SATURATED", limit), step(4, 31.0, 2.0, "SATURATED", limit),
+                       step(5, -170.0, 12.5, "SATURATED", limit)]  # beta past 180 deg reads wrapped
+    f = car_figures(sc, spin)
+    assert f["spun"] and f["spin_time_s"] == pytest.approx(4 / RATE)
+    assert f["peak_yaw_rate_rad_s"] == 2.0 and f["peak_side_slip_deg"] == pytest.approx(31.0)
+    assert f["time_at_limit_s"] == pytest.approx(3 / RATE) and f["final_speed_m_s"] == 16.0

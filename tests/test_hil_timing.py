@@ -27,7 +27,7 @@ def _summary(loop: dict[str, Any], mode: str = "realtime") -> dict[str, Any]:
             "duration": 5.0, "peak_yaw_rate_rad_s": 0.020300000000000002, "final_yaw_rate_rad_s": -1.16e-164,
             "peak_aux_steer_deg": 2.2589412345678, "final_aux_steer_deg": -1.81416, "saturated": False,
             "stable": True, "plant": "linear", "actuator": "ideal", "sensors": "ideal",
-            "peak_yaw_rate_true_rad_s": 0.0438372111, "peak_side_slip_deg": 1.09354, "aux_rms_deg": 1.70861,
+            "peak_measured_yaw_rate_rad_s": 0.0438372111, "peak_side_slip_deg": 1.09354, "aux_rms_deg": 1.70861,
             "time_at_limit_s": 0.0, "final_speed_m_s": 25.0,
             "frames": {"on_bus_logged": 9206, "sent_plant": 5354, "sent_controller": 3852},
             "loop": loop, "timing": timing(loop, mode, 500.0)}

@@ -65,11 +65,11 @@ class Progress:
         if self.start is None:
             self.start = done
         rate = (done - self.start) / seconds if seconds > 0 else 0.0
-        eta = (total - done) / rate if rate > 0 else float("nan")
         width = 30
         bar = "#" * int(width * done / max(total, 1))
-        line = (f"campaign [{bar:<{width}}] {done}/{total} runs  {rate:,.0f} runs/s  "
-                f"elapsed {seconds:.0f} s  ETA {eta:.0f} s")
+        line = f"campaign [{bar:<{width}}] {done}/{total} runs  {rate:,.0f} runs/s  elapsed {seconds:.0f} s"
+        if rate > 0 and done < total:  # (no ETA until a chunk of this run has finished)
+            line += f"  ETA {(total - done) / rate:.0f} s"
         print(("\r" if self.tty else "") + line, end="" if self.tty and done < total else "\n",
               file=sys.stderr, flush=True)
 
@@ -114,11 +114,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
         return 0
     print(f"campaign {s['campaign']}: {s['samples']} samples; report in {args.dir / 'report' / 'index.html'}")
     for name, c in s["calibrations"].items():
-        per = "  ".join(f"{k} {v:.4f}" for k, v in c["per_criterion"].items())
+        per = "  ".join(f"{k} {v:.4f}" for k, v in c["per_criterion"].items() if v is not None)
         worst = c["worst"][0] if c["worst"] else None
-        print(f"  {name:<12} pass {c['pass_rate']:.4f}   {per}"
+        print(f"  {name:<12} pass {c['pass_rate']:.4f}   spun {c['spun']} ({c['spun_share']:.1%})   {per}"
               + (f"   worst: sample {worst['index']} ({worst['disturbance']}), "
-                 f"peak yaw rate {worst['peak_yaw_rate']:.4g} rad/s" if worst else ""))
+                 f"peak yaw rate {worst['peak_yaw_rate']:.4g} rad/s" + (" (spun)" if worst["spun"] else "")
+                 if worst else ""))
     return 0
 
 

@@ -127,8 +127,8 @@ def _cmd_hil_run(args: argparse.Namespace) -> int:
 # What ``hil run`` prints of its summary (summary.json has it all), in this order.
 PRINTED = ("scenario", "mode", "rate_hz", "delay_steps", "controller", "peak_yaw_rate_rad_s", "final_yaw_rate_rad_s",
            "peak_aux_steer_deg", "final_aux_steer_deg", "saturated", "stable", "plant", "actuator", "sensors",
-           "peak_yaw_rate_true_rad_s", "peak_side_slip_deg", "aux_rms_deg", "time_at_limit_s", "final_speed_m_s",
-           "frames")
+           "peak_measured_yaw_rate_rad_s", "peak_side_slip_deg", "aux_rms_deg", "time_at_limit_s", "spun",
+           "spin_time_s", "final_speed_m_s", "frames")
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:

@@ -7,6 +7,7 @@
   disturbances vectorised; ``noise``: the sensors' per-row noise streams, seeded and drawn as
   the scalar sensors draw them;
 * ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
+  ``batch_tally``: its figures per row, each row's run to its end (a spin ends it);
 * ``batch_monitor``: issue 18's plausibility monitor vectorised (``batch_speed_checks``: its two
   checks on the speed, the speed pair among them; ``batch_authority``: the authority limiter);
   ``batch_faults``: the sampled sensor faults and their figures;

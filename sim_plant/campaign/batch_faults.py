@@ -62,10 +62,13 @@ class ExceededTracker:
         self.start = np.full(rows, -1, dtype=np.int64)  # where the current run over the bound began
         self.exceeded = np.full(rows, -1, dtype=np.int64)
 
-    def step(self, k: int, over: np.ndarray, first_report: np.ndarray) -> None:
-        """Step k: ``over`` the error beyond its bound, ``first_report`` the monitor's first fault now."""
+    def step(self, k: int, over: np.ndarray, first_report: np.ndarray, ending: np.ndarray | None = None) -> None:
+        """Step k: ``over`` the error beyond its bound, ``first_report`` the monitor's first fault now,
+        ``ending`` the rows whose run ends with this step (their car spun; None: none)."""
         start = np.where(over, np.where(self.start < 0, k, self.start), -1)
         long_enough = (k - start + 1 >= self.need) | first_report | (k == self.last)
+        if ending is not None:
+            long_enough |= ending
         found = over & long_enough & (self.exceeded < 0)
         self.exceeded = np.where(found, start, self.exceeded)
         self.start = start
@@ -102,10 +105,13 @@ class FaultFigures:
         self.speed_faulted = any(ch in ("speed", "speed_redundant") for ch in self.channels)  # braking matters
 
     def step(self, k: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
-             flags: np.ndarray | int = 0) -> None:
+             flags: np.ndarray | int = 0, live: np.ndarray | None = None, ending: np.ndarray | None = None) -> None:
         """Step k: the faulted channels' errors, the monitor's bits, the true yaw rate and speed,
         the monitor's detailed flags (their OUTSIDE_MODEL is a report; a missing input's
-        DEGRADED is not)."""
+        DEGRADED is not); ``live`` the rows whose run includes step k (None: all; a run that spun
+        has ended), ``ending`` those whose run ends with it (None: none)."""
+        if live is not None:
+            bits, flags = np.where(live, bits, 0), np.where(live, flags, 0)
         after = self.faulted & (self.faults.onset <= k * self.ts)
         self.alarms += (bits != 0) & ~after
         fault = ((bits & pl.PLAUS_FAULT) != 0) | ((flags & pl.OUTSIDE_MODEL) != 0)  # the report
@@ -122,9 +128,11 @@ class FaultFigures:
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,
                                               braking=braking), bound)
             seen = np.where(on, error + check_offset(channel, self.bias, v_true, after), seen)
-        self.tracker.step(k, np.abs(seen) > bound, first)
+        over = np.abs(seen) > bound
+        self.tracker.step(k, over if live is None else over & live, first, ending)
 
     def result(self) -> dict[str, np.ndarray]:
         ex, rep, ts = self.tracker.exceeded, self.report_step, self.ts
         late = np.where(rep < 0, np.inf, np.maximum(0.0, rep * ts - ex * ts))
-        return {"false_alarms": self.alarms, "detection_time": np.where(~self.faulted | (ex < 0), 0.0, late)}
+        return {"false_alarms": self.alarms,
+                "detection_time": np.where(~self.faulted, np.nan, np.where(ex < 0, 0.0, late))}

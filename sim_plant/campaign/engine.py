@@ -32,6 +32,11 @@ wheels keep their axle's B, which gives its values bitwise).  Split-mu rows alon
 each axle's tyre curve, but a third group's numpy calls cost more than their wheels' curves
 (each call's fixed cost is about that of a thousand rows' arithmetic).
 
+A row whose car spins (``nonlinear.spun``: its side slip beyond the model's validity) ends at
+that step, as the reference's run does: its figures are those up to it (``batch_tally.Ends``).  Its
+arithmetic runs on with the batch, since taking a row out of every stage's arrays costs more
+than carrying it, but nothing after its last step enters its figures or its traces.
+
 ``simulate`` returns, per row, the figures the criteria judge (``METRICS``).
 """
 
@@ -50,6 +55,7 @@ from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.batch_law import BatchLaw
 from sim_plant.campaign.batch_authority import BatchAuthority
 from sim_plant.campaign.batch_monitor import BatchMonitor
+from sim_plant.campaign.batch_tally import Ends, Tally, end_traces, scatter
 from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
@@ -58,10 +64,10 @@ from sim_plant.offline.plausibility_runs import cycles
 
 #: Per-row results: name -> unit, description.
 METRICS = {
-    "peak_yaw_rate": ("rad/s", "largest |r| of the run"),
+    "peak_yaw_rate": ("rad/s", "largest |r| of the run (the car's true yaw rate)"),
     "peak_side_slip": ("deg", "largest |beta| of the run"),
-    "time_at_limit": ("s", "time the reported state was SATURATED (the law's command at the actuator's +-3 deg; "
-                           "the limiter may be fading it: the state stays the law's)"),
+    "time_at_limit": ("s", "time the reported state was SATURATED: the law's command at the actuator's +-3 deg, "
+                           "the monitor neither faulted nor degraded (reference.reported_saturated)"),
     "fault_steps": ("", "steps the controller reported a fault: step()'s input ranges or the monitor's"),
     "false_alarm_steps": ("", "steps the monitor reported PLAUS_FAULT or PLAUS_DEGRADED"),
     "plausibility_bits": ("", "the monitor's CtrlStatus_Plausibility bits, OR over the run"),
@@ -71,18 +77,23 @@ METRICS = {
                             "the healthy biases its check sees: plausibility_runs.check_offset) left "
                             "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's; none below "
                             "speed_min) for 0.3 s "
-                            "(0: it never did, or was reported before, or no controller; inf: never reported)"),
+                            "(0: it never did, or was reported before, or no controller; inf: never reported; "
+                            "NaN: no sensor fault)"),
     "fault_yaw_rate": ("rad/s", "the yaw rate the faulty sensor makes the command cause: largest |r - r'| from "
                                 "the sensor fault's onset, r' the same car without the applied angle's excursion "
                                 "beyond the fault-free twin's and zero (offline.excursion_yaw, as hil run's "
-                                "caused_yaw_rad_s; a fade is not counted; 0 without a fault or a controller)"),
+                                "caused_yaw_rad_s; a fade is not counted; 0 without a controller, NaN without "
+                                "a sensor fault)"),
     "twin_yaw_rate": ("rad/s", "largest |r - r of the fault-free twin| (each at its step's start) from the sensor "
                                "fault's onset: the fault's "
                                "whole cost to the car, the disturbance rejection a fade gives up included (0 "
-                               "without a fault or a controller)"),
+                               "without a controller, NaN without a sensor fault)"),
     "peak_command": ("deg", "largest |auxiliary command|"),
-    "final_yaw_rate": ("rad/s", "r at the end"),
-    "final_speed": ("m/s", "v at the end"),
+    "final_yaw_rate": ("rad/s", "r at the end (of a spun run: at the spin)"),
+    "final_speed": ("m/s", "v at the end (of a spun run: at the spin)"),
+    "spun": ("", "the car spun: its side slip passed the model's validity (nonlinear.SPIN_SIDE_SLIP), and the run "
+                 "ended there: every figure is up to that step"),
+    "spin_time": ("s", "when it spun (NaN: it did not)"),
 }
 ACTUATOR_LIMIT_DEG = 3.0
 
@@ -164,7 +175,8 @@ class _Group:
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
         # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
         self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
-        self.faults = BatchFaults(s) if bool((s["fault_sensor"] != 0).any()) else None
+        self.fault_free = s["fault_sensor"] == 0
+        self.faults = None if self.fault_free.all() else BatchFaults(s)
         self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults, steps=steps)
         self.every = cycles(ts)
         if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
@@ -199,7 +211,9 @@ class _Group:
         in_flight: np.ndarray | None = None  # a status frame's bits, read by the plant next step
         held: dict[str, np.ndarray] = {}
         controlled = self.law is not None and self.monitor is not None and self.limiter is not None
-        tally = _Tally(rows, controlled)
+        tally = Tally(rows, controlled)
+        ends = Ends(rows, n)
+        final = np.empty((3, rows))  # beta, r, v of each row's last step that spun
         term = np.empty(rows)
         traces = {k: np.empty((n, rows)) for k in ("r", "beta", "command", "bits")} if self.record else {}
         red_every, speed_every = self.every["lat_accel"], self.every["speed"]
@@ -224,6 +238,10 @@ class _Group:
                 after = self.fault_onset <= t  # the faulted rows' faults have begun
                 r = car.r  # (a view: read before the car advances)
                 tally.state(j, car.x)
+                ending = ends.check(k, car.beta)  # rows whose car spun: this step is their last
+                if ending is not None:
+                    final[:, ending] = car.x[:, ending]
+                live = ends.live(k)  # None: every row's run still on
                 nominal = self.nominal if self.nominal is not None else nominal_gain(car.v, self.mass)
                 np.multiply(self.gain_step, r, out=term)
                 term /= nominal
@@ -274,10 +292,11 @@ class _Group:
                     if (k + 1) % self.status_every == 0:
                         in_flight = bits
                     if figures is not None:
-                        figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags)
-                    if self.shadow is not None:
+                        figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags, live, ending)
+                    if self.shadow is not None:  # (while both runs are on)
                         whole = np.abs(r[self.pairs] - r[self.twins])
-                        np.maximum(twin_yaw, np.where(after, whole, 0.0), out=twin_yaw)
+                        on = after if live is None else after & live[self.pairs] & live[self.twins]
+                        np.maximum(twin_yaw, np.where(on, whole, 0.0), out=twin_yaw)
                 else:
                     u, bits = np.zeros(rows), tally.no_bits
                 pending = u
@@ -296,18 +315,25 @@ class _Group:
                     car.advance(delta, m_z, f_y, None, None, car.mu)
                 if self.shadow is not None:  # (as excursion_yaw: each step's end from the onset's on)
                     caused = np.abs(car.r[self.pairs] - self.shadow.r)
-                    np.maximum(fault_yaw, np.where(after, caused, 0.0), out=fault_yaw)
-            tally.reduce(t_block.shape[0])
+                    moved = ends.advanced(k)  # (while both cars were advanced)
+                    on = after if moved is None else after & moved[self.pairs] & moved[self.twins]
+                    np.maximum(fault_yaw, np.where(on, caused, 0.0), out=fault_yaw)
+            tally.reduce(t_block.shape[0], k0, ends)
         c = tally.counts
+        spun = ends.stop < n
+        no_fault = np.where(self.fault_free, np.nan, 0.0)  # (a fault without a controller: 0)
+        if self.record:
+            end_traces(traces, ends.last)
         return {"peak_yaw_rate": tally.peaks[1], "peak_side_slip": np.degrees(tally.peaks[0]),
                 "time_at_limit": c["at_limit"] * ts, "fault_steps": c["faults"],
                 "false_alarm_steps": c["alarms"], "plausibility_bits": tally.ored,
                 "authority_steps": c["authority"], "peak_command": np.degrees(tally.peak_u),
                 **(figures.result() if figures is not None else
-                   {"false_alarms": c["alarms"].copy(), "detection_time": np.zeros(rows)}),
-                "fault_yaw_rate": _scatter(rows, self.pairs, fault_yaw),
-                "twin_yaw_rate": _scatter(rows, self.pairs, twin_yaw),
-                "final_yaw_rate": car.r.copy(), "final_speed": car.v.copy(), **traces}
+                   {"false_alarms": c["alarms"].copy(), "detection_time": no_fault.copy()}),
+                "fault_yaw_rate": scatter(no_fault, self.pairs, fault_yaw),
+                "twin_yaw_rate": scatter(no_fault, self.pairs, twin_yaw),
+                "final_yaw_rate": np.where(spun, final[1], car.r), "final_speed": np.where(spun, final[2], car.v),
+                "spun": spun, "spin_time": np.where(spun, ends.last * ts, np.nan), **traces}
 
     def _advance_shadow(self, driver: np.ndarray, block: dict, j: int, m_z: np.ndarray, f_y: np.ndarray | None,
                         tyres: Tyres | None, after: np.ndarray, steering: np.ndarray | None,
@@ -337,50 +363,3 @@ class _Group:
                            block["mu_max"][j][at])
         else:
             shadow.advance(delta, m_z, f_y, None, None, shadow.mu)
-
-
-class _Tally:
-    """The run's per-row figures from each step's values: a step copies them into its row of a
-    block (``BLOCK`` steps), and ``reduce`` folds the block in with one operation per figure
-    (the counts, the OR of the bits, the peaks), not a dozen small ones every step."""
-
-    def __init__(self, rows: int, controlled: bool) -> None:
-        self.controlled = controlled
-        self.x = np.empty((BLOCK, 2, rows))  # beta, r as each step begins
-        self.u = np.empty((BLOCK, rows))
-        self.status = np.empty((BLOCK, rows), dtype=np.int8)
-        self.bits = np.empty((BLOCK, rows), dtype=np.int64)
-        self.flags = np.empty((BLOCK, rows), dtype=np.int64)
-        self.peaks, self.peak_u = np.zeros((2, rows)), np.zeros(rows)  # |beta|, |r|; |u|
-        self.counts = {k: np.zeros(rows, dtype=np.int64) for k in ("at_limit", "faults", "alarms", "authority")}
-        self.ored = np.zeros(rows, dtype=np.int64)
-        self.no_bits = np.zeros(rows, dtype=np.int64)
-
-    def state(self, j: int, x: np.ndarray) -> None:
-        self.x[j] = x[:2]
-
-    def control(self, j: int, u: np.ndarray, status: np.ndarray, bits: np.ndarray, flags: np.ndarray) -> None:
-        """Step j's command sent, the law's status, the monitor's bits, the limiter's flags."""
-        self.u[j], self.status[j], self.bits[j], self.flags[j] = u, status, bits, flags
-
-    def reduce(self, steps: int) -> None:
-        """The block's first ``steps`` rows folded in: the controller node's state FAULT on
-        ``PLAUS_FAULT``, else the law's."""
-        np.maximum(self.peaks, np.abs(self.x[:steps]).max(axis=0), out=self.peaks)
-        if not self.controlled:
-            return
-        np.maximum(self.peak_u, np.abs(self.u[:steps]).max(axis=0), out=self.peak_u)
-        status, bits = self.status[:steps], self.bits[:steps]
-        plaus_fault = (bits & pl.PLAUS_FAULT) != 0
-        c = self.counts
-        c["at_limit"] += np.count_nonzero((status == mr.STATUS_SATURATED) & ~plaus_fault, axis=0)
-        c["faults"] += np.count_nonzero((status == mr.STATUS_FAULT) | plaus_fault, axis=0)
-        c["alarms"] += np.count_nonzero(bits, axis=0)
-        c["authority"] += np.count_nonzero(self.flags[:steps], axis=0)
-        self.ored |= np.bitwise_or.reduce(bits, axis=0)
-
-
-def _scatter(rows: int, at: np.ndarray, values: np.ndarray) -> np.ndarray:
-    out = np.zeros(rows)
-    out[at] = values
-    return out

@@ -18,8 +18,12 @@ with the bus taken out:
   command, after that step's command handling);
 * the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2, v_2)``,
   ``u = step(d, r, v, ms.flags & SUSPECT_CHECKS)``,
-  ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS, flags & FADE_CHECKS)``, the reported
-  state FAULT when ``bits & PLAUS_FAULT``.
+  ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS, flags & FADE_CHECKS)``; the state the
+  node reports is FAULT on ``step()``'s FAULT or ``PLAUS_FAULT``, else DEGRADED on
+  ``PLAUS_DEGRADED``, else ``step()``'s (``reported_fault``, ``reported_saturated``).
+
+A run ends at the step whose car has spun (``nonlinear.spun``: its side slip beyond the model's
+validity): that step is its last, and the car is not advanced past it.
 
 The batch engine must equal it (``tests/test_campaign_engine.py``), and ``mrsteer bench --only
 campaign`` times it as the scalar firmware loop the engine is measured against.
@@ -42,6 +46,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.scenario_play import ScenarioState
 from sim_plant.car.actuator import Actuator, ActuatorConfig
 from sim_plant.car.actuator_dynamics import PositionActuator
+from sim_plant.car.nonlinear import spun
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
@@ -51,9 +56,10 @@ from sim_plant.offline.plausibility_runs import MonitorRun, braking_of, check_of
 
 @dataclass(frozen=True)
 class ReferenceRun:
-    """Per step: the true yaw rate and side slip at the step's start, the command sent (after the
-    authority limiter), the reported state, the plausibility bits and the limiter's flags, and the
-    actuator position's mean over the step (the angle the car got besides the driver's)."""
+    """Per step to the run's last (its end, or the step its car spun at): the true yaw rate and
+    side slip at the step's start, the command sent (after the authority limiter), ``step()``'s
+    status, the plausibility bits and the limiter's flags, and the actuator position's mean over
+    the step (the angle the car got besides the driver's)."""
 
     r: np.ndarray
     beta: np.ndarray
@@ -63,10 +69,36 @@ class ReferenceRun:
     authority: np.ndarray
     final_speed: float
     false_alarms: int  # steps with a plausibility bit before the sensor fault's onset (all, without one)
-    detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun
-    fault_yaw_rate: float  # excursion_yaw's figure against the fault-free twin (engine.METRICS)
-    twin_yaw_rate: float  # |r - r of the fault-free twin|, largest from the onset
+    detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun (NaN: no fault)
+    fault_yaw_rate: float  # excursion_yaw's figure against the fault-free twin (engine.METRICS; NaN: no fault)
+    twin_yaw_rate: float  # |r - r of the fault-free twin|, largest from the onset (NaN: no fault)
     applied: np.ndarray
+    spun: bool  # the car spun at the last step (``nonlinear.spun``)
+    advanced: int  # steps whose car was advanced: all of them, or all but the last after a spin
+
+
+#: ``mr.reported_state`` for every law status and every ``CtrlStatus_Plausibility`` value (3 bits),
+#: out of the start state: the node's rule, tabulated so that arrays of steps x rows index it.
+_REPORTED = np.array([[mr.reported_state(status, bits, False) for bits in range(8)] for status in range(8)],
+                     dtype=np.int8)
+
+
+def reported_states(status: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """The state the controller node reports (``mr.reported_state``), element-wise over steps
+    or steps x rows of ``step()``'s status and the monitor's bits."""
+    return _REPORTED[status, bits & 7]
+
+
+def reported_fault(status: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """The steps the controller node reports FAULT: ``step()``'s FAULT (an input out of range)
+    or the monitor's ``PLAUS_FAULT``."""
+    return reported_states(status, bits) == mr.STATUS_FAULT
+
+
+def reported_saturated(status: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """The steps the controller node reports SATURATED: ``step()``'s SATURATED, unless the
+    monitor's bits make the state FAULT or DEGRADED (the limiter may be fading the command)."""
+    return reported_states(status, bits) == mr.STATUS_SATURATED
 
 
 def status_cycle(ts: float) -> int:
@@ -147,7 +179,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                           (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
             u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS,
                                   mon.state.flags & pl.FADE_CHECKS)
-            state = mr.STATUS_FAULT if bits & pl.PLAUS_FAULT else ctrl.state.status
+            state = ctrl.state.status
             flags_hist[k] = mon.state.flags
             if (k + 1) % status_every == 0:
                 in_flight = bits
@@ -161,23 +193,41 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         applied[k], driver_hist[k], m_z_hist[k] = position.mean, driver, m_z + car.loads.m_z
         mu_hist[k], v_hist[k], gain_hist[k] = scene.params().mu, car.v, scene.correction_gain(t, ts)
         loads_hist.append(car.loads)
+        if spun(float(x[0])):
+            last = advanced = k  # the car has left its model: the run ends with this step
+            break
         car.advance(driver + position.mean, m_z)  # PlantNode.step: the position's mean over the step
         scene.v = car.v
-    caused, clean = 0.0, None
+    else:
+        last, advanced = n - 1, n
+    kept = slice(0, last + 1)
+    r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true, yaw_2_seen = (
+        a[kept] for a in (r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true,
+                          yaw_2_seen))
+    caused, clean = math.nan, None
     if fault is not None and ctrl is not None:
         # the yaw rate the fault makes the command cause: the excursion beyond the same run
-        # without it, replayed on the car from the onset (as hil run's figure)
+        # without it, replayed on the car from the onset (as hil run's figure), over the steps
+        # both cars were advanced
         clean = run(replace(sc, sensor_faults=(), sensors=replace(sc.sensors, faults=())), config, ts)
         k0 = int(np.argmax(np.arange(n) * ts >= fault.start))
+        k1 = min(advanced, clean.advanced)
         car_at_onset = replace(scene.params(), v=float(v_hist[k0]), mu=float(mu_hist[k0]))
-        caused = excursion_yaw(applied[k0:], ts, car_at_onset, sc.plant, driver_hist[k0:], m_z_hist[k0:],
-                               float(beta_hist[k0]), float(r_hist[k0]), healthy=clean.applied[k0:],
-                               mu=mu_hist[k0:], loads=loads_hist[k0:], driver_gain=gain_hist[k0:])
+        caused = excursion_yaw(applied[k0:k1], ts, car_at_onset, sc.plant, driver_hist[k0:k1], m_z_hist[k0:k1],
+                               float(beta_hist[k0]), float(r_hist[k0]), healthy=clean.applied[k0:k1],
+                               mu=mu_hist[k0:k1], loads=loads_hist[k0:k1], driver_gain=gain_hist[k0:k1]) \
+            if k0 <= last else 0.0
+    elif fault is not None:
+        caused = 0.0  # no controller: nothing caused
     # (without a controller nothing is reported or caused: no fault figures, as the engine's)
     figures = fault_figures(fault if ctrl is not None else None, ts, bits_hist, r_hist, u_hist, error, speed_true,
                             None if clean is None else clean.r, yaw_2_seen, flags_hist)
+    if fault is None:
+        figures = (figures[0], math.nan, math.nan)
+    elif ctrl is None:
+        figures = (figures[0], 0.0, 0.0)
     return ReferenceRun(r_hist, beta_hist, u_hist, status, bits_hist, auth, car.v, figures[0], figures[1],
-                        caused, figures[2], applied)
+                        caused, figures[2], applied, advanced < n, advanced)
 
 
 def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
@@ -187,7 +237,7 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
     ``MonitorRun.exceeded_time`` against ``sensor_bound`` at the true yaw rate ``r`` and the
     true speed ``v`` (the car has the second speed: ``speed_pair``), the yaw-rate pair running
     while ``yaw_rate_2`` (what the monitor saw) is there; twin_yaw_rate the largest |r -
-    ``r_clean``| from the onset (0 without ``r_clean``)."""
+    ``r_clean``| from the onset over the steps both runs have (0 without ``r_clean``)."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
     false_alarms = int(np.count_nonzero((bits != 0) & ~after))
@@ -200,5 +250,6 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
                          braking=braking_of(v, ts, cfg))
     exceeded, reported = run.exceeded_time(bound), run.report_time
     detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
-    twin = 0.0 if r_clean is None else float(np.max(np.where(after, np.abs(r - r_clean), 0.0)))
+    m = 0 if r_clean is None else min(r.size, r_clean.size)  # (a run that spun ends early)
+    twin = float(np.max(np.where(after[:m], np.abs(r[:m] - r_clean[:m]), 0.0), initial=0.0))
     return false_alarms, detection, twin

@@ -33,10 +33,11 @@ def chunk_path(out: Path, chunk: int) -> Path:
 
 
 def judge(metrics: dict[str, np.ndarray], criteria: dict[str, float]) -> dict[str, np.ndarray]:
-    """``pass_<name>`` per criterion (figure <= bound) and ``pass`` (all of them)."""
-    n = metrics["peak_yaw_rate"].size
-    out = {f"pass_{k}": metrics[k] <= bound for k, bound in criteria.items()}
-    out["pass"] = np.logical_and.reduce(list(out.values())) if out else np.ones(n, dtype=bool)
+    """``pass_<name>`` per criterion (figure <= bound; a NaN figure, a sensor fault's of a sample
+    without one, has nothing to judge and passes) and ``pass``: all of them, and the car did not
+    spin (a spun run's figures stop at the spin: they cannot clear it)."""
+    out = {f"pass_{k}": (metrics[k] <= bound) | np.isnan(metrics[k]) for k, bound in criteria.items()}
+    out["pass"] = np.logical_and.reduce([~metrics["spun"], *out.values()])
     return out
 
 
@@ -108,3 +109,13 @@ def read_all(out: Path) -> pa.Table:
     if not files:
         raise FileNotFoundError(f"{out}: no results (no {CHUNK_DIR}/chunk-*.parquet): run `mrsteer campaign run` first")
     return pa.concat_tables([pq.read_table(f) for f in files])
+
+
+def same_rows(a: pa.Table, b: pa.Table) -> bool:
+    """Whether two results tables hold the same rows: ``Table.equals``, but a NaN figure (a sensor
+    fault's of a sample without one, a spin's time without a spin) equal to a NaN."""
+    if a.schema != b.schema or a.num_rows != b.num_rows:
+        return False
+    return all(np.array_equal(np.asarray(a[name]), np.asarray(b[name]),
+                              equal_nan=pa.types.is_floating(a.schema.field(name).type))
+               for name in a.column_names)

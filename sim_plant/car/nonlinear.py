@@ -38,6 +38,19 @@ friction on any wheel (the tyres' slope is largest at zero slip, so this bounds 
 Jacobian) and the relaxation rate v / sigma.  RK4's error per step is then about
 (h lambda)^5 / 120 <= 1e-5 of the state (measured against the exact ZOH solution at small
 slip: ``tests/test_car_nonlinear.py``).
+
+**Validity: a spin.**  The model holds while the side slip is moderate: its kinematics are
+small-angle (alpha = -beta + ..., the forces not turned into the direction of travel), and its
+tyres' force peaks at a slip angle of 11.5 deg (rear) to 13.9 deg (front) and falls after it
+toward 0.85 D.  A car whose |beta| passes ``SPIN_SIDE_SLIP`` (30 deg: tan beta
+10 % above beta, the rear axle at two and a half times its peak slip) has spun (``spun``): what
+the equations do after it is not a car's motion (with the yaw moment still on and both axles
+saturated, their moments cancel, l_f F_zf = l_r F_zr, and r grows without bound).  The bound
+is on the side slip, not on the yaw rate: the tyres bound beta' + r, |beta' + r| <= (mu g +
+|F_ext| / m) / v, not r, so a yaw rate above mu g / v makes beta grow, which the side slip then
+shows; a yaw-rate bound would need each wheel's mu and the side force, and cars within the
+side-slip bound pass mu g / v (docs/campaigns.md, "Spun samples", has the runs).  ``outputs``
+gives beta wrapped to (-pi, pi] (``wrap_angle``); the state itself is not wrapped.
 """
 
 from __future__ import annotations
@@ -54,6 +67,23 @@ STOP_SPEED = 3.0
 #: Largest h * ||A||_inf of one RK4 sub-step.
 MAX_STEP_RATE = 0.25
 MAX_RELAXATION = 5.0  # m; passenger-car tyres are 0.2-1 m
+#: Beyond this side slip (rad) the car has spun: the model's validity ends (the module docstring).
+SPIN_SIDE_SLIP = math.radians(30.0)
+
+
+def spun(beta: float | np.ndarray) -> bool | np.ndarray:
+    """Whether the side slip ``beta`` (rad; element-wise for an array) is beyond ``SPIN_SIDE_SLIP``."""
+    if isinstance(beta, float):
+        return abs(beta) > SPIN_SIDE_SLIP
+    return np.abs(beta) > SPIN_SIDE_SLIP
+
+
+def wrap_angle(x: float | np.ndarray) -> float | np.ndarray:
+    """``x`` (rad) wrapped to (-pi, pi]; an angle already in it unchanged, bit for bit."""
+    if isinstance(x, float):
+        return x if -math.pi < x <= math.pi else math.pi - (math.pi - x) % math.tau
+    x = np.asarray(x, dtype=float)
+    return np.where((-np.pi < x) & (x <= np.pi), x, np.pi - np.mod(np.pi - x, 2.0 * np.pi))
 
 
 class NonlinearPlant:
@@ -164,9 +194,10 @@ class NonlinearPlant:
     # ------------------------------------------------------------------ the DiscretePlant interface
 
     def outputs(self, delta_f: float, m_z: float, f_y: float = 0.0) -> np.ndarray:
-        """[r, beta, a_y] at the current state with the given (held) inputs; a_y = sum F_y / m."""
+        """[r, beta, a_y] at the current state with the given (held) inputs; a_y = sum F_y / m;
+        beta wrapped to (-pi, pi]."""
         f_front, f_rear = self.axle_forces(*self._slip(self._z, delta_f))
-        return np.array([self._z[1], self._z[0], (f_front + f_rear + f_y) / self.params.mass])
+        return np.array([self._z[1], wrap_angle(float(self._z[0])), (f_front + f_rear + f_y) / self.params.mass])
 
     def advance(self, delta_f: float, m_z: float, f_y: float = 0.0, a_x: float = 0.0) -> None:
         """One plant step with the inputs held constant over it (RK4 in equal sub-steps)."""

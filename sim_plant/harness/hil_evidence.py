@@ -41,13 +41,13 @@ class Evidence:
     @property
     def reduction(self) -> float:
         """1 - peak yaw rate with / without the controller (true yaw rates)."""
-        off = self.without_controller["peak_yaw_rate_true_rad_s"]
-        return 1.0 - self.with_controller["peak_yaw_rate_true_rad_s"] / off if off else 0.0
+        off = self.without_controller["peak_yaw_rate_rad_s"]
+        return 1.0 - self.with_controller["peak_yaw_rate_rad_s"] / off if off else 0.0
 
     def row(self) -> dict[str, Any]:
         on, off = self.with_controller, self.without_controller
-        return {"scenario": self.scenario, "peak_yaw_rate_off_rad_s": off["peak_yaw_rate_true_rad_s"],
-                "peak_yaw_rate_on_rad_s": on["peak_yaw_rate_true_rad_s"], "reduction": self.reduction,
+        return {"scenario": self.scenario, "peak_yaw_rate_off_rad_s": off["peak_yaw_rate_rad_s"],
+                "peak_yaw_rate_on_rad_s": on["peak_yaw_rate_rad_s"], "reduction": self.reduction,
                 "peak_side_slip_off_deg": off["peak_side_slip_deg"], "peak_side_slip_on_deg": on["peak_side_slip_deg"],
                 "aux_peak_deg": on["peak_aux_steer_deg"], "aux_rms_deg": on["aux_rms_deg"],
                 "time_at_limit_s": on["time_at_limit_s"], "final_speed_m_s": on["final_speed_m_s"],

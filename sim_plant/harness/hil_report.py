@@ -19,6 +19,7 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
+from sim_plant.car.nonlinear import spun, wrap_angle
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness import hil_plot, launch
 from sim_plant.figures import resolution_of, tidy, tidy_figures
@@ -26,7 +27,7 @@ from sim_plant.harness.hil_caused_yaw import caused_yaw_figures
 from sim_plant.harness.hil_timing import timing
 from sim_plant.harness.log_time import scenario_times
 from sim_plant.harness.hil_plausibility import plausibility_figures
-from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, step_table, steps_csv
+from sim_plant.harness.hil_steps import Step, Traffic, read_plant_trace, state_names, step_table, steps_csv
 from sim_plant.harness.processes import RunError as HilError
 from sim_plant.nodes.candump_log import Frame, read_candump
 from sim_plant.offline.closed_loop import discrete_loop_poles
@@ -151,7 +152,9 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
     return {
         "peak_aux_steer_deg": math.degrees(float(np.max(np.abs(aux)))),
         "final_aux_steer_deg": math.degrees(float(aux[-1])),
+        # the measured yaw rate (car_figures makes peak_yaw_rate_rad_s the car's true one)
         "peak_yaw_rate_rad_s": float(np.max(np.abs(r))),
+        "peak_measured_yaw_rate_rad_s": float(np.max(np.abs(r))),
         "final_yaw_rate_rad_s": float(r[-1]),
         "saturated": bool(np.any(np.abs(aux) >= limit - 1e-6)),
         "stable": stable,
@@ -172,14 +175,23 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
 
 
 def car_figures(sc: scn.Scenario, steps: list[Step]) -> dict[str, Any]:
-    """The car the run used and what it did, from the plant's true states (``steps.csv``):
-    the true yaw rate's peak (the bus's ``peak_yaw_rate_rad_s`` is the *measured* one, noisy
-    with realistic sensors), the side slip's peak, the auxiliary command's peak and RMS over
-    the run, the time the command sat at its +-3 deg limit, and the speed at the end."""
-    limit = mr.ControllerConfig().aux_limit
+    """The car the run used and what it did, from the plant's true states (``steps.csv``), as a
+    campaign defines them (``campaign.engine.METRICS``): the true yaw rate's peak
+    (``peak_yaw_rate_rad_s``; the bus's measured one is ``peak_measured_yaw_rate_rad_s``), the
+    side slip's peak (wrapped to (-180, 180] deg), the auxiliary command's RMS, the time the
+    controller reported the state SATURATED, and the speed at the end.  A car that spun
+    (``nonlinear.spun``: ``spun``, at ``spin_time_s``) left its model there: these figures are
+    those up to that step, as a campaign's run ends there."""
     ts = steps[1].t_s - steps[0].t_s if len(steps) > 1 else 0.0
+    end = next((k for k, s in enumerate(steps) if spun(s.beta_rad)), None)
+    steps = steps if end is None else steps[:end + 1]
     cmd = np.array([s.aux_cmd_rad for s in steps] or [0.0])
+    saturated = state_names()[mr.STATUS_SATURATED]
+    true_peak = {"peak_yaw_rate_rad_s": max(abs(s.yaw_rate_rad_s) for s in steps)} if steps else {}
     return {
+        **true_peak,
+        "spun": end is not None,
+        "spin_time_s": None if end is None else steps[-1].t_s,
         "plant": sc.plant,
         "actuator": "ideal" if sc.actuator.order == 0 and sc.actuator.dead_time_samples == 0 else
                     f"order {sc.actuator.order}, {1e3 * sc.actuator.time_constant_s:g} ms" if sc.actuator.order == 1
@@ -187,11 +199,9 @@ def car_figures(sc: scn.Scenario, steps: list[Step]) -> dict[str, Any]:
         "sensors": "ideal" if sc.sensors.exact else (f"{sc.sensors.yaw_rate.noise_density:g} deg/s/rtHz, "
                                                       f"{sc.sensors.yaw_rate.lowpass_hz:g} Hz low-pass"),
         "seed": None if sc.sensors.exact else sc.sensors.seed,
-        "peak_yaw_rate_true_rad_s": max((abs(s.yaw_rate_rad_s) for s in steps), default=0.0),
-        "peak_side_slip_deg": math.degrees(max((abs(s.beta_rad) for s in steps), default=0.0)),
+        "peak_side_slip_deg": math.degrees(max((abs(wrap_angle(s.beta_rad)) for s in steps), default=0.0)),
         "aux_rms_deg": math.degrees(float(np.sqrt(np.mean(cmd * cmd)))),
-        # The DBC's 1e-6 rad resolution: a command within it of the limit is at the limit.
-        "time_at_limit_s": float(np.sum(np.abs(cmd) >= limit - 1e-6)) * ts,
+        "time_at_limit_s": sum(s.ctrl_state == saturated for s in steps) * ts,
         "final_speed_m_s": steps[-1].v_m_s if steps else sc.v,
     }
 
