@@ -93,3 +93,15 @@ def test_the_text_output_names_the_plant_and_prints_no_dict(capsys: pytest.Captu
     out = capsys.readouterr().out
     assert "nonlinear" in out and "scheduled over v 5/10/20/30/40/50 m/s" in out
     assert "{" not in out and "[" not in out
+
+
+def test_a_car_that_spins_ends_the_run_there_with_the_campaigns_rule(capsys: pytest.CaptureFixture[str]) -> None:
+    """4000 N m on the uncontrolled nonlinear car: its side slip passes 30 deg near 2 s.  The run
+    ends at that step (the tyre model is no longer the car), as a campaign's does: the figures
+    are those up to it, the side slip no further than one step past the bound."""
+    result = _sim(capsys, "disturbance", "--mz", "4000", "--v", "20", "--mu", "1", "--plant", "nonlinear",
+                   "--controller", "none")
+    assert result["spun"] is True and 1.5 < result["spin_time_s"] < 2.5
+    assert 30.0 < result["peak_side_slip_deg"] < 31.0  # the spin step's |beta|, wrapped: not 185 deg
+    held = _sim(capsys, "disturbance", "--mz", "4000", "--v", "20", "--mu", "1", "--plant", "nonlinear")
+    assert held["spun"] is False and held["spin_time_s"] is None and held["peak_side_slip_deg"] < 2.0

@@ -27,6 +27,7 @@ from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_
 from sim_plant.car.plants import LINEAR, PLANTS
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, PAPER_MASS, VehicleParams
+from sim_plant.figures import tidy_figures
 from sim_plant.offline import experiments
 from sim_plant.harness.launch import LaunchError
 from sim_plant.harness.processes import RunError
@@ -204,7 +205,7 @@ _GAIN_KEYS = ("k", "tau", "tau_n", "schedule", "model_actuator_tau_s", "model_fi
 
 def _emit(args: argparse.Namespace, result: dict[str, object], title: str) -> None:
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(json.dumps(tidy_figures(result), indent=2))
         return
     print(title)
     for key, value in result.items():

@@ -28,6 +28,7 @@ from scipy.linalg import expm
 from firmware_py import model_regulator as mr
 from sim_plant.car.actuator_dynamics import PositionActuator
 from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS, Car
+from sim_plant.car.nonlinear import spun, wrap_angle
 from sim_plant.car.sensors import SensorConfig, Sensors
 from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
 from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles, inverse_kn
@@ -79,6 +80,7 @@ class Trace:
     applied: np.ndarray | None = None  # the angle the actuator applied (rad); None: the command itself
     plant: str = LINEAR  # the car: ``plants.LINEAR`` or ``plants.NONLINEAR``
     speed: np.ndarray | None = None  # the nonlinear car's speed (m/s); None: constant, the experiment's
+    spin_time: float | None = None  # s: the nonlinear car spun (``nonlinear.spun``) and the run ended there
 
     def applied_summary(self) -> dict[str, float]:
         """Peak and final applied auxiliary angle (deg), beside the command's in ``summary``."""
@@ -98,12 +100,16 @@ class Trace:
         }
 
     def car_summary(self) -> dict[str, float | str]:
-        """Which car ran, and on the nonlinear one what the tyres did: the peak side slip and the
-        final speed."""
-        out: dict[str, float | str] = {"plant": self.plant}
+        """Which car ran, and on the nonlinear one what the tyres did: the peak side slip (wrapped
+        to +-180 deg), the final speed, and whether the car spun (its side slip past
+        ``nonlinear.SPIN_SIDE_SLIP``, where the run ended: the figures are those up to it, as a
+        campaign's)."""
+        out: dict[str, float | str | bool | None] = {"plant": self.plant}
         if self.plant == NONLINEAR:
-            out["peak_side_slip_deg"] = math.degrees(float(np.max(np.abs(self.beta))))
+            out["peak_side_slip_deg"] = math.degrees(float(np.max(np.abs(wrap_angle(self.beta)))))
             out["final_speed_m_s"] = float(self.speed[-1]) if self.speed is not None else math.nan
+            out["spun"] = self.spin_time is not None
+            out["spin_time_s"] = self.spin_time
         return out
 
 
@@ -276,8 +282,11 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: 
     pipeline: deque[float] = deque([0.0] * (delay_steps + models.actuator.dead_time_samples))
     dd = exp.delta_driver
     saturated = False
+    spin_time = None
     for k in range(n):
         hist["beta"][k], hist["r"][k], hist["v"][k] = car.beta, car.r, car.v
+        if spin_time is None and plant != LINEAR and spun(car.beta):
+            spin_time = k * ts  # the car left the tyre model's validity: this step is the run's last
         if use_controller:
             u = mr.step(coeffs, state, sensors.steer(dd), sensors.yaw_rate(car.r), sensors.speed(car.v))
             saturated = saturated or state.status == mr.STATUS_SATURATED
@@ -287,6 +296,10 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: 
         pipeline.append(u)
         hist["applied"][k] = car.step(pipeline.popleft())
         hist["a_y"][k] = car.a_y
+        if spin_time is not None:
+            n = k + 1
+            hist = {key: values[:n] for key, values in hist.items()}
+            break
     t = np.arange(n) * ts
     if plant == LINEAR:
         ss = state_space(exp.params)
@@ -296,7 +309,7 @@ def simulate_discrete(exp: Experiment, ts: float, delay_steps: int = 1, models: 
     stable = _linear_loop_stable(exp, ts, delay_steps, models, coeffs if use_controller else None) \
         if plant == LINEAR else None
     return Trace(t, hist["r"], hist["beta"], hist["a_y"], hist["aux"], saturated, stable, hist["applied"], plant,
-                 None if plant == LINEAR else hist["v"])
+                 None if plant == LINEAR else hist["v"], spin_time)
 
 
 def _linear_loop_stable(exp: Experiment, ts: float, delay_steps: int, models: LoopModels,
