@@ -228,7 +228,7 @@ def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> 
 
     cfg = CALIBRATIONS[rate]
     assert cfg.ts == 1.0 / rate
-    res = M.envelope_margins(cfg, 1)
+    res = M.envelope_margins(cfg, 1, with_delay_margin=False)  # (the delay margin: 98 % of the time, unasserted)
     assert res.stable
     w = res.worst()
     assert w["gain_margin_db"] >= T.GM_MIN_DB - 0.01 and w["phase_margin_deg"] >= T.PM_MIN_DEG - 0.01
