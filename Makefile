@@ -1,11 +1,12 @@
 # Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite.
-# `make paper` regenerates the paper's figures.
+# `make test-slow` runs the checks too long for it (the fault matrices, the longer documented
+# commands; .ci/run runs both). `make paper` regenerates the paper's figures.
 # Both create .venv (Python >= 3.10) and install the project into it when needed.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: demo paper test venv clean
+.PHONY: demo paper test test-slow venv clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +23,10 @@ paper: $(STAMP)
 	$(VENV)/bin/mrsteer sim paper --out out/paper
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -m "not slow"
+
+test-slow: $(STAMP)
+	$(VENV)/bin/python -m pytest -q -m slow
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -1,0 +1,148 @@
+"""The commands the README and ``docs/*.md`` show, read from their ``sh`` blocks, and how to run
+them as a new user would: from a copy of the repository, with the project's virtual environment
+first on ``PATH`` (the README's ``. .venv/bin/activate``).
+
+A block may carry one HTML comment on the line before its fence::
+
+    <!-- doc-test: slow -->                    run by ``make test-slow``, not ``make test``
+    <!-- doc-test: vcan -->                    needs real SocketCAN: run in tools/vcan-vm-test
+    <!-- doc-test: skip: REASON -->            not run by the suite, and the reason why
+
+Blocks of one file run in the file's order in one copy of the repository, so a block may use
+what an earlier block of the same file wrote (a log, a campaign).  Inline code spans are prose:
+one that holds a whole command line with arguments and no placeholder must also appear in a
+block (``inline_commands_outside_blocks``), so that what a reader would type is run.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
+TAGS = ("slow", "vcan", "skip")
+#: What a copy of the repository leaves out: environments, outputs, caches, builds.
+COPY_IGNORE = shutil.ignore_patterns(".git", ".venv*", "out", "__pycache__", ".pytest_cache", ".hypothesis",
+                                     "*.egg-info", "build")
+#: The longest a block may run before it counts as hung.
+BLOCK_TIMEOUT_S = 900.0
+
+_FENCE = re.compile(r"^```(\S*)\s*$")
+_TAG = re.compile(r"^<!--\s*doc-test:\s*(?P<tag>slow|vcan|skip)(?::\s*(?P<reason>.+?))?\s*-->\s*$")
+_INLINE = re.compile(r"`([^`\n]+)`")
+_COMMAND_START = re.compile(r"^(mrsteer|make|cantools|candump|cansend|sudo|python -m|ports/c/build/\S+|tools/\S+)\s")
+#: An inline span with one of these is a pattern, not a command: FILE, DIR, [--json], a|b, ...
+_PLACEHOLDER = re.compile(r"\b[A-Z][A-Z0-9_]*\b|[\[\]|…]|\.\.\.|\d/rate")
+
+
+@dataclass(frozen=True)
+class Block:
+    """One ``sh`` block: where it is, its command lines (comments and blank lines dropped), its
+    tag and the tag's reason."""
+
+    path: Path
+    line: int
+    commands: tuple[str, ...]
+    tag: str | None = None
+    reason: str = ""
+
+    @property
+    def name(self) -> str:
+        return f"{self.path.relative_to(ROOT)}:{self.line}"
+
+    @property
+    def script(self) -> str:
+        return "\n".join(self.commands) + "\n"
+
+
+def blocks(path: Path) -> list[Block]:
+    """The ``sh`` blocks of one Markdown file, in order."""
+    out: list[Block] = []
+    lines = path.read_text().splitlines()
+    i = 0
+    while i < len(lines):
+        m = _FENCE.match(lines[i])
+        if m is None:
+            i += 1
+            continue
+        start, lang = i, m.group(1)
+        i += 1
+        body: list[str] = []
+        while i < len(lines) and not lines[i].startswith("```"):
+            body.append(lines[i])
+            i += 1
+        i += 1
+        if lang != "sh":
+            continue
+        tag_match = _TAG.match(lines[start - 1]) if start > 0 else None
+        commands = tuple(s for s in body if s.strip() and not s.lstrip().startswith("#"))
+        out.append(Block(path, start + 1, commands, tag_match and tag_match["tag"],
+                         (tag_match and tag_match["reason"]) or ""))
+    return out
+
+
+def all_blocks() -> list[Block]:
+    return [b for doc in DOCS for b in blocks(doc)]
+
+
+def inline_commands_outside_blocks() -> list[str]:
+    """Inline code spans that are whole command lines with arguments and no placeholder, and
+    that no ``sh`` block of the docs holds: ``file:line: span`` each."""
+    shown = {_strip_comment(c) for b in all_blocks() for c in b.commands}
+    missing = []
+    for doc in DOCS:
+        in_fence = False
+        for number, line in enumerate(doc.read_text().splitlines(), 1):
+            if line.startswith("```"):
+                in_fence = not in_fence
+                continue
+            if in_fence:
+                continue
+            for span in _INLINE.findall(line):
+                args = re.sub(r"^python -m \S+", "", span)
+                if _COMMAND_START.match(span) and " -" in args and not _PLACEHOLDER.search(span) \
+                        and span not in shown:
+                    missing.append(f"{doc.relative_to(ROOT)}:{number}: {span}")
+    return missing
+
+
+def _strip_comment(command: str) -> str:
+    """A command line without its trailing ``# comment`` and spaces."""
+    return re.sub(r"\s+#\s.*$", "", command).strip()
+
+
+def repo_copy(dest: Path) -> Path:
+    """A copy of the repository's files, as a clone would have them (no environments, outputs or
+    builds), in ``dest``."""
+    shutil.copytree(ROOT, dest, ignore=COPY_IGNORE, symlinks=True)
+    return dest
+
+
+def environment() -> dict[str, str]:
+    """The environment of a user who activated the project's virtual environment."""
+    env = dict(os.environ)
+    venv_bin = str(Path(sys.executable).parent)
+    env["PATH"] = venv_bin + os.pathsep + env.get("PATH", "")
+    env["VIRTUAL_ENV"] = str(Path(sys.executable).parent.parent)
+    env.pop("PYTHONHOME", None)
+    return env
+
+
+#: Bash around a block: stop at the first failing line and name it; end the block's background
+#: jobs (``mrsteer bus &``) when it ends.
+_PROLOGUE = """set -eo pipefail
+trap 'status=$?; echo "doc-test: failed (exit $status): $BASH_COMMAND" >&2; exit $status' ERR
+trap 'kill $(jobs -p) 2>/dev/null; wait 2>/dev/null || true' EXIT
+"""
+
+
+def run(block: Block, cwd: Path, timeout: float = BLOCK_TIMEOUT_S) -> subprocess.CompletedProcess[str]:
+    """Run a block's commands as one bash script in ``cwd``."""
+    return subprocess.run(["bash", "-c", _PROLOGUE + block.script], cwd=cwd, env=environment(), text=True,
+                          capture_output=True, timeout=timeout)
