@@ -1,6 +1,7 @@
-"""The commands the README and ``docs/*.md`` show, read from their ``sh`` blocks, and how to run
-them as a new user would: from a copy of the repository, with the project's virtual environment
-first on ``PATH`` (the README's ``. .venv/bin/activate``).
+"""The commands the README and ``docs/*.md`` show, read from their ``sh`` and ``python`` blocks,
+and how to run them as a new user would: from a copy of the repository, with the project's
+virtual environment activated (the README's ``. .venv/bin/activate``) and ``MRSTEER_QUICK=1``
+(every long command's short run, as the README says).
 
 A block may carry one HTML comment on the line before its fence::
 
@@ -24,9 +25,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from firmware_py.platform.cli import QUICK_ENV
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
 TAGS = ("slow", "vcan", "skip")
+LANGUAGES = ("sh", "python")  # a python block runs as one script
 #: What a copy of the repository leaves out: environments, outputs, caches, builds.
 COPY_IGNORE = shutil.ignore_patterns(".git", ".venv*", "out", "__pycache__", ".pytest_cache", ".hypothesis",
                                      "*.egg-info", "build")
@@ -78,10 +82,11 @@ def blocks(path: Path) -> list[Block]:
             body.append(lines[i])
             i += 1
         i += 1
-        if lang != "sh":
+        if lang not in LANGUAGES:
             continue
         tag_match = _TAG.match(lines[start - 1]) if start > 0 else None
-        commands = tuple(s for s in body if s.strip() and not s.lstrip().startswith("#"))
+        commands = tuple(s for s in body if s.strip() and not s.lstrip().startswith("#")) if lang == "sh" \
+            else ("python - <<'PYTHON'", *body, "PYTHON")
         out.append(Block(path, start + 1, commands, tag_match and tag_match["tag"],
                          (tag_match and tag_match["reason"]) or ""))
     return out
@@ -118,18 +123,26 @@ def _strip_comment(command: str) -> str:
 
 
 def repo_copy(dest: Path) -> Path:
-    """A copy of the repository's files, as a clone would have them (no environments, outputs or
-    builds), in ``dest``."""
+    """A copy of the repository's files, as a clone would have them (no outputs or builds), in
+    ``dest``, whose ``.venv`` is the environment running the tests, installed (``make`` finds
+    its stamp newer than ``pyproject.toml`` and installs nothing: an install from the copy would
+    point the environment at it)."""
     shutil.copytree(ROOT, dest, ignore=COPY_IGNORE, symlinks=True)
+    venv = Path(sys.prefix)
+    (dest / ".venv").symlink_to(venv)
+    stamp = venv / ".installed"
+    if stamp.exists():
+        older = stamp.stat().st_mtime - 1.0
+        os.utime(dest / "pyproject.toml", (older, older))
     return dest
 
 
 def environment() -> dict[str, str]:
     """The environment of a user who activated the project's virtual environment."""
     env = dict(os.environ)
-    venv_bin = str(Path(sys.executable).parent)
-    env["PATH"] = venv_bin + os.pathsep + env.get("PATH", "")
-    env["VIRTUAL_ENV"] = str(Path(sys.executable).parent.parent)
+    env["PATH"] = str(Path(sys.prefix) / "bin") + os.pathsep + env.get("PATH", "")
+    env["VIRTUAL_ENV"] = sys.prefix
+    env[QUICK_ENV] = "1"
     env.pop("PYTHONHOME", None)
     return env
 
@@ -138,7 +151,7 @@ def environment() -> dict[str, str]:
 #: jobs (``mrsteer bus &``) when it ends.
 _PROLOGUE = """set -eo pipefail
 trap 'status=$?; echo "doc-test: failed (exit $status): $BASH_COMMAND" >&2; exit $status' ERR
-trap 'kill $(jobs -p) 2>/dev/null; wait 2>/dev/null || true' EXIT
+trap 'status=$?; trap - ERR; running=$(jobs -p); [ -z "$running" ] || kill $running 2>/dev/null || true; wait 2>/dev/null || true; exit $status' EXIT
 """
 
 

@@ -114,6 +114,7 @@ def test_shipped_default_keeps_its_margins_over_the_whole_default_envelope() -> 
     assert w["phase_margin_deg"] >= T.PM_MIN_DEG - 1e-6
 
 
+@pytest.mark.slow
 def test_tuning_beats_every_feasible_point_of_a_plain_grid_search() -> None:
     ts, delay = 0.01, 1
     env = SMALL

@@ -51,4 +51,4 @@ def test_the_reader_parses_tags_and_commands(tmp_path: Path) -> None:
                    "```toml\nkey = 1\n```\n```sh\nmrsteer sim paper\n```\n")
     got = dc.blocks(doc)
     assert [(b.line, b.commands, b.tag, b.reason) for b in got] == [
-        (3, ("make test   # all",), "skip", "CI runs it"), (10, ("mrsteer sim paper",), None, "")]
+        (3, ("make test   # all",), "skip", "CI runs it"), (11, ("mrsteer sim paper",), None, "")]

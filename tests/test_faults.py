@@ -211,6 +211,7 @@ def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
         bus.shutdown()
 
 
+@pytest.mark.slow
 def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep), ROWS, tmp_path)
     table = format_table(results)

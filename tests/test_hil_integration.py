@@ -236,6 +236,7 @@ def _timing_held(hil: dict) -> bool:
             and hil["loop"]["plant"]["overruns"] == 0 and hil["plausibility"]["first_degraded_s"] is None)
 
 
+@pytest.mark.slow
 def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:
     # A gentler tuning that stays stable with the 1-3 samples of delay a free-running
     # Python loop sees (the paper's K=10, tau=6 ms needs exactly one sample at 1 kHz).
