@@ -1,6 +1,7 @@
-# Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite.
-# `make test-slow` runs the checks too long for it (the fault matrices, the longer documented
-# commands; .ci/run runs both). `make paper` regenerates the paper's figures.
+# Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite (on two
+# pytest-xdist workers). `make test-slow` runs the checks too long for it, one at a time (the
+# fault matrices, every documented command; .ci/run runs both). `make paper` regenerates the
+# paper's figures.
 # Both create .venv (Python >= 3.10) and install the project into it when needed.
 PYTHON ?= python3
 VENV := .venv
@@ -23,7 +24,7 @@ paper: $(STAMP)
 	$(VENV)/bin/mrsteer sim paper --out out/paper
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -m "not slow"
+	$(VENV)/bin/python -m pytest -q -n 2 -m "not slow"
 
 test-slow: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m slow

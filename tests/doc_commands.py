@@ -3,11 +3,10 @@ and how to run them as a new user would: from a copy of the repository, with the
 virtual environment activated (the README's ``. .venv/bin/activate``) and ``MRSTEER_QUICK=1``
 (every long command's short run, as the README says).
 
-A block may carry one HTML comment on the line before its fence::
+A block the suite cannot run (it needs root, or a kernel with CAN, or it is the suite itself)
+says so in an HTML comment on the line before its fence, with the reason::
 
-    <!-- doc-test: slow -->                    run by ``make test-slow``, not ``make test``
-    <!-- doc-test: vcan -->                    needs real SocketCAN: run in tools/vcan-vm-test
-    <!-- doc-test: skip: REASON -->            not run by the suite, and the reason why
+    <!-- doc-test: skip: REASON -->
 
 Blocks of one file run in the file's order in one copy of the repository, so a block may use
 what an earlier block of the same file wrote (a log, a campaign).  Inline code spans are prose:
@@ -29,7 +28,6 @@ from firmware_py.platform.cli import QUICK_ENV
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
-TAGS = ("slow", "vcan", "skip")
 LANGUAGES = ("sh", "python")  # a python block runs as one script
 #: What a copy of the repository leaves out: environments, outputs, caches, builds.
 COPY_IGNORE = shutil.ignore_patterns(".git", ".venv*", "out", "__pycache__", ".pytest_cache", ".hypothesis",
@@ -38,7 +36,7 @@ COPY_IGNORE = shutil.ignore_patterns(".git", ".venv*", "out", "__pycache__", ".p
 BLOCK_TIMEOUT_S = 900.0
 
 _FENCE = re.compile(r"^```(\S*)\s*$")
-_TAG = re.compile(r"^<!--\s*doc-test:\s*(?P<tag>slow|vcan|skip)(?::\s*(?P<reason>.+?))?\s*-->\s*$")
+_TAG = re.compile(r"^<!--\s*doc-test:\s*(?P<tag>skip)(?::\s*(?P<reason>.+?))?\s*-->\s*$")
 _INLINE = re.compile(r"`([^`\n]+)`")
 _COMMAND_START = re.compile(r"^(mrsteer|make|cantools|candump|cansend|sudo|python -m|ports/c/build/\S+|tools/\S+)\s")
 #: An inline span with one of these is a pattern, not a command: FILE, DIR, [--json], a|b, ...

@@ -1,8 +1,9 @@
 """Every command the README and ``docs/*.md`` show runs as written (tests/doc_commands.py).
 
-The ``sh`` blocks run in a copy of the repository with the virtual environment on ``PATH``; a
-block passes when every line exits 0 and nothing prints a traceback.  Blocks tagged ``slow`` run
-in ``make test-slow``; ``vcan`` ones in the real-SocketCAN stage (tests/test_vcan.py)."""
+The ``sh`` and ``python`` blocks run in a copy of the repository with the virtual environment
+activated and ``MRSTEER_QUICK=1``; a block passes when every line exits 0 and nothing prints a
+traceback.  Together they take minutes: ``make test-slow`` runs them, ``make test`` the reader's
+own tests below."""
 
 from __future__ import annotations
 
@@ -12,12 +13,11 @@ import pytest
 
 import doc_commands as dc
 
-_RUNNABLE = [b for b in dc.all_blocks() if b.tag not in ("vcan", "skip")]
+_RUNNABLE = [b for b in dc.all_blocks() if b.tag != "skip"]
 
 
 def _param(block: dc.Block) -> object:
-    marks = [pytest.mark.slow] if block.tag == "slow" else []
-    return pytest.param(block, id=block.name, marks=marks)
+    return pytest.param(block, id=block.name, marks=[pytest.mark.slow])
 
 
 @pytest.fixture(scope="module")

@@ -134,8 +134,9 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                    help="with --schedule: the schedule to start from (default: the shipped one)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.cfg",
                    help="with --schedule: write the tuned calibration there (firmware_py.calibration_file format)")
-    add_quick_arg(p, "verify on the 24-point envelope of `design margins --quick` unless a grid option says "
-                   "otherwise; with --schedule also coarse local grids and few trials (a smoke test)")
+    add_quick_arg(p, "search every third K and tau of the grid and verify on the 24-point envelope of `design "
+                   "margins --quick` unless a grid option says otherwise; with --schedule coarse local grids and "
+                   "few trials: a smoke run, not the optimum")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
 
@@ -270,7 +271,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
     try:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
-                   progress=_progress("tune"), models=_models(args)).as_dict()
+                   progress=_progress("tune"), models=_models(args), coarse=args.quick).as_dict()
     except TuneInfeasible as exc:
         # a verdict on the structure, not an error: exit status 1
         return fail("mrsteer design tune", f"no calibration of this structure meets every constraint: {exc}", 1)
