@@ -24,7 +24,7 @@ paper: $(STAMP)
 	$(VENV)/bin/mrsteer sim paper --out out/paper
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n 2 -m "not slow"
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "not slow"
 
 test-slow: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m slow

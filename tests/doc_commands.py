@@ -29,9 +29,6 @@ from firmware_py.platform.cli import QUICK_ENV
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
 LANGUAGES = ("sh", "python")  # a python block runs as one script
-#: What a copy of the repository leaves out: environments, outputs, caches, builds.
-COPY_IGNORE = shutil.ignore_patterns(".git", ".venv*", "out", "__pycache__", ".pytest_cache", ".hypothesis",
-                                     "*.egg-info", "build")
 #: The longest a block may run before it counts as hung.
 BLOCK_TIMEOUT_S = 900.0
 
@@ -40,7 +37,7 @@ _TAG = re.compile(r"^<!--\s*doc-test:\s*(?P<tag>skip)(?::\s*(?P<reason>.+?))?\s*
 _INLINE = re.compile(r"`([^`\n]+)`")
 _COMMAND_START = re.compile(r"^(mrsteer|make|cantools|candump|cansend|sudo|python -m|ports/c/build/\S+|tools/\S+)\s")
 #: An inline span with one of these is a pattern, not a command: FILE, DIR, [--json], a|b, ...
-_PLACEHOLDER = re.compile(r"\b[A-Z][A-Z0-9_]*\b|[\[\]|…]|\.\.\.|\d/rate")
+_PLACEHOLDER = re.compile(r"(?<![-\w])[A-Z][A-Z0-9_]*\b|[\[\]|…]|\.\.\.|\d/rate")
 
 
 @dataclass(frozen=True)
@@ -95,8 +92,9 @@ def all_blocks() -> list[Block]:
 
 
 def inline_commands_outside_blocks() -> list[str]:
-    """Inline code spans that are whole command lines with arguments and no placeholder, and
-    that no ``sh`` block of the docs holds: ``file:line: span`` each."""
+    """Inline code spans that are whole command lines (with a flag, a ``make`` target or a
+    redirection) and no placeholder, and that no ``sh`` block of the docs holds: ``file:line:
+    span`` each."""
     shown = {_strip_comment(c) for b in all_blocks() for c in b.commands}
     missing = []
     for doc in DOCS:
@@ -109,8 +107,8 @@ def inline_commands_outside_blocks() -> list[str]:
                 continue
             for span in _INLINE.findall(line):
                 args = re.sub(r"^python -m \S+", "", span)
-                if _COMMAND_START.match(span) and " -" in args and not _PLACEHOLDER.search(span) \
-                        and span not in shown:
+                whole = " -" in args or span.startswith("make ") or " < " in span or " > " in span
+                if _COMMAND_START.match(span) and whole and not _PLACEHOLDER.search(span) and span not in shown:
                     missing.append(f"{doc.relative_to(ROOT)}:{number}: {span}")
     return missing
 
@@ -121,17 +119,25 @@ def _strip_comment(command: str) -> str:
 
 
 def repo_copy(dest: Path) -> Path:
-    """A copy of the repository's files, as a clone would have them (no outputs or builds), in
-    ``dest``, whose ``.venv`` is the environment running the tests, installed (``make`` finds
-    its stamp newer than ``pyproject.toml`` and installs nothing: an install from the copy would
-    point the environment at it)."""
-    shutil.copytree(ROOT, dest, ignore=COPY_IGNORE, symlinks=True)
-    venv = Path(sys.prefix)
-    (dest / ".venv").symlink_to(venv)
+    """The repository's files as a clone would have them once committed (``git ls-files``:
+    tracked and new files, not ignored ones: no outputs, builds or environments), in ``dest``,
+    with a ``.venv`` whose ``bin`` is the environment running the tests and whose install stamp
+    is newer than ``pyproject.toml``: ``make`` finds it installed and installs nothing (an
+    install from the copy would point the environment at it)."""
+    listed = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                            capture_output=True, check=True).stdout.decode().split("\0")
+    for name in filter(None, listed):
+        src = ROOT / name
+        if src.is_file():
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / name)
+    venv = dest / ".venv"
+    venv.mkdir()
+    (venv / "bin").symlink_to(Path(sys.prefix) / "bin")
     stamp = venv / ".installed"
-    if stamp.exists():
-        older = stamp.stat().st_mtime - 1.0
-        os.utime(dest / "pyproject.toml", (older, older))
+    stamp.touch()
+    older = stamp.stat().st_mtime - 1.0
+    os.utime(dest / "pyproject.toml", (older, older))
     return dest
 
 

@@ -95,8 +95,8 @@ QUICK_ENV = "MRSTEER_QUICK"
 
 def add_quick_arg(p: argparse.ArgumentParser, what: str) -> None:
     """``--quick``: ``what`` the short run does; on by default when ``$MRSTEER_QUICK`` is 1."""
-    p.add_argument("--quick", action="store_true", default=os.environ.get(QUICK_ENV, "") == "1",
-                   help=f"{what} (the default when ${QUICK_ENV} is 1)")
+    p.add_argument("--quick", action=argparse.BooleanOptionalAction, default=os.environ.get(QUICK_ENV, "") == "1",
+                   help=f"{what} (the default when ${QUICK_ENV} is 1; --no-quick: the full run)")
 
 
 SLOW_MOTION_MAX = 100.0

@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     if args.quick and not args.only:
         rows = tuple(row for row in rows if row.name in QUICK_ROWS)
     if not rows:
-        r.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
+        r.error(f"no row matches {args.only or 'the quick rows'}; rows: " + "; ".join(r.name for r in every))
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]
