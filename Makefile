@@ -1,11 +1,13 @@
-# Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite.
-# `make paper` regenerates the paper's figures.
+# Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite (on two
+# pytest-xdist workers). `make test-slow` runs the checks too long for it, one at a time (the
+# fault matrices, every documented command; .ci/run runs both). `make paper` regenerates the
+# paper's figures.
 # Both create .venv (Python >= 3.10) and install the project into it when needed.
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: demo paper test venv clean
+.PHONY: demo paper test test-slow venv clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +24,10 @@ paper: $(STAMP)
 	$(VENV)/bin/mrsteer sim paper --out out/paper
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "not slow"
+
+test-slow: $(STAMP)
+	$(VENV)/bin/python -m pytest -q -m slow
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -86,15 +86,18 @@ def _scaling(samples: int, chunk: int, tmp: Path) -> dict[str, float]:
             "loadavg_1min": os.getloadavg()[0]}
 
 
+QUICK_SAMPLES = 2048  # --quick: the campaign and the scaling run
+
+
 def campaign_bench(quick: bool) -> dict[str, Any]:
     """The campaign (wall time and its workers' CPU seconds), the scalar loop (wall and CPU), the
     scaling, and the machine's load average before and after."""
     load_before = os.getloadavg()[0]
-    n = 4096 if quick else 100_000
+    n = QUICK_SAMPLES if quick else 100_000
     workers = os.cpu_count() or 1
     # chunks a multiple of the workers (100,000 in 8 of 12,500: 4 each), so none idles at the end
-    chunk = 1024 if quick else -(-n // (4 * workers))
-    n_scalar = 2 if quick else 6
+    chunk = QUICK_SAMPLES // 4 if quick else -(-n // (4 * workers))
+    n_scalar = 1 if quick else 6
     c = spec.parse(TEMPLATE.format(samples=n, chunk=chunk), "bench.toml")
     with tempfile.TemporaryDirectory(prefix="mrsteer-bench-campaign-") as d:
         tmp = Path(d)
@@ -109,7 +112,7 @@ def campaign_bench(quick: bool) -> dict[str, Any]:
         per_scalar = (time.perf_counter() - t0) / n_scalar
         per_scalar_cpu = (time.process_time() - c0) / n_scalar
         load_mid = os.getloadavg()[0]
-        scaling = _scaling(4096 if quick else 32768, 1024 if quick else 4096, tmp)
+        scaling = _scaling(QUICK_SAMPLES if quick else 32768, QUICK_SAMPLES // 4 if quick else 4096, tmp)
     steps = int(round(c.duration / spec.TS)) + 1
     return {"name": "validation campaign", "samples": n, "chunk": chunk, "duration_s": c.duration,
             "rate_hz": 1.0 / spec.TS, "workers": workers, "ours_s": t_batch, "ours_cpu_s": cpu_batch,

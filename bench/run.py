@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from firmware_py.controller import node as rt
 from firmware_py.controller.options import RATES_HELP, RateError, calibration_for_rate
-from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, describe, fail
+from firmware_py.platform.cli import add_quick_arg, describe, EXIT_INTERRUPTED, fail, Parser
 
 if TYPE_CHECKING:
     from mrsteer_bench.loop_compare import CompareSettings
@@ -28,9 +28,8 @@ def build_parser(prog: str = "mrsteer bench") -> Parser:
                "a validation campaign against the scalar firmware loop, the loop timing and latency of the Python and the C controller side by side on the fallback bus with the "
                "plant running, quiet and under a CPU load the bench starts and stops, and the controller's memory. "
                "Figures, not pass/fail: timing on shared machines is noisy.")
-    p.add_argument("--quick", action="store_true",
-                   help="short runs (loop 5 s, soak 30 s, 1,000 sweep points) instead of the full ones "
-                   "(loop 30 s per controller and condition, soak 10 min, 10,000 points); campaign 4,096 "
+    add_quick_arg(p, "short runs (loop 5 s, soak 10 s, 1,000 sweep points) instead of the full ones "
+                   "(loop 30 s per controller and condition, soak 10 min, 10,000 points); campaign 2,048 "
                    "scenarios instead of 100,000")
     p.add_argument("--only", choices=NAMES, action="append", metavar="NAME",
                    help=f"run only these ({', '.join(NAMES)}); repeatable")
@@ -143,7 +142,7 @@ def run(names: Sequence[str], quick: bool, say: Callable[[str], None],
                                                                  default_procs())
         out["loop"] = loop_compare.compare(settings, say)
     if "soak" in names:
-        secs = 30.0 if quick else 600.0
+        secs = 10.0 if quick else 600.0
         say(f"memory soak at {rt.DEFAULT_RATE_HZ:g} Hz for {secs:g} s ...")
         out["soak"] = loop.loop_timing(rt.DEFAULT_RATE_HZ, secs)
     out["wall_s"] = time.monotonic() - t0

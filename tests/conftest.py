@@ -12,6 +12,8 @@ from numpy.polynomial import polynomial as P
 # Every fallback-bus socket the tests create lives in a private directory of this run, so
 # parallel runs and a user's own brokers never meet.
 os.environ["MRSTEER_BUS_DIR"] = tempfile.mkdtemp(prefix="mrsteer-bus-test-")
+# The tests choose their own run lengths: a user's MRSTEER_QUICK=1 (README) must not change them.
+os.environ.pop("MRSTEER_QUICK", None)
 
 
 def polymul(*polys: tuple[float, ...] | np.ndarray) -> np.ndarray:

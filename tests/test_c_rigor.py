@@ -21,6 +21,7 @@ from mrsteer_dbc.link import Rejected
 from mrsteer_dbc.names import (MSG_REDUNDANT, MSG_SPEED, MSG_STEER, MSG_SYNC, MSG_YAW, SIG_LAT_ACCEL, SIG_SPEED,
                                SIG_STEER_ANGLE, SIG_STEER_ANGLE_2, SIG_YAW_RATE)
 from mrsteer_dbc.secoc import EPOCH_ORIGIN_S, CommandVerifier, SensorSigner
+from sim_plant.harness.launch import make_port
 
 ROOT = Path(__file__).resolve().parents[1]
 PORT = ROOT / "ports" / "c"
@@ -40,8 +41,7 @@ C_VERDICTS = (None, Rejected.IGNORED, Rejected.LENGTH, Rejected.CRC, Rejected.CO
 
 
 def _make(target: str, *extra: str, timeout: float = 600) -> str:
-    proc = subprocess.run(["make", "-s", "-C", str(PORT), target, *extra], capture_output=True, text=True,
-                          timeout=timeout)
+    proc = make_port(target, *extra, timeout=timeout)  # one build of the tree at a time
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return proc.stdout
 

@@ -24,6 +24,7 @@ onset = { uniform = [0.05, 0.2] }
 """
 
 
+@pytest.mark.slow
 def test_local_cluster_with_two_workers_matches_the_in_process_run(tmp_path: Path) -> None:
     c = spec.parse(TEXT, "d.toml")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,

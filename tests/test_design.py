@@ -114,6 +114,7 @@ def test_shipped_default_keeps_its_margins_over_the_whole_default_envelope() -> 
     assert w["phase_margin_deg"] >= T.PM_MIN_DEG - 1e-6
 
 
+@pytest.mark.slow
 def test_tuning_beats_every_feasible_point_of_a_plain_grid_search() -> None:
     ts, delay = 0.01, 1
     env = SMALL
@@ -285,3 +286,13 @@ def test_quick_is_the_same_24_point_envelope_in_every_design_command(command: st
     assert design_cli._envelope(build_parser().parse_args(["design", command])) == M.Envelope()
     assert len(design_cli._envelope(build_parser().parse_args(["design", command, "--quick", "--mass-grid",
                                                                "1500"]))) == 12
+
+
+def test_a_coarse_tune_searches_a_ninth_of_the_grid_and_keeps_the_margins() -> None:
+    """``design tune --quick``: every third K and tau of the grid; the result still meets the margins."""
+    res = T.tune(0.01, 1, SMALL, coarse=True)
+    per_structure = len(T.K_GRID[::T.COARSE_STRIDE]) * len(T.TAU_GRID[::T.COARSE_STRIDE]) * len(T.TAU_N_GRID)
+    assert res.screened in (per_structure, 2 * per_structure)  # one or both delay structures
+    assert per_structure * 8 < len(T.K_GRID) * len(T.TAU_GRID) * len(T.TAU_N_GRID)
+    w = res.margins.worst()
+    assert res.margins.stable and w["gain_margin_db"] >= T.GM_MIN_DB and w["phase_margin_deg"] >= T.PM_MIN_DEG

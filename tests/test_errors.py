@@ -205,8 +205,10 @@ def test_ctrl_c_stops_a_realtime_run_and_writes_nothing(tmp_path: Path) -> None:
 
 def test_ctrl_c_stops_the_fault_matrix_and_keeps_only_whole_rows(tmp_path: Path) -> None:
     keep = tmp_path / "keep"
-    code, err, started = _interrupt(tmp_path, ["faults", "run", "--only", "driver steers", "--keep", str(keep)],
-                                    "[1/1]", 3)  # one row (4 s): its brokers and loggers at least
+    # one row, stretched to 40 s so that it is still running when the signal comes on a loaded
+    # machine: its brokers and loggers at least
+    code, err, started = _interrupt(tmp_path, ["faults", "run", "--only", "driver steers", "--time-scale", "10",
+                                               "--keep", str(keep)], "[1/1]", 3)
     assert code == 130 and err.splitlines() == [
         f"mrsteer: faults run: interrupted: every process it started is stopped, no table; the rows run before it "
         f"are in {keep}/"], err

@@ -211,6 +211,7 @@ def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
         bus.shutdown()
 
 
+@pytest.mark.slow
 def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep), ROWS, tmp_path)
     table = format_table(results)
@@ -228,7 +229,7 @@ def test_every_matrix_calibration_keeps_its_margins_at_its_rate(rate: float) -> 
 
     cfg = CALIBRATIONS[rate]
     assert cfg.ts == 1.0 / rate
-    res = M.envelope_margins(cfg, 1)
+    res = M.envelope_margins(cfg, 1, with_delay_margin=False)  # (the delay margin: 98 % of the time, unasserted)
     assert res.stable
     w = res.worst()
     assert w["gain_margin_db"] >= T.GM_MIN_DB - 0.01 and w["phase_margin_deg"] >= T.PM_MIN_DEG - 0.01

@@ -18,6 +18,7 @@ def _tree(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow
 def test_hil_evidence_as_the_readme_writes_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """README: ``mrsteer hil evidence``, shortened to one scenario of 1.5 s (--quick) so that it
     takes seconds: real processes on the fallback bus, with the shipped (scheduled) gains."""

@@ -202,8 +202,10 @@ def test_signals_csv_starts_with_scenario_time_and_keeps_the_logs_microsecond_ti
     first = next(i for i, r in enumerate(rows) if r["message"] not in (names.MSG_CMD, names.MSG_STATUS))
     assert float(rows[first]["t_s"]) == 0.0 and yaw == [s.t_s for s in steps]
     assert all(float(r["t_s"]) < 0.0 for r in rows[:first])  # a controller's frames before the plant's first
-    answers = [float(r["t_s"]) for r in rows if r["message"] == names.MSG_CMD][:len(steps)]
-    assert answers == [s.t_s for s in steps]  # lockstep: each step's command at its step's time
+    # lockstep: each step's command at its step's time (a watchdog command the controller sent
+    # while a slow plant was starting is before its first frame: not one of them)
+    answers = [float(r["t_s"]) for r in rows[first:] if r["message"] == names.MSG_CMD][:len(steps)]
+    assert answers == [s.t_s for s in steps]
     logged = [line[1:line.index(")")] for line in (out / "traffic.log").read_text().splitlines()]
     written = [r["bus_time_s"] for r in rows]
     assert written == logged and all(re.fullmatch(r"\d+\.\d{6}", t) for t in written)
@@ -236,6 +238,7 @@ def _timing_held(hil: dict) -> bool:
             and hil["loop"]["plant"]["overruns"] == 0 and hil["plausibility"]["first_degraded_s"] is None)
 
 
+@pytest.mark.slow
 def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:
     # A gentler tuning that stays stable with the 1-3 samples of delay a free-running
     # Python loop sees (the paper's K=10, tau=6 ms needs exactly one sample at 1 kHz).

@@ -36,6 +36,7 @@ def test_a_breakpoint_influences_the_speeds_between_its_neighbours() -> None:
     assert S.local_speeds(v, 0, 2.5, 5.0, 50.0) == [5.0, 7.5, 10.0]
 
 
+@pytest.mark.slow
 def test_quick_schedule_tune_meets_every_constraint_on_its_envelope(tmp_path, capsys) -> None:
     out = tmp_path / "tuned.cfg"
     rc = main(["design", "tune", "--schedule", "--quick", *ENVELOPE, "--out", str(out), "--json"])

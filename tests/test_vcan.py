@@ -200,9 +200,9 @@ def test_controller_filters_are_installed_in_the_kernel() -> None:
 # matrix runs at 100 Hz (with the calibration tuned for 100 Hz) in 4x slow motion (every node's
 # period 40 ms of wall time: the plant keeps up, so the loop is the car's), with 5 scenario
 # seconds (20 s of wall time) for the restarted Python controller to come up.  Every check is the
-# same as on the fallback bus, judged in the car's time.  tools/vcan-vm-test runs it with the
-# Python controller and with the C node (MRSTEER_VCAN_MATRIX=0 / MRSTEER_VCAN_C_MATRIX=0 leave
-# them out; docs/faults.md, "State on real SocketCAN").
+# same as on the fallback bus, judged in the car's time.  tools/vcan-vm-test runs it with the C
+# node, and with the Python controller too when MRSTEER_VCAN_MATRIX=1 (MRSTEER_VCAN_C_MATRIX=0
+# leaves the C node's out; docs/faults.md, "State on real SocketCAN").
 VM_SETUP = dict(rate_hz=100.0, slow_motion=4.0, startup_s=5.0)
 
 
@@ -211,7 +211,8 @@ def test_fault_matrix_on_vcan0_and_vcan1(tmp_path: Path, capsys: pytest.CaptureF
     from firmware_py.platform.rx_queue import DEPTH_BYTES
 
     if os.environ.get("MRSTEER_VCAN_MATRIX") == "0":
-        pytest.skip("MRSTEER_VCAN_MATRIX=0: the fault matrix on vcan0/vcan1 left out")
+        pytest.skip("MRSTEER_VCAN_MATRIX=0 (tools/vcan-vm-test's default: 9 min under QEMU): the Python "
+                    "controller's fault matrix on vcan0/vcan1 left out; it runs on the fallback bus in make test-slow")
     if not vcan_available("vcan1"):
         pytest.fail("the fault matrix needs vcan1 too (tools/vcan.sh up 2)")
 

@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -302,6 +303,7 @@ DELEGATED = ("controller", "plant", "bus", "bench", "faults")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    entry = argv is None  # the process's own entry point (not a call from Python)
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in DELEGATED:
         # These commands own their whole argument list (including --help).
@@ -320,6 +322,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return fail(prog, getattr(args, "interrupted", "interrupted; nothing written"), EXIT_INTERRUPTED)
     except ERRORS as exc:
         return fail(prog, describe(exc))
+    finally:
+        if entry:  # the command has ended: a Ctrl-C now would only break the interpreter's exit
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 if __name__ == "__main__":

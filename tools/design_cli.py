@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
 from firmware_py.controller.options import calibration_from_args
-from firmware_py.platform.cli import fail, output_file_problem
+from firmware_py.platform.cli import add_quick_arg, fail, output_file_problem
 from mrsteer_cli.cli_args import MASS_RANGE, add_gains, add_models, count, loop_models, number
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU
@@ -108,8 +108,7 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                    help=f"discretisation (default: the calibration's, {d.method})")
     _add_envelope(p)
     _add_reference(p)
-    p.add_argument("--quick", action="store_true",
-                   help="a coarse envelope by default: 24 points (v 5:50:4, mu 0.1:1:3, mass 1296:1800:2) instead of "
+    add_quick_arg(p, "a coarse envelope by default: 24 points (v 5:50:4, mu 0.1:1:3, mass 1296:1800:2) instead of "
                    "300; the grid options still override it")
     p.add_argument("--constraints", action="store_true",
                    help="also the constraint figures of issue 15 (extra sample of delay, actuator time constant "
@@ -135,9 +134,9 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                    help="with --schedule: the schedule to start from (default: the shipped one)")
     p.add_argument("--out", type=Path, default=None, metavar="FILE.cfg",
                    help="with --schedule: write the tuned calibration there (firmware_py.calibration_file format)")
-    p.add_argument("--quick", action="store_true",
-                   help="verify on the 24-point envelope of `design margins --quick` unless a grid option says "
-                   "otherwise; with --schedule also coarse local grids and few trials (a smoke test)")
+    add_quick_arg(p, "search every third K and tau of the grid and verify on the 24-point envelope of `design "
+                   "margins --quick` unless a grid option says otherwise; with --schedule coarse local grids and "
+                   "few trials: a smoke run, not the optimum")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=_cmd_tune)
 
@@ -148,8 +147,7 @@ def add_parsers(sub: Any, parser_class: type) -> None:
                         "stability, margins, delay margin, dry-road peaks, worst command noise, saturation "
                         "thresholds; with --out also a plot of peak yaw rate against command noise over candidates.")
     _add_envelope(p)
-    p.add_argument("--quick", action="store_true",
-                   help="the table on the 24-point envelope of `design margins --quick` unless a grid option says "
+    add_quick_arg(p, "the table on the 24-point envelope of `design margins --quick` unless a grid option says "
                    "otherwise (the plot's candidates are scored as without it)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="also write tradeoff.png (and tradeoff.json) there: peak yaw rate at the Figure-10 point "
@@ -273,7 +271,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
     try:
         res = tune(args.ts, args.delay_steps, _envelope(args), q_form=args.controller,
-                   progress=_progress("tune"), models=_models(args)).as_dict()
+                   progress=_progress("tune"), models=_models(args), coarse=args.quick).as_dict()
     except TuneInfeasible as exc:
         # a verdict on the structure, not an error: exit status 1
         return fail("mrsteer design tune", f"no calibration of this structure meets every constraint: {exc}", 1)

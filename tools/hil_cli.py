@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from firmware_py.controller.options import RATES_HELP, calibration_at_rate
-from firmware_py.platform.cli import Parser, add_secoc_args, secoc_key
+from firmware_py.platform.cli import add_quick_arg, add_secoc_args, Parser, secoc_key
 from mrsteer_cli.cli_args import add_gains, count, number, say
 from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
@@ -68,8 +68,7 @@ def add_parsers(sub: Any) -> None:
                    help="standard or limited (default limited)")
     add_gains(p)
     add_car_args(p)
-    p.add_argument("--quick", action="store_true",
-                   help="end each scenario 1 s after its last event (1.5 s for the three built-ins, instead of 4 s): "
+    add_quick_arg(p, "end each scenario 1 s after its last event (1.5 s for the three built-ins, instead of 4 s): "
                    "a smoke run of the command, not the evidence")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     p.set_defaults(handler=_cmd_hil_evidence)

@@ -88,6 +88,17 @@ def secoc_key(args: argparse.Namespace, parser: argparse.ArgumentParser | None =
         parser.error(str(exc))
 
 
+#: Set to 1, every long command makes the short run of its ``--quick`` (the test suite runs the
+#: README's and the docs' commands so, exactly as they are written: tests/doc_commands.py).
+QUICK_ENV = "MRSTEER_QUICK"
+
+
+def add_quick_arg(p: argparse.ArgumentParser, what: str) -> None:
+    """``--quick``: ``what`` the short run does; on by default when ``$MRSTEER_QUICK`` is 1."""
+    p.add_argument("--quick", action=argparse.BooleanOptionalAction, default=os.environ.get(QUICK_ENV, "") == "1",
+                   help=f"{what} (the default when ${QUICK_ENV} is 1; --no-quick: the full run)")
+
+
 SLOW_MOTION_MAX = 100.0
 
 

@@ -33,6 +33,7 @@ from sim_plant.campaign.engine import METRICS
 from sim_plant.campaign.params import INDEX, KINDS, PARAMETERS
 from sim_plant.campaign.runner import SPEC_FILE
 from sim_plant.campaign.spec import CRITERIA, FAULT_PARAMETERS, SpecError, parse
+from sim_plant.car.nonlinear import SPIN_SIDE_SLIP
 
 WORST = 10
 BINS = 10
@@ -196,7 +197,7 @@ def _html(s: dict[str, Any], images: list[str]) -> str:
              "td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}</style>",
              f"<h1>Campaign {e(s['campaign'])}</h1><p>{s['samples']} samples per calibration; criteria: {crit}. "
              "A run passes when its figures are within every criterion and its car did not spin (its side slip "
-             "beyond 30&deg;, where the car model ends: the run ends there, and its figures are those up to the "
+             f"beyond {math.degrees(SPIN_SIDE_SLIP):g}&deg;, where the car model ends: the run ends there, and its figures are those up to the "
              "spin).</p>",
              "<h2>Pass rates</h2><p>All runs; per criterion, the runs that did not spin; per disturbance, all runs "
              "of that kind (the spun ones in brackets).</p>"

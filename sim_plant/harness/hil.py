@@ -153,6 +153,8 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
             signal.signal(signal.SIGINT, previous)
         raise
     except BaseException:
+        for p in reversed(procs):  # the logger stopped first: it flushes, the copy is whole
+            stop(p)
         partial = work / "traffic.log"
         if partial.exists() and partial.stat().st_size > 0:
             shutil.copy(partial, cfg.out / "traffic.partial.log")

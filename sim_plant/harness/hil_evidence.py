@@ -20,6 +20,7 @@ from typing import Any, Callable
 from firmware_py import model_regulator as mr
 from firmware_py.platform.files import staged_directory, write_files
 from sim_plant.car import scenario as scn
+from sim_plant.figures import tidy_figures
 from sim_plant.harness import hil
 
 #: The built-ins of issue 15's HIL evidence (``scenario.BUILTINS``).
@@ -80,7 +81,7 @@ def run(base: hil.HilConfig, scenarios: tuple[str, ...] = SCENARIOS,
                               out=stage / Path(name).stem / sub)
                 runs[ctrl] = hil.run(cfg, say).summary
             out.append(Evidence(name, runs[base.controller], runs["none"]))
-        write_files(stage, {ROWS_FILE: json.dumps([e.row() for e in out], indent=2) + "\n",
+        write_files(stage, {ROWS_FILE: json.dumps(tidy_figures([e.row() for e in out]), indent=2) + "\n",
                             TABLE_FILE: format_table(out) + "\n"})
     return out
 

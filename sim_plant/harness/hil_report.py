@@ -20,6 +20,7 @@ from firmware_py import model_regulator as mr
 from firmware_py.platform.files import write_files
 from sim_plant.car import scenario as scn
 from sim_plant.car.nonlinear import spun, wrap_angle
+from sim_plant.car.plants import NONLINEAR
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness import hil_plot, launch
 from sim_plant.figures import resolution_of, tidy, tidy_figures
@@ -155,7 +156,8 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
         # the measured yaw rate (car_figures makes peak_yaw_rate_rad_s the car's true one)
         "peak_yaw_rate_rad_s": float(np.max(np.abs(r))),
         "peak_measured_yaw_rate_rad_s": float(np.max(np.abs(r))),
-        "final_yaw_rate_rad_s": float(r[-1]),
+        "final_yaw_rate_rad_s": float(r[-1]),  # the car's true one replaces it (car_figures)
+        "final_measured_yaw_rate_rad_s": float(r[-1]),
         "saturated": bool(np.any(np.abs(aux) >= limit - 1e-6)),
         "stable": stable,
         "rate_hz": cfg.rate_hz,
@@ -176,18 +178,21 @@ def summarize(traffic: Traffic, cfg: "HilConfig", sc: scn.Scenario, ctrl: mr.Con
 
 def car_figures(sc: scn.Scenario, steps: list[Step]) -> dict[str, Any]:
     """The car the run used and what it did, from the plant's true states (``steps.csv``), as a
-    campaign defines them (``campaign.engine.METRICS``): the true yaw rate's peak
-    (``peak_yaw_rate_rad_s``; the bus's measured one is ``peak_measured_yaw_rate_rad_s``), the
+    campaign defines them (``campaign.engine.METRICS``): the true yaw rate's peak and final
+    value (``peak_yaw_rate_rad_s``, ``final_yaw_rate_rad_s``; the bus's measured ones are
+    ``peak_measured_yaw_rate_rad_s``, ``final_measured_yaw_rate_rad_s``), the
     side slip's peak (wrapped to (-180, 180] deg), the auxiliary command's RMS, the time the
     controller reported the state SATURATED, and the speed at the end.  A car that spun
     (``nonlinear.spun``: ``spun``, at ``spin_time_s``) left its model there: these figures are
     those up to that step, as a campaign's run ends there."""
     ts = steps[1].t_s - steps[0].t_s if len(steps) > 1 else 0.0
-    end = next((k for k, s in enumerate(steps) if spun(s.beta_rad)), None)
+    # (only the nonlinear car has a model that ends: the linear one's equations are the car's)
+    end = next((k for k, s in enumerate(steps) if spun(s.beta_rad)), None) if sc.plant == NONLINEAR else None
     steps = steps if end is None else steps[:end + 1]
     cmd = np.array([s.aux_cmd_rad for s in steps] or [0.0])
     saturated = state_names()[mr.STATUS_SATURATED]
-    true_peak = {"peak_yaw_rate_rad_s": max(abs(s.yaw_rate_rad_s) for s in steps)} if steps else {}
+    true_peak = {"peak_yaw_rate_rad_s": max(abs(s.yaw_rate_rad_s) for s in steps),
+                 "final_yaw_rate_rad_s": steps[-1].yaw_rate_rad_s} if steps else {}
     return {
         **true_peak,
         "spun": end is not None,

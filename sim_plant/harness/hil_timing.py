@@ -41,8 +41,8 @@ def process_line(figures: dict[str, Any]) -> str:
     parts = [f"overruns {figures.get('overruns', 0)}"]
     if "missed_cycles" in figures:
         parts.append(f"missed cycles {figures['missed_cycles']}")
-    else:
-        parts.append("late steps made up")
+    elif figures.get("overruns", 0):
+        parts.append("late steps made up, none skipped")
     if "lateness_p99_s" in figures:
         parts.append(f"lateness p99 {1e3 * figures['lateness_p99_s']:.3g} ms")
     if "lateness_max_s" in figures:

@@ -16,6 +16,7 @@ first with ``make -C ports/c node``).
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import shlex
 import shutil
@@ -73,11 +74,22 @@ class LaunchError(RuntimeError):
     """A controller program cannot be had (the C node does not build, a command is empty)."""
 
 
+MAKE_LOCK = PORT_DIR / ".make.lock"
+
+
+def make_port(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """``make -s -C ports/c ARGS``, one at a time across processes (an flock on ``MAKE_LOCK``):
+    two builds in one tree at once (parallel test workers, two runs) write the same files."""
+    with MAKE_LOCK.open("a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return subprocess.run(["make", "-s", "-C", str(PORT_DIR), *args], capture_output=True, text=True,
+                              timeout=timeout)
+
+
 def build_c_node() -> Path:
     """``make -C ports/c node`` (quick when up to date): the C node's path."""
     try:
-        proc = subprocess.run(["make", "-s", "-C", str(PORT_DIR), "node", f"PYTHON={sys.executable}"],
-                              capture_output=True, text=True, timeout=600)
+        proc = make_port("node", f"PYTHON={sys.executable}")
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise LaunchError(f"cannot build the C node: {exc}") from None
     if proc.returncode != 0 or not C_NODE.exists():

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import mrsteer_dbc
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE, SIG_CMD_MEAS, SIG_CMD_STATE
-from sim_plant.harness.replay import Out, ReplayResult, StatusOut, compare, judge
+from sim_plant.harness.launch import make_port
+from sim_plant.harness.replay import Mismatch, Out, ReplayResult, StatusOut, compare, judge
 from firmware_py import calibration_file
 
 PORT = Path(__file__).resolve().parents[2] / "ports" / "c"
@@ -44,7 +45,7 @@ def build() -> Path:
     if not (PORT / "mrs_replay.c").is_file():
         raise PortError(f"the C port is not here: {PORT}")
     try:
-        proc = subprocess.run(["make", "-s", "-C", str(PORT), DRIVER], capture_output=True, text=True, timeout=120)
+        proc = make_port(DRIVER, timeout=120)
     except (OSError, subprocess.TimeoutExpired) as exc:
         raise PortError(f"cannot build {DRIVER}: {exc}") from None
     if proc.returncode != 0:
@@ -94,4 +95,11 @@ def replay_c(result: ReplayResult, contract: mrsteer_dbc.Contract | None = None)
                            outs, statuses)
     steps = [replace(s, out=o) for s, o in zip(result.steps, outs)]
     judged, apart, since = judge(steps, result.structural + found)
-    return replace(result, steps=steps, mismatches=judged, apart=apart, unjudged_from=since, max_abs_dangle=worst)
+    # The port against the Python firmware on the very same inputs, whatever the log's timing let
+    # the replay judge: a difference here is the port's, never a late cycle's.
+    port = [Mismatch(s.recorded.line if s.recorded is not None else s.line, s.t, c.frame_id(MSG_CMD),
+                     f"port: C sent {o.angle!r} rad, state {o.state}; the Python firmware {s.out.angle!r} rad, "
+                     f"state {s.out.state}")
+            for s, o in zip(result.steps, outs) if s.kind != "final" and (o.angle, o.state) != (s.out.angle, s.out.state)]
+    return replace(result, steps=steps, mismatches=judged + port, apart=apart, unjudged_from=since,
+                   max_abs_dangle=worst)

@@ -56,6 +56,7 @@ TAU_BOUNDS = (0.001, 1.0)
 K_GRID = tuple(float(x) for x in np.geomspace(*K_BOUNDS, 24))
 TAU_GRID = tuple(float(x) for x in np.geomspace(0.002, 0.5, 25))
 TAU_N_GRID = (0.005, 0.01, 0.02, 0.05, 0.1)
+COARSE_STRIDE = 3  # ``tune(coarse=True)``: every third K and tau of the grids (a smoke run, ~1/9 the work)
 
 SCREEN_ENVELOPE = Envelope(speeds=(5.0, 10.0, 20.0, 35.0, 50.0), frictions=(0.1, 0.3, 0.6, 1.0),
                            masses=(1296.0, 1800.0))
@@ -140,9 +141,10 @@ class TuneInfeasible(ValueError):
 
 def tune(ts: float, delay_steps: int, envelope: Envelope = Envelope(), q_form: str = mr.Q_LIMITED,
          base: mr.ControllerConfig | None = None, progress: Progress | None = None,
-         models: LoopModels = IDEAL) -> TuneResult:
+         models: LoopModels = IDEAL, coarse: bool = False) -> TuneResult:
     """Best-rejecting (K, tau, tau_n) that keeps the margins over ``envelope``; with an actuator
-    or sensor model in the loop, also the constraints of ``constraints`` (issue 15)."""
+    or sensor model in the loop, also the constraints of ``constraints`` (issue 15).  ``coarse``
+    searches every ``COARSE_STRIDE``-th K and tau only: a quick run, not the optimum."""
     say = progress or (lambda *_: None)
     # Constant gains on the base's structure (by default the paper's plain law, the structure
     # this grid search was built for; the shipped law's schedule comes from tune_schedule).
@@ -156,8 +158,9 @@ def tune(ts: float, delay_steps: int, envelope: Envelope = Envelope(), q_form: s
     # N steps ago) or not: both structures are searched.
     plain = cfg0.model_actuator_tau == 0.0 and cfg0.model_filter_hz == 0.0
     delays = sorted({0, min(delay_steps, mr.MAX_MODEL_DELAY)} if plain else {max(1, min(delay_steps, mr.MAX_MODEL_DELAY))})
+    stride = COARSE_STRIDE if coarse else 1
     candidates = [replace(cfg0, k=k, tau=t, tau_n=tn, model_delay_steps=m)
-                  for m in delays for tn in TAU_N_GRID for k in K_GRID for t in TAU_GRID]
+                  for m in delays for tn in TAU_N_GRID for k in K_GRID[::stride] for t in TAU_GRID[::stride]]
     feasible = []
     for i, c in enumerate(candidates):
         if screen.passes(c):

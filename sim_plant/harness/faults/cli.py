@@ -12,7 +12,7 @@ from pathlib import Path
 from sim_plant.car.options import add_car_args
 from sim_plant.figures import tidy_figures
 from sim_plant.harness.faults.verdicts import RowResult
-from sim_plant.harness.faults.rows import ROWS, secured_rows
+from sim_plant.harness.faults.rows import QUICK_ROWS, ROWS, secured_rows
 from sim_plant.harness.faults.run import holds_files, run_matrix
 from firmware_py.controller.options import RATES_HELP
 from sim_plant.harness.faults.settings import RATE_HZ, Setup
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     import argparse
 
     from firmware_py.platform import bus_open
-    from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, fail
+    from firmware_py.platform.cli import EXIT_INTERRUPTED, Parser, add_quick_arg, fail
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bridge"]:  # the bridge owns its whole argument list, --help included
@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     r.add_argument("--only", action="append", metavar="TEXT", help="only rows whose name contains TEXT; repeatable")
     r.add_argument("--keep", type=Path, metavar="DIR", help="keep every row's logs, traces and statistics here")
     r.add_argument("--json", action="store_true", help="print the results as JSON")
+    add_quick_arg(r, f"only the rows {', '.join(QUICK_ROWS)} (a smoke run; --only overrides it)")
     r.add_argument("--secoc", action="store_true",
                    help="run every row with the commands and sensor frames authenticated (a random key per row); "
                    "the rows that show what E2E alone lets through are left out")
@@ -80,8 +81,10 @@ def main(argv: list[str] | None = None, prog: str = "mrsteer faults") -> int:
     args = p.parse_args(argv)
     every = secured_rows() if args.secoc else ROWS
     rows = tuple(row for row in every if not args.only or any(o.lower() in row.name.lower() for o in args.only))
+    if args.quick and not args.only:
+        rows = tuple(row for row in rows if row.name in QUICK_ROWS)
     if not rows:
-        r.error(f"no row matches {args.only}; rows: " + "; ".join(r.name for r in every))
+        r.error(f"no row matches {args.only or 'the quick rows'}; rows: " + "; ".join(r.name for r in every))
     try:
         channels = tuple(args.channels.split(",")) if args.channels else None
         setup = Setup(args.interface, channels, args.rate_hz, args.time_scale, args.startup_s,  # type: ignore[arg-type]

@@ -155,6 +155,9 @@ SENSOR_ROWS = (
 ROWS = ROWS + SENSOR_ROWS
 
 
+#: ``faults run --quick``: one row of each kind (clean, a bus fault, a sensor fault) as a smoke run.
+QUICK_ROWS = ("baseline", "yaw-rate frames lost (burst)", "yaw rate stuck at 0.01 rad/s")
+
 #: The bridge's sensor-fault kinds as the plant's (``sim_plant.car.sensor_faults``).
 _PLANT_KIND = {"sensor_stuck": "stuck", "sensor_frozen": "frozen", "sensor_bias": "bias", "sensor_scale": "scale",
                "sensor_drift": "drift", "sensor_noise": "noise"}
