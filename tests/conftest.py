@@ -122,7 +122,7 @@ def matrix_with_one_rerun(run, rows, keep):
     import warnings
 
     results = run(rows, keep)
-    failed = [r for r in results if not r.passed]
+    failed = [r for r in results if not r.ok]
     if not failed or len(failed) > MATRIX_RERUN_MAX:
         return results
     names = {r.name for r in failed}

@@ -21,12 +21,16 @@ from mrsteer_dbc import secoc
 from mrsteer_dbc.e2e import COUNTER_MODULO
 from mrsteer_dbc import names
 from sim_plant.harness.faults.evidence import STATISTICS, Evidence, gather, stalled, stall_gaps
-from sim_plant.harness.faults.rows import Row
+from sim_plant.harness.faults.rows import NOT_KEPT, NOT_RECOVERED, Row
 from sim_plant.harness.faults.verdicts_plausibility import check_plausibility, check_quiet_monitor
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
                                                CUT_RATE, FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE,
                                                RATE_LIMIT, TRACE_RESOLUTION, Setup)
 from sim_plant.nodes.candump_log import Frame
+
+
+# The states after a recovery that mean the function is off again, by their DBC names.
+LOST_STATES = {mr.STATUS_FAULT: "FAULT", mr.STATUS_DEGRADED: "DEGRADED"}
 
 
 @dataclass
@@ -39,6 +43,12 @@ class RowResult:
     worst_step_deg: float
     detection_cycles: int | None
     failures: list[str] = field(default_factory=list)
+    known: str = ""  # why, when every failure is the row's known defect (``rows.Known``)
+
+    @property
+    def ok(self) -> bool:
+        """Passed, or failed only as its known defect: what the matrix's exit status counts."""
+        return self.passed or bool(self.known)
 
 
 @dataclass
@@ -75,7 +85,15 @@ def judge(row: Row, work: Path, ctl_code: int | None, killed_at: float | None,
     check_forgery(e, v)
     check_controller_kill(e, v)
     return RowResult(row.name, row.expected, not v.fails, "; ".join(v.observed), math.degrees(worst),
-                     math.degrees(worst_step), detection if plausibility is None else plausibility, v.fails)
+                     math.degrees(worst_step), detection if plausibility is None else plausibility, v.fails,
+                     known_defect(row, v.fails))
+
+
+def known_defect(row: Row, fails: list[str]) -> str:
+    """Why the row failed, when it failed only as its known defect; else ""."""
+    if row.known is None or not fails or not all(f.startswith(row.known.failures) for f in fails):
+        return ""
+    return row.known.why
 
 
 def check_applied(e: Evidence, v: Verdict) -> tuple[float, float]:
@@ -196,6 +214,17 @@ def faulted_after_bad_frames(frames: list[Frame], cmds: list[tuple[float, float]
     return sum(1 for t_, _ in cmds if nth < t_ < first_fault) <= 1
 
 
+def off_to_the_end(cmds: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """The first command (t, state) of the run of FAULT or DEGRADED commands that ends the log,
+    ``None`` when the last command is in another state."""
+    first = None
+    for t_, state in reversed(cmds):
+        if state not in LOST_STATES:
+            break
+        first = (t_, state)
+    return first
+
+
 def check_detection(e: Evidence, v: Verdict, affected0: float | None,
                     affected1: float | None) -> tuple[int | None, float | None]:
     """A row that must fault: FAULT within its cycles, with its cause, then recovery.  The
@@ -226,9 +255,16 @@ def check_detection(e: Evidence, v: Verdict, affected0: float | None,
             v.fails.append(f"status never gave cause 0x{row.cause:02X} (saw {sorted(set(seen))})")
     back = next((t_ for t_, s in cmds if t_ > affected1 and s in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)), None)
     if back is None:
-        v.fails.append("did not recover after the fault")
+        v.fails.append(NOT_RECOVERED)
     else:
         v.observed.append(f"recovered {1e3 * (back - affected1):.0f} ms after")
+        # Recovered means for good: FAULT or DEGRADED from some command to the last (a latched
+        # monitor's) is the function off, however briefly it was ACTIVE before.  A missing
+        # frame's DEGRADED comes and goes.
+        lost = off_to_the_end([(t_, s) for t_, s in cmds if t_ > back])
+        if lost is not None:
+            v.fails.append(f"{NOT_KEPT}: {LOST_STATES[lost[1]]} from {1e3 * (lost[0] - affected1):.0f} ms "
+                           f"after the fault to the end")
     return detection, first_fault
 
 
