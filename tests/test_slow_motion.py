@@ -65,12 +65,12 @@ def test_the_car_clock_divides_wall_time_from_one_reference() -> None:
 def test_a_row_in_slow_motion_is_judged_as_in_real_time(tmp_path: Path, impl: str) -> None:
     """The burst of lost yaw-rate frames at 2.5x slow motion: the plant took 2.5x its scenario in
     wall time, the controller ran one cycle per car step, and the row's verdict (FAULT within
-    the timeout in cycles, the fade, the recovery) is the real-time one."""
+    the timeout in cycles, the fade, the recovery and its known defect) is the real-time one."""
     slow = 2.5
     setup = replace(Setup(slow_motion=slow), controller_program=launch.controller_program(impl))
     row = ROW["yaw-rate frames lost (burst)"]
     [result] = run_matrix((row,), keep=tmp_path, setup=setup)
-    assert result.passed, result.failures
+    assert result.ok, result.failures  # the burst row's known defect is judged alike
     assert result.detection_cycles is not None and result.detection_cycles <= 12
     plant = json.loads((tmp_path / "01" / "plant.json").read_text())
     assert plant["wall_time_s"] >= 0.9 * slow * DURATION  # it did run slowly
