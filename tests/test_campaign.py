@@ -181,6 +181,7 @@ def test_shipped_campaign_files_parse(name: str) -> None:
         assert scn.parse({"duration": sc.duration, "v": sc.v, "mu": sc.mu, "mass": sc.mass}, "x").v == sc.v
 
 
+@pytest.mark.slow  # 18 s; test_run_resumes_only_the_missing_chunks is the quick check of resuming
 def test_an_interrupted_run_resumes_to_the_same_results(tmp_path: Path) -> None:
     import signal
     import time
@@ -226,7 +227,8 @@ detection_time = 0.3
 """
 
 
-@pytest.mark.parametrize("sensor,size", [("yaw_rate", "2.8, 3.0"), ("speed_redundant", "-3.0, -2.8")],
+@pytest.mark.parametrize("sensor,size", [("yaw_rate", "2.8, 3.0"),
+                                         pytest.param("speed_redundant", "-3.0, -2.8", marks=pytest.mark.slow)],
                          ids=["yaw-rate-offset", "second-speed-offset"])
 def test_an_exported_sample_on_the_bus_gives_the_campaigns_figures_and_its_monitor_fault(tmp_path: Path, sensor: str,
                                                                                         size: str) -> None:
