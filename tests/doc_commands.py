@@ -121,7 +121,7 @@ def _strip_comment(command: str) -> str:
 def repo_copy(dest: Path) -> Path:
     """The repository's files as a clone would have them once committed (``git ls-files``:
     tracked and new files, not ignored ones: no outputs, builds or environments), in ``dest``,
-    with a ``.venv`` whose ``bin`` is the environment running the tests and whose install stamp
+    with a ``.venv`` linked to the environment running the tests and whose install stamp
     is newer than ``pyproject.toml``: ``make`` finds it installed and installs nothing (an
     install from the copy would point the environment at it)."""
     listed = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
@@ -133,7 +133,11 @@ def repo_copy(dest: Path) -> Path:
             shutil.copy2(src, dest / name)
     venv = dest / ".venv"
     venv.mkdir()
-    (venv / "bin").symlink_to(Path(sys.prefix) / "bin")
+    # bin, and lib and pyvenv.cfg too: ``.venv/bin/python`` (the Makefile's) finds its
+    # environment's packages from the folder it is in.
+    for entry in Path(sys.prefix).iterdir():
+        if entry.name != ".installed":
+            (venv / entry.name).symlink_to(entry)
     stamp = venv / ".installed"
     stamp.touch()
     older = stamp.stat().st_mtime - 1.0
