@@ -309,3 +309,22 @@ def test_the_c_port_is_judged_against_the_python_firmware_in_every_cycle(
     off = replay_c.replay_c(result)
     port = [m for m in off.mismatches if m.what.startswith("port:")]
     assert not off.agrees and len(port) == 1 and port[0].line == result.steps[k].recorded.line
+
+
+def test_a_fault_matrix_rows_kept_log_replays_with_its_kept_calibration(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``faults run --keep``: the controller's log of the baseline row replays to every command
+    with the row's controller.cfg, which holds what the controller ran with (the rows' rate limit
+    too); a cycle late on a loaded machine is set apart, which does not fail the replay."""
+    from sim_plant.harness.faults import ROWS, run_matrix
+    from sim_plant.harness.faults.settings import RATE_LIMIT
+
+    [result] = run_matrix(ROWS[:1], keep=tmp_path)
+    assert result.ok, result.failures
+    row = tmp_path / "01"
+    assert f"rate_limit = {RATE_LIMIT!r}" in (row / "controller.cfg").read_text().splitlines()
+    code, doc, err = _replay(capsys, str(row / "controller.log"), "--trigger", "clock",
+                             "--recorded-calibration", str(row / "controller.cfg"))
+    s = doc["replays"][0]
+    assert code == 0 and s["agrees"], (err, s)
+    assert s["commands_recorded"] > 1000

@@ -63,9 +63,11 @@ class _RowRun:
     def start_controller(self, name: str) -> Proc:
         return self.start(name, launch.controller(
             launch.BusArgs(self.setup.interface, self.controller_side),
+            # The rows' rate limit in the calibration file itself: controller.cfg is then what the
+            # controller ran with, and replays the row's log (``mrsteer replay --recorded-calibration``).
             launch.ControllerSettings(self.setup.rate_hz,
-                                      launch.write_calibration(self.work, self.setup.calibration()),
-                                      rate_limit=RATE_LIMIT,
+                                      launch.write_calibration(self.work,
+                                                               replace(self.setup.calibration(), rate_limit=RATE_LIMIT)),
                                       stats_out=self.work / "controller.json", secoc=self.row.secoc,
                                       program=self.setup.controller_program, slow_motion=self.setup.slow_motion)))
 
