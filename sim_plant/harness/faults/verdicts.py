@@ -23,14 +23,15 @@ from mrsteer_dbc import names
 from sim_plant.harness.faults.evidence import STATISTICS, Evidence, gather, stalled, stall_gaps
 from sim_plant.harness.faults.rows import NOT_KEPT, NOT_RECOVERED, Row
 from sim_plant.harness.faults.verdicts_plausibility import check_plausibility, check_quiet_monitor
+from sim_plant.harness.hil_steps import state_names
 from sim_plant.harness.faults.settings import (ACTUATOR_RATE, BUS_RESOLUTION, COUNTER_WINDOW, E2E_FAIL_MAX,
                                                CUT_RATE, FLOOD_CAPACITY, FORGED_ANGLE, MAC_LUCK, PLANT_FADE,
                                                RATE_LIMIT, TRACE_RESOLUTION, Setup)
 from sim_plant.nodes.candump_log import Frame
 
 
-# The states after a recovery that mean the function is off again, by their DBC names.
-LOST_STATES = {mr.STATUS_FAULT: "FAULT", mr.STATUS_DEGRADED: "DEGRADED"}
+# The states after a recovery that mean the function is off again.
+LOST_STATES = (mr.STATUS_FAULT, mr.STATUS_DEGRADED)
 
 
 @dataclass
@@ -263,7 +264,7 @@ def check_detection(e: Evidence, v: Verdict, affected0: float | None,
         # frame's DEGRADED comes and goes.
         lost = off_to_the_end([(t_, s) for t_, s in cmds if t_ > back])
         if lost is not None:
-            v.fails.append(f"{NOT_KEPT}: {LOST_STATES[lost[1]]} from {1e3 * (lost[0] - affected1):.0f} ms "
+            v.fails.append(f"{NOT_KEPT}: {state_names()[int(lost[1])]} from {1e3 * (lost[0] - affected1):.0f} ms "
                            f"after the fault to the end")
     return detection, first_fault
 
