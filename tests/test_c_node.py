@@ -114,6 +114,27 @@ def test_c_node_signs_every_golden_command_frame(c_node) -> None:
     assert len(cmds) >= 50
 
 
+def test_a_keyed_c_node_sends_no_command_before_the_first_sync(c_node) -> None:
+    contract = mrsteer_dbc.load()
+    key = bytes(range(16))
+    verifier = mrsteer_dbc.secoc.CommandVerifier(contract, key)
+    sync = verifier.next_sync()
+    exe = ROOT / "ports" / "c" / "build" / "secoc_check"
+    script = [f"key {key.hex()}", *["ctl"] * 5, f"rx {contract.frame_id('MRS_SecOCSync'):X} {sync.hex()}", "ctl"]
+    proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout.splitlines()
+    cmd_id = f"{contract.frame_id('MRS_AuxSteerCmd'):03X}#"
+    assert out[0] == "ok" and out[6] == "1"
+    assert not any(cmd_id in line for line in out[1:6])  # withheld: the actuator could not verify it
+    sent = [f for f in out[7].split() if f.startswith(cmd_id)]
+    assert len(sent) == 1
+    data, cmd = bytes.fromhex(sent[0].split("#")[1]), contract.frame_id("MRS_AuxSteerCmd")
+    decoded = contract.decode(cmd, data)
+    assert decoded is not None and decoded.status is mrsteer_dbc.E2EStatus.OK
+    assert verifier.verify(cmd, data, decoded.signals)  # signed for the adopted epoch
+
+
 def test_the_c_node_rounds_the_command_toward_zero_as_the_contract_does(c_node) -> None:
     """The C TX path (the generated pack) and the Python contract encode every command alike, the
     3 deg limit as 52359 (2.99995 deg, not 52360: 3.00001 deg); random angles, ties included."""

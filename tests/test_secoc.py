@@ -3,6 +3,8 @@ controller and the plant: RFC 4493 vectors, freshness, forgery, replay, loss, re
 
 from __future__ import annotations
 
+import dataclasses
+
 import os
 import subprocess
 import sys
@@ -309,6 +311,15 @@ def test_plant_rejects_unauthenticated_commands_when_secoc_is_on(plant) -> None:
     assert node.actuator.applied == 0.0 and node.stats.cmd_auth_failed == 1
 
 
+def test_plant_discards_what_was_queued_before_it_started(plant) -> None:
+    node, ctl = plant
+    for _ in range(3):  # a previous instance's commands, still on the bus when this one starts
+        ctl.send(can.Message(arbitration_id=CMD, data=C.encode(secoc.COMMAND, VALUES, 0), is_extended_id=False))
+    node.sc = dataclasses.replace(node.sc, duration=0.005)
+    stats = node.run()
+    assert stats.rx_before_start == 3 and stats.cmd_rejected == 0 and stats.cmd_auth_failed == 0
+
+
 def test_plant_announces_the_epoch_at_the_sync_cycle_time(plant) -> None:
     node, ctl = plant
     for k in range(250):
@@ -335,22 +346,24 @@ def test_controller_signs_once_synced_and_reports_a_lost_sync(channel: str) -> N
                 vb.send(can.Message(arbitration_id=C.frame_id(name), data=data, is_extended_id=False))
             node.drain()
             node.control()
-            cmd = next(m for m in iter(lambda: vb.recv(0.0), None) if m.arbitration_id == CMD)
-            return accepts(verifier, bytes(cmd.data)), node.cause
+            cmds = [m for m in iter(lambda: vb.recv(0.0), None) if m.arbitration_id == CMD]
+            return len(cmds) == 1 and accepts(verifier, bytes(cmds[0].data)), node.cause
 
-        ok, cause = cycle(0)
-        assert not ok and cause & names.CAUSE_AUTH  # no sync yet
+        # No sync yet: no command goes out (the actuator could not verify it), the status says why.
+        before = [cycle(k) for k in range(3)]
+        assert all(not ok and cause & names.CAUSE_AUTH for ok, cause in before)
+        assert node.stats.cmd_withheld == 3 and verifier.stats.failed == 0
         vb.send(can.Message(arbitration_id=SYNC_ID, data=verifier.next_sync(), is_extended_id=False))
-        results = [cycle(k) for k in range(1, 300)]
+        results = [cycle(k) for k in range(3, 302)]
         assert all(ok for ok, _ in results)
         assert not any(cause & names.CAUSE_AUTH for _, cause in results)
         # No sync for three of its cycles (300 ms): still signing, but the status says so.
-        late = [cycle(k) for k in range(300, 310)][1:]  # the sync came in cycle 1: 300 cycles is the limit
+        late = [cycle(k) for k in range(302, 312)][1:]  # the sync came in cycle 3: 300 cycles is the limit
         assert all(cause & names.CAUSE_AUTH for _, cause in late)
         forged = bytearray(verifier.next_sync())
         forged[7] ^= 0x01
         vb.send(can.Message(arbitration_id=SYNC_ID, data=bytes(forged), is_extended_id=False))
-        cycle(311)
+        cycle(313)
         assert node.stats.syncs_rejected == 1
 
 

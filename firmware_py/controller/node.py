@@ -39,7 +39,9 @@ one and names the cause of a rejection, ``TxLink`` builds the command and the st
 SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's ``MRS_SecOCSync``
 frames and verifies each sensor frame's MAC (a failure counts as a rejected frame of cause
 ``CAUSE_AUTH``), and step 4 signs each command (``mrsteer_dbc.secoc``); without a valid sync
-for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.
+for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.  Until the first
+authentic sync (at power-up) no command is sent at all (``cmd_withheld``): the actuator could not
+verify it, and a rejected command is an alarm there.
 
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
@@ -357,6 +359,11 @@ class ControllerNode:
             self._send_status()
 
     def _send_command(self, u: float, state: int) -> None:
+        if self.signer is not None and not self.signer.synced:
+            # No freshness yet: the actuator would reject the command (AUTOSAR SecOC sends no
+            # PDU without freshness); its own timeout holds it at zero meanwhile.
+            self.stats.cmd_withheld += 1
+            return
         self.bus.send(self.tx.frame(MSG_CMD, {SIG_CMD_STATE: state, SIG_CMD_ANGLE: u, SIG_CMD_MEAS: self._answers}))
         self.stats.tx_frames += 1
 

@@ -87,6 +87,7 @@ class PlantStats:
     actuator_timeouts: int = 0
     actuator_authority_steps: int = 0  # steps in which the actuator's authority limiter changed the command
     bench_injections: int = 0
+    rx_before_start: int = 0  # frames queued before the first step, discarded unread
     rx_ignored: int = 0  # frames of other IDs (queued before the kernel filter was installed)
     overruns: int = 0  # realtime: steps started more than a period late (made up, none skipped)
     wall_time_s: float = 0.0
@@ -289,6 +290,10 @@ class PlantNode:
 
     def run(self) -> PlantStats:
         n = int(round(self.sc.duration / self.ts)) + 1
+        # The actuator powers up at the first step: what the bus queued while this process set up
+        # was sent to an ECU that was not there (with SecOC, commands for a freshness it never issued).
+        while self.bus.recv(0.0) is not None:
+            self.stats.rx_before_start += 1
         start = time.monotonic()
         deadline = start
         for k in range(n):

@@ -312,8 +312,9 @@ def check_secoc(e: Evidence, v: Verdict) -> None:
     plant refusing every bad command but a lucky few."""
     row, bridge, plant, ctl_stats = e.row, e.bridge, e.plant, e.ctl_stats
     if row.secoc:
-        # Real commands fail too: before the controller has the first sync, and when they reach
-        # the actuator an epoch too late (a stalled machine).  Both are right; shown, not judged.
+        # Real commands fail too: in flight with the old epoch when the actuator restarts, and
+        # when they reach it an epoch too late (a stalled machine).  Both are right; shown, not
+        # judged.  (Before its first sync the controller sends none.)
         v.observed.append(f"plant: {plant['cmd_auth_failed']} failed SecOC")
         if ctl_stats is not None:
             sensor_failed = ctl_stats.get("rx_auth_failed", 0)
@@ -344,9 +345,9 @@ def check_forgery(e: Evidence, v: Verdict) -> None:
             v.fails.append(f"the actuator took {taken} forged commands")
         # Authentication comes before the counter check, so forgeries cannot push the real
         # commands out of the alive-counter sequence.
-        # Real commands that fail authentication (before the first sync; an epoch late when the
-        # machine stalls) leave gaps in the sequence the actuator saw, and a gap wider than the
-        # counter window (3) costs the next command: only those are allowed.
+        # Real commands that fail authentication (an epoch late when the machine stalls) leave
+        # gaps in the sequence the actuator saw, and a gap wider than the counter window (3)
+        # costs the next command: only those are allowed.
         e2e_rejected = plant["cmd_rejected"] - plant["cmd_auth_failed"]
         real_lost = max(0, plant["cmd_auth_failed"] - bridge["affected"])
         allowed = MAC_LUCK + real_lost // (COUNTER_WINDOW + 1)
