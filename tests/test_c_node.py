@@ -191,6 +191,7 @@ def test_c_node_verifies_the_golden_sensor_frames_as_the_python_controller_does(
     (["--interface", "mrsteer", "--channel", "bad/name"], 2),  # a channel that cannot exist
     (["--secoc-key", "/nonexistent/key.hex"], 2),
     (["--rate-hz", "fast"], 2),
+    (["--rate-hz", "250"], 2),  # no calibration for it
     (["--no-such-flag"], 2),
     (["--k", "-3"], 2),
     (["--slow-motion", "0.5"], 2),
@@ -205,6 +206,31 @@ def test_command_line_errors_are_one_line_and_the_python_exit_status(c_node, tmp
     assert py.returncode == code, py.stderr  # the reference behaves as the table says
     assert c.returncode == code
     assert len(c.stderr.splitlines()) == 1 and c.stderr.startswith("mrs_node: error: "), c.stderr
+
+
+def test_the_c_node_runs_a_calibration_only_at_its_own_rate(c_node, tmp_path: Path) -> None:
+    """The Python rule (``calibration_for_rate``): the built-in 500 Hz calibration and a file
+    refuse another rate; hand gains take any."""
+    from firmware_py import calibration_file
+    from firmware_py.calibration import RATE_CALIBRATIONS
+
+    cfg = tmp_path / "100hz.cfg"
+    cfg.write_text(calibration_file.dumps(RATE_CALIBRATIONS[100.0]))
+    env = {**os.environ, "MRSTEER_BUS_DIR": str(tmp_path)}
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*c_node, "--interface", "mrsteer", "--channel", "nobody-listens", *args,
+                               "--duration", "0.1"], capture_output=True, text=True, timeout=30, env=env)
+
+    built_in, wrong_file = run("--rate-hz", "100"), run("--rate-hz", "200", "--calibration", str(cfg))
+    for proc, made_for in ((built_in, "built-in calibration is made for 500 Hz"),
+                           (wrong_file, "--calibration file's calibration is made for 100 Hz")):
+        assert proc.returncode == 2 and made_for in proc.stderr and "--calibration FILE made for" in proc.stderr
+        assert len(proc.stderr.splitlines()) == 1
+    # accepted: they get as far as the bus (no broker here)
+    for args in (("--rate-hz", "100", "--calibration", str(cfg)), ("--rate-hz", "250", "--k", "3"), ()):
+        proc = run(*args)
+        assert proc.returncode == 2 and "no fallback-bus broker" in proc.stderr, (args, proc.stderr)
 
 
 def test_without_a_broker_the_c_node_says_so(c_node, tmp_path: Path) -> None:

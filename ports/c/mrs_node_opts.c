@@ -264,6 +264,22 @@ static int controller_config(raw_args_t *a, mrs_config_t *c)
     return 0;
 }
 
+/* The rate rule of firmware_py.controller.options.calibration_for_rate: hand gains run at any
+ * rate; a calibration (a file, or the built-in shipped one) only at the rate it was made for.
+ * (The Python controller also has plain-law tunings for 100, 200 and 1000 Hz built in; this node
+ * has only the shipped 500 Hz one, docs/porting.md.) */
+static int rate_rule(const raw_args_t *a, const mrs_node_opts_t *o, const mrs_config_t *c)
+{
+    const double own = 1.0 / c->ts;
+    if (!a->have_rate || a->have_k || a->have_tau || a->have_tau_n || fabs(o->rate_hz - own) <= 1e-9 * own) {
+        return 0;
+    }
+    return usage_error("--rate-hz %g: the %s calibration is made for %g Hz (ts %g s); give --calibration FILE "
+                       "made for %g Hz (mrsteer design tune --schedule --ts %g --out FILE.cfg)", o->rate_hz,
+                       a->calibration != NULL ? "--calibration file's" : "built-in", own, c->ts, o->rate_hz,
+                       1.0 / o->rate_hz);
+}
+
 static int check(const raw_args_t *a, mrs_node_opts_t *o, mrs_node_config_t *cfg)
 {
     const long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
@@ -271,6 +287,9 @@ static int check(const raw_args_t *a, mrs_node_opts_t *o, mrs_node_config_t *cfg
     mrs_coeffs_t coeffs;
     if (!(isfinite(o->rate_hz) && o->rate_hz >= 1.0 && o->rate_hz <= 10000.0)) {
         return usage_error("--rate-hz must be in [1, 10000], got %g", o->rate_hz);
+    }
+    if (rate_rule(a, o, &cfg->controller) != 0) {
+        return 2;
     }
     if (cfg->timeout_cycles < 1) {
         return usage_error("--timeout-cycles must be at least 1");
