@@ -71,20 +71,44 @@ class Candump:
         return self.path.read_text()
 
 
-def test_lockstep_hil_on_vcan0_matches_offline_and_candump_decodes(tmp_path: Path) -> None:
-    dump = Candump(tmp_path / "candump.log")
-    plain = Candump(tmp_path / "candump.txt", log_format=False)  # what `candump vcan0 | cantools decode` reads
+# One Python lockstep run on vcan0 serves the offline comparison, candump's decoding and the C
+# node's comparison: under QEMU a run costs minutes, most of it Python starting its processes.
+LOCKSTEP_ARGS = ("hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200",
+                 "--k", "3", "--tau", "0.05", "--v", "24", "--mu", "0.95", "--duration", "1.5", "--json")
+
+
+def _lockstep(out: Path, impl: str) -> dict:
+    """A lockstep run of ``LOCKSTEP_ARGS`` by ``impl``'s controller; again (once) if the plant
+    stalled for a watchdog cycle of the controller's (``lockstep_traffic``): the VM's load."""
+    for _ in range(2):
+        proc = _mrsteer(*LOCKSTEP_ARGS, "--controller-impl", impl, "--out", str(out))
+        assert proc.returncode == 0, proc.stderr
+        run = json.loads(proc.stdout)
+        if not lockstep_traffic(out / "traffic.log")["stalls"] and not run["loop"]["plant"].get("lockstep_timeouts"):
+            break
+    return run
+
+
+@pytest.fixture(scope="module")
+def python_lockstep(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, Path, str, str]:
+    """The Python controller's lockstep run, with what ``candump -L vcan0`` and plain
+    ``candump vcan0`` saw meanwhile."""
+    tmp = tmp_path_factory.mktemp("python-lockstep")
+    dump = Candump(tmp / "candump.log")
+    plain = Candump(tmp / "candump.txt", log_format=False)  # what `candump vcan0 | cantools decode` reads
     try:
-        run = _mrsteer("hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200",
-                       "--k", "3", "--tau", "0.05", "--v", "24", "--mu", "0.95", "--out", str(tmp_path / "hil"),
-                       "--json")
+        run = _lockstep(tmp / "hil", "python")
     finally:
         text = dump.stop()
         plain_text = plain.stop()
-    assert run.returncode == 0, run.stderr
-    hil = json.loads(run.stdout)
+    return run, tmp / "hil", text, plain_text
+
+
+def test_lockstep_hil_on_vcan0_matches_offline_and_candump_decodes(
+        python_lockstep: tuple[dict, Path, str, str]) -> None:
+    hil, _, text, plain_text = python_lockstep
     off = _mrsteer("sim", "disturbance", "--mz", "4000", "--v", "24", "--mu", "0.95", "--ts", "0.005",
-                   "--delay-steps", "1", "--k", "3", "--tau", "0.05", "--json")
+                   "--delay-steps", "1", "--k", "3", "--tau", "0.05", "--duration", "1.5", "--json")
     assert off.returncode == 0, off.stderr
     offline = json.loads(off.stdout)
     for key in ("peak_aux_steer_deg", "final_aux_steer_deg", "peak_yaw_rate_rad_s", "final_yaw_rate_rad_s"):
@@ -258,26 +282,18 @@ def c_node() -> tuple[str, ...]:
     return launch.controller_program("c")  # built on the host before the VM starts (tools/vcan-vm-test)
 
 
-def test_c_node_lockstep_on_vcan0_sends_the_python_controllers_frames(c_node: tuple[str, ...], tmp_path: Path) -> None:
+def test_c_node_lockstep_on_vcan0_sends_the_python_controllers_frames(
+        c_node: tuple[str, ...], python_lockstep: tuple[dict, Path, str, str], tmp_path: Path) -> None:
     if os.environ.get("MRSTEER_VCAN_C_LOCKSTEP") == "0":
         pytest.skip("MRSTEER_VCAN_C_LOCKSTEP=0: the C node's lockstep comparison on vcan left out (the same "
                     "comparison runs on the fallback bus in test_c_node.py)")
-    args = ["hil", "run", *IFACE, "--scenario", "paper-fig9", "--mode", "lockstep", "--rate-hz", "200", "--k", "3",
-            "--tau", "0.05", "--duration", "1.5", "--json"]
-    runs = {}
-    for impl in ("python", "c"):
-        for _ in range(2):  # again if the plant stalled a second (lockstep_traffic): the VM's load
-            proc = _mrsteer(*args, "--controller-impl", impl, "--out", str(tmp_path / impl))
-            assert proc.returncode == 0, proc.stderr
-            runs[impl] = json.loads(proc.stdout)
-            if not lockstep_traffic(tmp_path / impl / "traffic.log")["stalls"] and not runs[impl]["loop"]["plant"].get(
-                    "lockstep_timeouts"):
-                break
-    assert runs["c"]["loop"]["controller"]["implementation"] == "c"
-    traffic = {impl: lockstep_traffic(tmp_path / impl / "traffic.log") for impl in runs}
-    assert len(traffic["c"]["commands"]) >= 300
-    assert traffic["c"]["plant"] == traffic["python"]["plant"] and traffic["c"]["commands"] == traffic["python"]["commands"]
-    assert runs["c"]["peak_aux_steer_deg"] == runs["python"]["peak_aux_steer_deg"] > 0.0
+    py, py_out, _, _ = python_lockstep
+    c = _lockstep(tmp_path / "c", "c")
+    assert c["loop"]["controller"]["implementation"] == "c"
+    py_t, c_t = lockstep_traffic(py_out / "traffic.log"), lockstep_traffic(tmp_path / "c" / "traffic.log")
+    assert len(c_t["commands"]) >= 300
+    assert c_t["plant"] == py_t["plant"] and c_t["commands"] == py_t["commands"]
+    assert c["peak_aux_steer_deg"] == py["peak_aux_steer_deg"] > 0.0
 
 
 def test_c_node_filters_in_the_kernel_and_rejects_a_bad_frame(c_node: tuple[str, ...], tmp_path: Path) -> None:
@@ -285,7 +301,7 @@ def test_c_node_filters_in_the_kernel_and_rejects_a_bad_frame(c_node: tuple[str,
 
     c = mrsteer_dbc.load()
     stats = tmp_path / "c.json"
-    ctl = subprocess.Popen([*c_node, *IFACE, "--rate-hz", "100", "--stats-out", str(stats)],
+    ctl = subprocess.Popen([*c_node, *IFACE, "--stats-out", str(stats)],
                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
