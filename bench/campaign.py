@@ -86,7 +86,7 @@ def _scaling(samples: int, chunk: int, tmp: Path) -> dict[str, float]:
             "loadavg_1min": os.getloadavg()[0]}
 
 
-QUICK_SAMPLES = 2048  # --quick: the campaign and the scaling run
+QUICK_SAMPLES = 512  # --quick: the campaign and the scaling run (a smoke run: its figures are noisier)
 
 
 def campaign_bench(quick: bool) -> dict[str, Any]:

@@ -29,7 +29,7 @@ def build_parser(prog: str = "mrsteer bench") -> Parser:
                "plant running, quiet and under a CPU load the bench starts and stops, and the controller's memory. "
                "Figures, not pass/fail: timing on shared machines is noisy.")
     add_quick_arg(p, "short runs (loop 5 s, soak 10 s, 1,000 sweep points) instead of the full ones "
-                   "(loop 30 s per controller and condition, soak 10 min, 10,000 points); campaign 2,048 "
+                   "(loop 30 s per controller and condition, soak 10 min, 10,000 points); campaign 512 "
                    "scenarios instead of 100,000")
     p.add_argument("--only", choices=NAMES, action="append", metavar="NAME",
                    help=f"run only these ({', '.join(NAMES)}); repeatable")

@@ -91,6 +91,7 @@ def test_clean_log_agrees(clean_log: Path, capsys: pytest.CaptureFixture[str]) -
     lines = _lines(clean_log)
     yaw_frames = sum(1 for ln in lines if _frame(ln)[0] == YAW)
     assert code == 0 and s["agrees"] and s["mismatches"] == 0 and s["max_abs_dangle_rad"] == 0.0
+    assert s["verdict"] == "agrees"
     # every logged command is one cycle: one per yaw-rate frame, the final zero command, and a
     # watchdog cycle for each SENSORS_WATCHDOG_S the controller waited for the plant to start
     assert s["steps"] == s["commands_recorded"] == len(_command_lines(lines))
@@ -109,7 +110,7 @@ def test_altered_command_is_named(clean_log: Path, tmp_path: Path, capsys: pytes
     lines[i] = _with_payload(lines[i], C.encode(MSG_CMD, values, d.counter))  # a valid CRC: only the angle lies
     code, doc, _ = _replay(capsys, str(_write(tmp_path, lines)))
     s = doc["replays"][0]
-    assert code == 1 and not s["agrees"]
+    assert code == 1 and not s["agrees"] and s["verdict"] == "disagrees"
     assert s["first_mismatch"]["line"] == i + 1 and s["first_mismatch"]["frame_id"] == CMD
     assert s["first_mismatch"]["what"].startswith("angle") and s["mismatches"] == 1
     assert s["max_abs_dangle_rad"] == pytest.approx(1e-4, abs=2e-6)
@@ -328,3 +329,11 @@ def test_a_fault_matrix_rows_kept_log_replays_with_its_kept_calibration(tmp_path
     s = doc["replays"][0]
     assert code == 0 and s["agrees"], (err, s)
     assert s["commands_recorded"] > 1000
+
+
+def test_the_verdict_word_says_where_a_replay_stopped_judging() -> None:
+    from sim_plant.harness.replay_report import verdict
+
+    assert verdict(True, 0) == "agrees"
+    assert verdict(True, 927) == "agrees_up_to_a_late_cycle"  # mismatches left apart after a late cycle
+    assert verdict(False, 0) == verdict(False, 3) == "disagrees"

@@ -51,12 +51,24 @@ def _mismatch(m: Mismatch, times: dict[int, float]) -> dict[str, Any]:
     return {"line": m.line, "t_s": times.get(m.line), "bus_time_s": m.t, "frame_id": m.frame_id, "what": m.what}
 
 
+VERDICTS = ("agrees", "agrees_up_to_a_late_cycle", "disagrees")
+
+
+def verdict(agrees: bool, mismatches_apart: int) -> str:
+    """The replay's verdict in one word (``VERDICTS``): ``agrees`` alone would read as the whole
+    log where mismatches after a late cycle were left apart."""
+    if not agrees:
+        return "disagrees"
+    return "agrees_up_to_a_late_cycle" if mismatches_apart else "agrees"
+
+
 def summary(result: ReplayResult, impl: str) -> dict[str, Any]:
     """The replay's figures (JSON-ready, tidied: ``sim_plant.figures``)."""
     first, times = result.first, result.times
     late = result.late
     return tidy_figures({
-        "impl": impl, "log": str(result.log), "agrees": result.agrees, "trigger": result.settings.trigger,
+        "impl": impl, "log": str(result.log), "verdict": verdict(result.agrees, len(result.apart)),
+        "agrees": result.agrees, "trigger": result.settings.trigger,
         "rate_hz": result.settings.rate_hz, "frames": result.frames, "sensor_frames": result.sensor_frames,
         "steps": len(result.steps), "commands_recorded": sum(1 for s in result.steps if s.recorded is not None),
         "statuses_recorded": result.statuses_recorded, "mismatches": len(result.mismatches),
@@ -85,10 +97,10 @@ def whatif_summary(w: WhatIf) -> dict[str, Any]:
 def text(s: dict[str, Any]) -> list[str]:
     """The report in lines: the verdict first, then the figures, the late cycles and the first
     mismatches."""
-    verdict = "agrees with the log" if s["agrees"] else "DISAGREES with the log"
-    if s["agrees"] and s["mismatches_apart"]:
-        verdict += f" up to line {s['apart_from_line']}, the late cycle no grouping of its frames reproduces"
-    lines = [f"replay ({s['impl']}) of {s['log']}: {verdict}",
+    said = {"agrees": "agrees with the log", "disagrees": "DISAGREES with the log",
+            "agrees_up_to_a_late_cycle": f"agrees with the log up to line {s['apart_from_line']}, the late cycle "
+            "no grouping of its frames reproduces"}[s["verdict"]]
+    lines = [f"replay ({s['impl']}) of {s['log']}: {said}",
              f"  frames {s['frames']}, sensor frames {s['sensor_frames']}, cycles {s['steps']}, recorded commands "
              f"{s['commands_recorded']}, status frames {s['statuses_recorded']} ({s['trigger']} trigger, "
              f"{s['rate_hz']:g} Hz)",
