@@ -229,3 +229,16 @@ def test_ctrl_c_in_an_offline_command_is_one_line(tmp_path: Path, monkeypatch: p
     assert main(["replay", str(log), "--out", str(tmp_path / "out")]) == 130
     assert capsys.readouterr().err.splitlines() == ["mrsteer: replay: interrupted; nothing written"]
     assert [p.name for p in tmp_path.iterdir()] == ["x.log"]
+
+
+def test_a_failed_output_leaves_no_directory_it_made(tmp_path: Path) -> None:
+    from firmware_py.platform.files import staged_directory
+
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(RuntimeError), staged_directory(tmp_path / "kept" / "new" / "deeper" / "out") as stage:
+        (stage / "half.csv").write_text("1,2\n")
+        raise RuntimeError("the run failed")
+    assert [p.name for p in tmp_path.rglob("*")] == ["kept"]  # its new parents gone, the old one kept
+    with staged_directory(tmp_path / "kept" / "new" / "out") as stage:
+        (stage / "whole.csv").write_text("1,2\n")
+    assert (tmp_path / "kept" / "new" / "out" / "whole.csv").read_text() == "1,2\n"

@@ -51,12 +51,19 @@ def staged_directory(target: Path) -> Iterator[Path]:
     removed and ``target`` is as it was.  Nothing is moved into place before the whole set exists."""
     if target.exists() and not target.is_dir():
         raise ValueError(f"--out {target} exists and is not a directory")
+    created = [d for d in (target.parent, *target.parent.parents) if not d.exists()]  # deepest first
     target.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     try:
         yield stage
         target.mkdir(exist_ok=True)
         _swap_in(stage, target)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        for d in created:  # the parents made for it, while still empty: the tree as it was
+            with contextlib.suppress(OSError):
+                d.rmdir()
+        raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 
