@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
 
 import numpy as np
@@ -14,6 +15,13 @@ from numpy.polynomial import polynomial as P
 os.environ["MRSTEER_BUS_DIR"] = tempfile.mkdtemp(prefix="mrsteer-bus-test-")
 # The tests choose their own run lengths: a user's MRSTEER_QUICK=1 (README) must not change them.
 os.environ.pop("MRSTEER_QUICK", None)
+
+
+def ctrl_c_reaches_it() -> None:
+    """``preexec_fn`` of a child a test interrupts with SIGINT: SIGINT at its default there, as a
+    terminal's Ctrl-C finds it.  A suite started in the background of a script (``cmd &``) runs
+    with SIGINT ignored, children inherit that, and an ignoring child would never stop."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def polymul(*polys: tuple[float, ...] | np.ndarray) -> np.ndarray:

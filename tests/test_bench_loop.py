@@ -14,6 +14,7 @@ from typing import Any, Iterator
 
 import pytest
 
+from conftest import ctrl_c_reaches_it
 from mrsteer_bench import loop_compare as lc, machine_state as ms
 from mrsteer_bench.cpu_load import CpuLoad
 from mrsteer_bench.loop import loop_timing, rt_loop_lateness
@@ -299,7 +300,7 @@ def _children(pid: int) -> list[int]:
 def test_interrupted_bench_stops_the_load_and_its_nodes() -> None:
     proc = subprocess.Popen([sys.executable, "-m", "mrsteer_bench", "--only", "loop", "--loop-seconds", "0.5",
                              "--load-procs", "1"], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=ctrl_c_reaches_it)
     assert proc.stderr is not None
     try:
         for line in proc.stderr:  # the loaded condition has started once its first run is announced

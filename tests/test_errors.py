@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import mrsteer_dbc
+from conftest import ctrl_c_reaches_it
 from firmware_py import calibration_file
 from firmware_py.calibration import RATE_CALIBRATIONS, ControllerConfig
 from firmware_py.controller.options import RateError, calibration_for_rate
@@ -169,7 +170,8 @@ def _interrupt(tmp_path: Path, argv: list[str], ready: str, kids: int) -> tuple[
     it; its exit status, the stderr after the signal and the children it had."""
     proc = subprocess.Popen([sys.executable, "-m", "mrsteer_cli", *argv], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path,
-                            env={**os.environ, "MRSTEER_BUS_DIR": str(tmp_path / "bus")})
+                            env={**os.environ, "MRSTEER_BUS_DIR": str(tmp_path / "bus")},
+                            preexec_fn=ctrl_c_reaches_it)
     assert proc.stderr is not None
     try:
         for line in proc.stderr:

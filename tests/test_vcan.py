@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import MATRIX_RERUN_MAX, lockstep_traffic, matrix_with_one_rerun
+from conftest import MATRIX_RERUN_MAX, ctrl_c_reaches_it, lockstep_traffic, matrix_with_one_rerun
 from firmware_py.platform.bus_open import vcan_available
 from mrsteer_dbc import names
 
@@ -56,7 +56,7 @@ class Candump:
         self.path = path
         self._out = path.open("w")
         self.proc = subprocess.Popen(["stdbuf", "-oL", _tool("candump"), *(["-L"] if log_format else []), "vcan0"],
-                                     stdout=self._out, stderr=subprocess.PIPE)
+                                     stdout=self._out, stderr=subprocess.PIPE, preexec_fn=ctrl_c_reaches_it)
         deadline = time.monotonic() + 120
         while not any(probe in path.read_text() for probe in ("7FF#", "7FF   [1]")):
             assert self.proc.poll() is None, self.proc.stderr.read()
