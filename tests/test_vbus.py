@@ -209,3 +209,40 @@ def test_frames_sent_just_before_shutdown_are_not_lost(broker, channel: str) -> 
     assert len(got) == 60
     rx.shutdown()
     noisy.shutdown()
+
+
+def test_a_receive_timeout_holds_while_another_thread_sends(broker, channel: str) -> None:
+    """The fault bridge receives on a bus in one thread while another sends on it: a send must
+    not turn the receiver's timed wait into one that never returns (it hung a matrix row)."""
+    bus = _bus(channel)
+    sending = threading.Event()
+    sending.set()
+    waits: list[float] = []
+
+    def receive() -> None:  # nobody else is on the channel: every wait ends by its timeout
+        while len(waits) < 200:
+            t0 = time.monotonic()
+            assert bus.recv(0.005) is None
+            waits.append(time.monotonic() - t0)
+
+    def send() -> None:
+        msg = can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False)
+        while sending.is_set():
+            bus.send(msg)  # no timeout: a blocking send
+
+    sender, receiver = threading.Thread(target=send, daemon=True), threading.Thread(target=receive, daemon=True)
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads between any two calls: the race, every few frames
+    try:
+        sender.start()
+        receiver.start()
+        time.sleep(0.5)
+        sending.clear()
+        sender.join(10)
+        receiver.join(30)
+        assert not receiver.is_alive(), f"a receive with a 5 ms timeout still waiting after {len(waits)} returned"
+        assert len(waits) == 200
+    finally:
+        sys.setswitchinterval(interval)
+        sending.clear()
+        bus.shutdown()

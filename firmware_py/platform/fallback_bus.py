@@ -24,6 +24,7 @@ Use it as ``can.Bus(interface="mrsteer", channel="mrsteer0")`` (registered throu
 from __future__ import annotations
 
 import collections
+import select
 import socket
 import time
 from typing import Any
@@ -61,11 +62,18 @@ class FallbackBus(BusABC):
                 if not packet:
                     raise CanInitializationError("fallback bus: the broker closed the connection")
                 if packet == b"A":
-                    return
+                    break
                 self._early.append(packet)  # a frame fanned out to us before the ack
         except socket.timeout:
             self._sock.close()
             raise CanInitializationError(f"fallback bus: no answer from the broker on {self._path}") from None
+        # Blocking from here on, for good: every wait is per call (``poll``), because one thread
+        # may receive while another sends (the fault bridge), and a timeout set on the socket by
+        # one would change the other's wait (a receive that never returned).
+        self._sock.settimeout(None)
+        self._readable, self._writable = select.poll(), select.poll()  # one per direction: one thread each
+        self._readable.register(self._sock, select.POLLIN)
+        self._writable.register(self._sock, select.POLLOUT)
 
     def _connect(self, autostart: bool, timeout: float) -> socket.socket:
         deadline = time.monotonic() + timeout
@@ -86,11 +94,18 @@ class FallbackBus(BusABC):
                 raise CanInitializationError(f"fallback-bus broker did not come up on {self._path}")
             time.sleep(0.02)
 
-    def _send_raw(self, packet: bytes) -> None:
+    def _send_raw(self, packet: bytes, timeout: float | None = None) -> None:
+        deadline = None if timeout is None else time.monotonic() + timeout
         try:
-            self._sock.send(packet)
-        except socket.timeout:
-            raise CanOperationError("fallback bus: send timed out") from None
+            while True:
+                try:
+                    self._sock.send(packet, 0 if deadline is None else socket.MSG_DONTWAIT)
+                    return
+                except BlockingIOError:
+                    assert deadline is not None
+                    left = deadline - time.monotonic()
+                    if left <= 0.0 or not self._writable.poll(left * 1e3):
+                        raise CanOperationError("fallback bus: send timed out") from None
         except OSError as exc:
             raise CanOperationError(f"fallback bus: broker connection lost ({exc.strerror or exc})") from None
 
@@ -99,21 +114,17 @@ class FallbackBus(BusABC):
             raise CanOperationError("fallback bus: send on a closed bus")
         if len(msg.data or b"") > 64:
             raise CanOperationError("fallback bus: more than 64 data bytes")
-        self._sock.settimeout(timeout)
-        self._send_raw(pack_frame(msg))
+        self._send_raw(pack_frame(msg), timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[Message | None, bool]:
         if self._is_shutdown:
             raise CanOperationError("fallback bus: receive on a closed bus")
         if self._early:
             return unpack_frame(self._early.popleft(), self.channel), False
-        self._sock.settimeout(timeout)
         try:
+            if timeout is not None and not self._readable.poll(max(timeout, 0.0) * 1e3):
+                return None, False
             packet = self._sock.recv(MAX_PACKET)
-        except socket.timeout:
-            return None, False
-        except BlockingIOError:
-            return None, False
         except OSError as exc:
             raise CanOperationError(f"fallback bus: broker connection lost ({exc.strerror or exc})") from None
         if not packet:
