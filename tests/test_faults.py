@@ -211,9 +211,18 @@ def test_controller_receive_path_survives_any_frame_sequence(frames) -> None:
         bus.shutdown()
 
 
+# The Python controller's matrix runs at 200 Hz (its calibration for that rate) here: at 500 Hz,
+# six Python processes on this 2-core machine leave the plant late in up to 14 % of its steps,
+# and a stall past a sensor's timeout, in paper-fig9's disturbance, latches the monitor's
+# OUTSIDE_MODEL (issue 53: a false alarm under load, rerun or not).  The C node's matrix runs at
+# 500 Hz (test_c_node.py); `mrsteer faults run` at 500 Hz with Python is run by hand.
+PYTHON_MATRIX_RATE_HZ = 200.0
+
+
 @pytest.mark.slow
 def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
-    results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep), ROWS, tmp_path)
+    setup = Setup(rate_hz=PYTHON_MATRIX_RATE_HZ)
+    results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep, setup=setup), ROWS, tmp_path)
     table = format_table(results)
     assert all(r.ok for r in results), table
     assert len(results) == len(ROWS) >= 20
