@@ -253,6 +253,7 @@ def test_a_bad_calibration_file_is_one_line_naming_the_line(c_node, tmp_path: Pa
     assert needle in proc.stderr
 
 
+@pytest.mark.slow  # two more whole lockstep pairs: the bit-for-bit pairs above run in make test
 def test_lockstep_with_another_calibration_and_hand_gains_equals_python(c_node, tmp_path: Path) -> None:
     """A golden-vector calibration (ZOH, 200 Hz, M = 1) reaches both controllers as the file the
     runner writes (``--calibration``); and the C node's own --k/--tau mean the Python plain law."""

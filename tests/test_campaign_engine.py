@@ -143,7 +143,7 @@ fault_size = {{ uniform = [0.5, 4.0] }}
 """
 
 
-@pytest.mark.parametrize("seed", [3, 41])
+@pytest.mark.parametrize("seed", [3, pytest.param(41, marks=pytest.mark.slow)])
 def test_batch_equals_scalar_with_sampled_sensor_faults(seed: int) -> None:
     """Sampled sensor faults of every channel and kind: the error each makes, its detection,
     the yaw rate the command asks while faulted and the alarms before the onset, against the

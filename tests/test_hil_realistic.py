@@ -68,11 +68,11 @@ def test_the_actuators_applied_angle_lags_the_command_by_20_ms(tmp_path: Path) -
 
 @pytest.fixture(scope="module")
 def side_wind(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """side-wind, 1 s, twice with the scenario's seed (0) and once with seed 1."""
+    """side-wind, 0.5 s, twice with the scenario's seed (0) and once with seed 1."""
     outs = {}
     for tag, extra in (("a", ()), ("b", ("--seed", "0")), ("c", ("--seed", "1"))):
         outs[tag] = tmp_path_factory.mktemp(f"wind-{tag}")
-        _run(outs[tag], "--scenario", "side-wind", "--duration", "1.0", *extra)
+        _run(outs[tag], "--scenario", "side-wind", "--duration", "0.5", *extra)
     return outs
 
 
@@ -86,10 +86,10 @@ def _payloads(out: Path) -> list[str]:
 
 def test_sensor_noise_is_seeded_on_the_bus(side_wind: dict[str, Path]) -> None:
     a, b, c = (_payloads(side_wind[k]) for k in "abc")
-    assert len(a) > 1000 and a == b and a != c
+    assert len(a) > 500 and a == b and a != c
 
 
-@pytest.mark.parametrize("name,v", [("split-mu", 25.0), ("blow-out", 30.0)])
+@pytest.mark.parametrize("name,v", [pytest.param("split-mu", 25.0, marks=pytest.mark.slow), ("blow-out", 30.0)])
 def test_the_realistic_builtins_run_in_lockstep(tmp_path: Path, name: str, v: float) -> None:
     s = _run(tmp_path, "--scenario", name, "--duration", "1.2")
     assert (s["scenario"], s["v"], s["plant"], s["actuator"]) == (name, v, "nonlinear", "order 1, 20 ms")
