@@ -91,11 +91,15 @@ def test_lockstep_c_node_with_secoc_equals_python(c_node, tmp_path: Path) -> Non
     assert py.summary["peak_aux_steer_deg"] == c.summary["peak_aux_steer_deg"]
 
 
-def _secoc_check(lines: list[str]) -> list[str]:
+def _secoc_check_output(lines: list[str]) -> str:
     exe = ROOT / "ports" / "c" / "build" / "secoc_check"
     proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    return proc.stdout.split()
+    return proc.stdout
+
+
+def _secoc_check(lines: list[str]) -> list[str]:
+    return _secoc_check_output(lines).split()
 
 
 def _setup_key() -> str:
@@ -119,11 +123,8 @@ def test_a_keyed_c_node_sends_no_command_before_the_first_sync(c_node) -> None:
     key = bytes(range(16))
     verifier = mrsteer_dbc.secoc.CommandVerifier(contract, key)
     sync = verifier.next_sync()
-    exe = ROOT / "ports" / "c" / "build" / "secoc_check"
     script = [f"key {key.hex()}", *["ctl"] * 5, f"rx {contract.frame_id('MRS_SecOCSync'):X} {sync.hex()}", "ctl"]
-    proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0, proc.stderr
-    out = proc.stdout.splitlines()
+    out = _secoc_check_output(script).splitlines()  # a line per command: a ctl that sent nothing is empty
     cmd_id = f"{contract.frame_id('MRS_AuxSteerCmd'):03X}#"
     assert out[0] == "ok" and out[6] == "1"
     assert not any(cmd_id in line for line in out[1:6])  # withheld: the actuator could not verify it

@@ -43,16 +43,33 @@ def write_atomic(path: Path, data: str | bytes) -> None:
     write_files(path.parent, {path.name: data})
 
 
+def make_dirs(path: Path) -> list[Path]:
+    """Create ``path`` and its missing parents; the ones created, deepest first (for
+    ``remove_empty``: an output that failed leaves the tree as it was)."""
+    missing = [d for d in (path, *path.parents) if not d.exists()]
+    path.mkdir(parents=True, exist_ok=True)
+    return missing
+
+
+def remove_empty(created: list[Path]) -> None:
+    """Remove the directories ``make_dirs`` created, deepest first, while they are empty."""
+    for d in created:
+        try:
+            d.rmdir()  # only if empty
+        except OSError:
+            break  # its parents hold it
+
+
 @contextlib.contextmanager
 def staged_directory(target: Path) -> Iterator[Path]:
     """A scratch directory beside ``target`` to make a set of outputs in.  When the block ends
     without an error, each of its entries replaces ``target``'s entry of that name (others in
     ``target`` are kept; ``target`` is created if need be); on an error, Ctrl-C included, it is
-    removed and ``target`` is as it was.  Nothing is moved into place before the whole set exists."""
+    removed and ``target`` is as it was (the parents made for it removed).  Nothing is moved into
+    place before the whole set exists."""
     if target.exists() and not target.is_dir():
         raise ValueError(f"--out {target} exists and is not a directory")
-    created = [d for d in (target.parent, *target.parent.parents) if not d.exists()]  # deepest first
-    target.parent.mkdir(parents=True, exist_ok=True)
+    created = make_dirs(target.parent)
     stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     try:
         yield stage
@@ -60,12 +77,9 @@ def staged_directory(target: Path) -> Iterator[Path]:
         _swap_in(stage, target)
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
-        for d in created:  # the parents made for it, while still empty: the tree as it was
-            with contextlib.suppress(OSError):
-                d.rmdir()
+        remove_empty(created)
         raise
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
+    shutil.rmtree(stage, ignore_errors=True)
 
 
 def _swap_in(stage: Path, target: Path) -> None:

@@ -28,6 +28,7 @@ from typing import Callable
 from mrsteer_dbc import secoc as secoc_mod
 from firmware_py.platform import bus_open
 from firmware_py.platform.cli import output_dir_problem
+from firmware_py.platform.files import make_dirs, remove_empty
 from firmware_py import model_regulator as mr
 from firmware_py.controller.node import DEFAULT_RATE_HZ
 from sim_plant.car import scenario as scn
@@ -88,7 +89,7 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
     notices: list[str] = []
     iface, channel = bus_open.resolve(cfg.interface, cfg.channel, notice=notices.append)
     bus_open.check(iface, channel, between_processes=True)  # BusOpenError: no such bus here, before anything
-    created = _make_dirs(cfg.out)
+    created = make_dirs(cfg.out)
     for line in notices:
         say(line)
     work = Path(tempfile.mkdtemp(prefix=".hil-", dir=cfg.out))
@@ -164,13 +165,6 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         _clean_up(procs, work, None)
 
 
-def _make_dirs(out: Path) -> list[Path]:
-    """Create ``out`` and its missing parents; the ones created, deepest first."""
-    missing = [d for d in (out, *out.parents) if not d.exists()]
-    out.mkdir(parents=True, exist_ok=True)
-    return missing
-
-
 def _clean_up(procs: list[Proc], work: Path, created: list[Path] | None) -> None:
     """Stop every process (the last started first), remove the work directory and, given
     ``created``, each directory the run created that is still empty."""
@@ -178,10 +172,6 @@ def _clean_up(procs: list[Proc], work: Path, created: list[Path] | None) -> None
         stop(p)
     procs.clear()
     shutil.rmtree(work, ignore_errors=True)
-    for d in created or ():
-        try:
-            d.rmdir()  # only if empty
-        except OSError:
-            break
+    remove_empty(created or [])
 
 

@@ -51,12 +51,10 @@ def _mismatch(m: Mismatch, times: dict[int, float]) -> dict[str, Any]:
     return {"line": m.line, "t_s": times.get(m.line), "bus_time_s": m.t, "frame_id": m.frame_id, "what": m.what}
 
 
-VERDICTS = ("agrees", "agrees_up_to_a_late_cycle", "disagrees")
-
-
 def verdict(agrees: bool, mismatches_apart: int) -> str:
-    """The replay's verdict in one word (``VERDICTS``): ``agrees`` alone would read as the whole
-    log where mismatches after a late cycle were left apart."""
+    """The replay's verdict in one word, ``agrees``, ``agrees_up_to_a_late_cycle`` or
+    ``disagrees``: ``agrees`` alone would read as the whole log where mismatches after a late
+    cycle were left apart."""
     if not agrees:
         return "disagrees"
     return "agrees_up_to_a_late_cycle" if mismatches_apart else "agrees"
