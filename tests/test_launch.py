@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -106,3 +107,21 @@ def test_an_external_controller_gets_the_controllers_arguments_after_its_command
     assert p.popen.wait(10) == 0 and p.popen.stdout.read() == b"hello\n"
     p.popen.stdout.close()
     p.stderr.close()
+
+
+def test_the_c_node_builds_from_a_read_only_tree_where_it_is_up_to_date() -> None:
+    """The real-SocketCAN VM shares the tree read-only and builds nothing (the host did): asking for
+    the C node there must take no lock or file inside the tree.  Run in a private mount namespace
+    where ``ports/c`` is bound read-only, as the guest sees it."""
+    launch.build_c_node()  # up to date on the host first, as tools/vcan-vm-test leaves it
+    port = str(launch.PORT_DIR)
+    probe = ("from sim_plant.harness import launch; "
+             "print(launch.build_c_node())")
+    script = (f"mount --bind {port} {port} && mount -o remount,bind,ro {port} || exit 77; "
+              f"{sys.executable} -c '{probe}'")
+    proc = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, timeout=120,
+                          cwd=launch.PORT_DIR.parents[1])
+    if proc.returncode == 77 or "unshare failed" in proc.stderr:
+        pytest.skip(f"no private mount namespace here: {proc.stderr.strip()[-200:]}")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == str(launch.C_NODE)

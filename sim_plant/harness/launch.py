@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import hashlib
 import json
 import shlex
 import shutil
 import subprocess
 import sys
+import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -74,12 +76,14 @@ class LaunchError(RuntimeError):
     """A controller program cannot be had (the C node does not build, a command is empty)."""
 
 
-MAKE_LOCK = PORT_DIR / ".make.lock"
+# In the temporary directory, not the tree: the tree may be read-only (the real-SocketCAN VM
+# shares it so; the node, built on the host, is up to date there and make writes nothing).
+MAKE_LOCK = Path(tempfile.gettempdir()) / f"mrsteer-make-{hashlib.sha256(bytes(PORT_DIR)).hexdigest()[:16]}.lock"
 
 
 def make_port(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
-    """``make -s -C ports/c ARGS``, one at a time across processes (an flock on ``MAKE_LOCK``):
-    two builds in one tree at once (parallel test workers, two runs) write the same files."""
+    """``make -s -C ports/c ARGS``, one at a time across processes (an flock on ``MAKE_LOCK``, one
+    per tree): two builds in one tree at once (parallel test workers, two runs) write the same files."""
     with MAKE_LOCK.open("a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         return subprocess.run(["make", "-s", "-C", str(PORT_DIR), *args], capture_output=True, text=True,
