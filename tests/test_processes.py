@@ -96,3 +96,34 @@ def test_a_bus_process_hung_at_sigterm_leaves_its_threads_stacks_before_it_is_ki
     assert p.popen.returncode == -signal.SIGKILL
     err = (tmp_path / "hung.stderr").read_text()
     assert "most recent call first" in err and "in hang" in err, err
+
+
+@pytest.mark.parametrize("how", ["spawn", "spawn_preloaded"])
+def test_a_ctrl_c_that_lands_during_a_fork_is_not_lost(tmp_path: Path, how: str) -> None:
+    """CPython runs at-fork hooks (logging registers one) in Python and drops, with "Exception
+    ignored", a KeyboardInterrupt raised inside one: a Ctrl-C landing there was lost and the run
+    went on.  Here a hook sends SIGINT at exactly that moment; the start must raise it."""
+    script = f"""
+import os, signal, sys
+from pathlib import Path
+from sim_plant.harness import processes
+signal.signal(signal.SIGINT, signal.default_int_handler)
+def ctrl_c_now():
+    os.kill(os.getpid(), signal.SIGINT)
+    sum(range(1000))  # bytecode after the signal: Python handlers run here, inside the hook
+os.register_at_fork(after_in_parent=ctrl_c_now)
+work = Path({str(tmp_path)!r})
+try:
+    if {how!r} == "spawn":
+        p = processes.spawn("node", [sys.executable, "-c", "pass"], work, dict(os.environ))
+    else:
+        p = processes.spawn_preloaded("node", "builtins:len", [], work, dict(os.environ))
+except KeyboardInterrupt:
+    print("interrupted")
+    sys.exit(0)
+p.popen.wait()
+print("not interrupted")
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "interrupted", proc.stderr
+    assert "Exception ignored" not in proc.stderr

@@ -25,6 +25,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -43,7 +45,25 @@ class Proc:
     stderr: IO[bytes]
 
 
+# Held (blocked) in the supervisor while it forks: CPython runs at-fork hooks (logging's lock) in
+# Python, and a KeyboardInterrupt raised inside one is printed as "Exception ignored" and lost, so a
+# Ctrl-C that lands during a fork would be swallowed and the run go on.  Held, the signal waits and
+# is raised on the way out of the fork, in the supervisor's own code.
+HELD_DURING_FORK = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_DURING_FORK)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _pdeathsig() -> None:  # runs in the child between fork and exec
+    # The mask survives fork and exec: the node must get the signals the supervisor held.
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, HELD_DURING_FORK)
     os.setpgid(0, 0)  # out of the terminal's foreground group: Ctrl-C is the supervisor's to handle
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
@@ -54,8 +74,10 @@ def _pdeathsig() -> None:  # runs in the child between fork and exec
 
 def spawn(name: str, argv: list[str], work: Path, env: dict[str, str], stdout: bool = False) -> Proc:
     err = open(work / f"{name.replace(' ', '_')}.stderr", "w+b")
-    popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE if stdout else subprocess.DEVNULL,
-                             stderr=err, env=env, preexec_fn=_pdeathsig)
+    with _signals_held():
+        popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL,
+                                 stdout=subprocess.PIPE if stdout else subprocess.DEVNULL,
+                                 stderr=err, env=env, preexec_fn=_pdeathsig)
     return Proc(name, popen, err)
 
 
@@ -119,7 +141,8 @@ def spawn_preloaded(name: str, entry: str, argv: list[str], work: Path, env: dic
     out_path = f"{stem}.stdout" if stdout else os.devnull
     out = open(out_path, "w+b") if stdout else None
     process = _FORK.Process(target=_run_node, args=(entry, argv, env, out_path, err.name), name=name)
-    process.start()
+    with _signals_held():
+        process.start()
     return Proc(name, _Forked(process, out), err)
 
 
