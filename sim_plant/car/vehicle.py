@@ -21,7 +21,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import expm
 
 # Section 3: "a mid-sized passenger car that is available in the literature".
 PAPER_L_F = 1.25  # m, front axle to CG
@@ -150,6 +149,10 @@ def zoh_discretize(A: np.ndarray, B: np.ndarray, ts: float) -> tuple[np.ndarray,
     """Exact zero-order-hold discretisation: expm([[A, B], [0, 0]] ts) = [[Phi, Gamma], [0, I]]."""
     if not (math.isfinite(ts) and ts > 0.0):
         raise ValueError(f"sample time must be positive and finite, got {ts!r}")
+    # Here, not at the top: scipy.linalg costs every importer of the car (the command line, the
+    # nodes) 0.3 s on this host and half a minute under the CI's emulated VM.
+    from scipy.linalg import expm
+
     n, m = B.shape
     aug = np.zeros((n + m, n + m))
     aug[:n, :n] = A

@@ -23,7 +23,6 @@ from collections import deque
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import expm
 
 from firmware_py import model_regulator as mr
 from sim_plant.car.actuator_dynamics import PositionActuator
@@ -33,6 +32,15 @@ from sim_plant.car.sensors import SensorConfig, Sensors
 from sim_plant.car.vehicle import VehicleParams, state_space, zoh_discretize
 from sim_plant.offline.discrete_loop import IDEAL, discrete_loop_matrix, discrete_loop_poles, inverse_kn
 from sim_plant.offline.loop_plant import LoopModels, sampled_plant
+
+
+# scipy.linalg on first use, not at import: the command line imports this module for its names
+# (see sim_plant.car.vehicle.zoh_discretize).
+def expm(a: np.ndarray) -> np.ndarray:
+    from scipy.linalg import expm as scipy_expm
+
+    return scipy_expm(a)
+
 
 __all__ = ["CONTROLLERS", "Experiment", "Trace", "continuous_loop_poles", "discrete_loop_matrix",
            "discrete_loop_poles", "inverse_nominal_gain", "simulate_continuous", "simulate_discrete"]
