@@ -26,8 +26,11 @@ paper: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "not slow"
 
+# The slow tests that share the machine well run on both cores; then, one at a time, those that
+# need it to themselves (marker serial: realtime runs, the docs' blocks in their order).
 test-slow: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -m slow --durations=10
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "slow and not serial" --durations=10
+	$(VENV)/bin/python -m pytest -q -m "slow and serial" --durations=10
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

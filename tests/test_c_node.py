@@ -277,6 +277,7 @@ def test_lockstep_with_another_calibration_and_hand_gains_equals_python(c_node, 
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_fault_matrix_with_the_c_node_on_the_fallback_bus(c_node, tmp_path: Path) -> None:
     from sim_plant.harness.faults import ROWS, Setup, format_table, run_matrix
 

@@ -17,7 +17,7 @@ _RUNNABLE = [b for b in dc.all_blocks() if b.tag != "skip"]
 
 
 def _param(block: dc.Block) -> object:
-    return pytest.param(block, id=block.name, marks=[pytest.mark.slow])
+    return pytest.param(block, id=block.name, marks=[pytest.mark.slow, pytest.mark.serial])
 
 
 @pytest.fixture(scope="module")

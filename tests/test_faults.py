@@ -220,6 +220,7 @@ PYTHON_MATRIX_RATE_HZ = 200.0
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_fault_matrix_on_the_fallback_bus(tmp_path: Path) -> None:
     setup = Setup(rate_hz=PYTHON_MATRIX_RATE_HZ)
     results = matrix_with_one_rerun(lambda rows, keep: run_matrix(rows, keep=keep, setup=setup), ROWS, tmp_path)

@@ -239,6 +239,7 @@ def _timing_held(hil: dict) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_realtime_matches_within_five_percent(tmp_path: Path) -> None:
     # A gentler tuning that stays stable with the 1-3 samples of delay a free-running
     # Python loop sees (the paper's K=10, tau=6 ms needs exactly one sample at 1 kHz).

@@ -245,6 +245,7 @@ def test_c_port_replays_the_clean_log_to_the_same_commands(clean_log: Path,
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_realtime_log_replays_on_the_clock_trigger_and_a_dropped_command_shows(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # The wheel is held in paper-fig9, so a driver-angle frame a late cycle may or may not have

@@ -61,7 +61,7 @@ def test_the_car_clock_divides_wall_time_from_one_reference() -> None:
     assert clock.frames([Frame(ref + 1.0, 7, b"x")]) == [Frame(pytest.approx(ref + 0.2), 7, b"x")]
 
 
-@pytest.mark.parametrize("impl", ["python", pytest.param("c", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("impl", ["python", pytest.param("c", marks=[pytest.mark.slow, pytest.mark.serial])])
 def test_a_row_in_slow_motion_is_judged_as_in_real_time(tmp_path: Path, impl: str) -> None:
     """The burst of lost yaw-rate frames at 2.5x slow motion: the plant took 2.5x its scenario in
     wall time, the controller ran one cycle per car step, and the row's verdict (FAULT within
