@@ -129,13 +129,13 @@ def _plain(x: Any) -> Any:
 
 def build(out: Path) -> dict[str, Any]:
     """The figures and index.html in ``out/report``; the summary."""
+    summary = summarise(out)  # a directory that is no campaign's is refused before plotting loads
+    _, cols = read(out)
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    summary = summarise(out)
-    _, cols = read(out)
     rep = out / "report"
     files: dict[str, bytes | str] = {}
     for name in summary["calibrations"]:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.stats import qmc
 
 from sim_plant.campaign.params import INDEX, NOISE_SEED, SampleSet, noise_seed
 from sim_plant.campaign.spec import Campaign
@@ -28,6 +27,10 @@ def unit_design(c: Campaign, rows: np.ndarray) -> np.ndarray:
     if d == 0:
         return np.zeros((rows.size, 0))
     if c.sampling == "lhs":
+        # Here, not at the top: scipy.stats costs 1.5 s to import, and most importers of the
+        # campaign package (report, export, the command line) never sample.
+        from scipy.stats import qmc
+
         full = qmc.LatinHypercube(d=d, seed=np.random.default_rng(c.seed)).random(c.samples)
         return full[rows]
     out = np.empty((rows.size, d))
