@@ -367,6 +367,10 @@ def test_secured_rows_authenticate_every_row_and_drop_the_e2e_only_ones() -> Non
     assert len(rows) == len(F.ROWS) - 2
 
 
+# A realtime row at 500 Hz judged on the wall clock: beside the other test worker the plant was
+# late in 364 of 1301 steps and the monitor latched OUTSIDE_MODEL (issue 53's timing false alarm).
+@pytest.mark.slow
+@pytest.mark.serial
 def test_faults_run_secoc_judges_a_row_with_the_sensor_frames_authenticated(capsys: pytest.CaptureFixture[str]) -> None:
     assert F.main(["run", "--secoc", "--only", "yaw-rate frames replayed", "--json"]) == 0
     (result,) = json.loads(capsys.readouterr().out)
