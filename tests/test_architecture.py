@@ -40,7 +40,7 @@ def test_every_package_is_placed_in_a_layer() -> None:
             assert pkg in named, f"{pkg} is in no layers contract"
 
 
-PORTING_REFERENCE = ("model_regulator", "calibration", "calibration_file", "plausibility", "authority")
+PORTING_REFERENCE = ("model_regulator", "calibration", "calibration_file", "plausibility", "authority", "cycle")
 
 
 @pytest.mark.parametrize("module", PORTING_REFERENCE)

@@ -64,6 +64,7 @@ import can
 
 import mrsteer_dbc
 from firmware_py import authority as au
+from firmware_py import cycle as cy
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from firmware_py.controller.inputs import Input
@@ -126,12 +127,10 @@ class ControllerNode:
                        yaw_rate_max=c.signal_range(MSG_YAW, SIG_YAW_RATE)[1],
                        speed_max=c.signal_range(MSG_SPEED, SIG_SPEED)[1],
                        aux_limit=min(config.controller.aux_limit, c.signal_range(MSG_CMD, SIG_CMD_ANGLE)[1]))
-        self.coeffs = mr.configure(ctrl)
-        self.state = mr.State()
-        self.monitor_coeffs = pl.configure(pl.PlausibilityConfig(ts=period))
-        self.monitor = pl.MonitorState()
-        self.authority_coeffs = au.configure_authority(au.AuthorityConfig(ts=period, u_max=ctrl.aux_limit))
-        self.authority = au.AuthorityState()
+        self.cycle_coeffs = cy.configure(ctrl, pl.PlausibilityConfig(ts=period),
+                                         au.AuthorityConfig(ts=period, u_max=ctrl.aux_limit))
+        self.cycle_state = cy.CycleState()
+        self._cycle_in = cy.CycleInputs()
 
         def limit(name: str, cycles: int = config.timeout_cycles) -> int:
             """``cycles`` of the message's own cycle time, in controller periods (rounded up; the
@@ -177,9 +176,6 @@ class ControllerNode:
         self.status_every = max(1, int(round(status_cycle / period)))
         self.stats = LoopStats()
         self.cause = 0
-        self.command = 0.0  # the angle sent last: what acts on the car during the next period
-        self.reported_state = mr.STATUS_INACTIVE  # model_regulator.reported_state, sent last
-        self.plausibility = 0  # the monitor's CtrlStatus_Plausibility bits
         self._max_lateness = 0.0
         self._running = True
         self._was_fault = False
@@ -189,6 +185,46 @@ class ControllerNode:
         # the same step), and whether the monitor has yet to step over that redundant sample.
         self._steer_at_redundant = math.nan
         self._redundant_unstepped = False
+
+    # The cycle's pieces and what it leaves, by the names the node's readers use.
+    @property
+    def coeffs(self) -> mr.Coefficients:
+        return self.cycle_coeffs.law
+
+    @property
+    def monitor_coeffs(self) -> pl.MonitorCoefficients:
+        return self.cycle_coeffs.monitor
+
+    @property
+    def authority_coeffs(self) -> au.AuthorityCoefficients:
+        return self.cycle_coeffs.authority
+
+    @property
+    def state(self) -> mr.State:
+        return self.cycle_state.law
+
+    @property
+    def monitor(self) -> pl.MonitorState:
+        return self.cycle_state.monitor
+
+    @property
+    def authority(self) -> au.AuthorityState:
+        return self.cycle_state.authority
+
+    @property
+    def command(self) -> float:
+        """The angle sent last: what acts on the car during the next period."""
+        return self.cycle_state.command
+
+    @property
+    def plausibility(self) -> int:
+        """The monitor's CtrlStatus_Plausibility bits."""
+        return self.cycle_state.plausibility
+
+    @property
+    def reported_state(self) -> int:
+        """``model_regulator.reported_state``, sent last."""
+        return self.cycle_state.reported
 
     # ---------------------------------------------------------------- receive
 
@@ -318,41 +354,33 @@ class ControllerNode:
             inp.age += 1
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
-        yaw_2 = math.nan if math.isnan(values[1]) else self._yaw.extra[0]  # NaN: SNA, no element
-        bits = self.plausibility  # held between yaw-rate samples
-        steer = self.monitor_driver_angle(values[0])  # the first step's: a new redundant sample's
+        i = self._cycle_in
+        i.delta_driver, i.yaw_rate, i.speed = values
+        i.lat_accel, i.delta_driver_redundant, i.speed_redundant = lat, steer_2, speed_2
+        i.yaw_rate_redundant = math.nan if math.isnan(values[1]) else self._yaw.extra[0]  # NaN: SNA, no element
+        i.monitor_steps = steps
+        i.monitor_driver = self.monitor_driver_angle(values[0])  # the first step's: a new redundant sample's
+        i.starting = self.starting
         if steps:
             self._redundant_unstepped = False
-        for _ in range(steps):  # a sample lost on the way is held at the newest values
-            bits = pl.monitor_step(self.monitor_coeffs, self.monitor, steer, steer_2, values[1], lat,
-                                   values[2], self.command, yaw_2, speed_2)
-            steer = values[0]
-        # before the law: the monitor's suspicion of the yaw rate holds the law's command
-        u = mr.step(self.coeffs, self.state, values[0], values[1], values[2],
-                    (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)
-        if self.state.fault_flags and not cause:
+        u = cy.step(self.cycle_coeffs, self.cycle_state, i)
+        law = self.cycle_state.law
+        if law.fault_flags and not cause:
             cause |= CAUSE_RANGE
-        if self.state.status == mr.STATUS_INACTIVE and not cause:
+        if law.status == mr.STATUS_INACTIVE and not cause:
             cause |= CAUSE_LOW_SPEED
         if self.signer is not None:
             self._sync_age += 1
             if self._sync_age > self.sync_limit or not self.signer.synced:
                 cause |= CAUSE_AUTH
-        # a pair check's fault (yaw rate or steering) is found while its command builds: removed at
-        # the limiter's rate bound, not faded
-        u = au.authority_step(self.authority_coeffs, self.authority, u, bits,
-                              self.monitor.flags & pl.CUT_CHECKS, self.monitor.flags & pl.FADE_CHECKS)
-        if bits & pl.PLAUS_FAULT:
+        if self.plausibility & pl.PLAUS_FAULT:
             cause |= CAUSE_PLAUSIBILITY
-        state = mr.reported_state(self.state.status, bits, self.starting)
+        state = self.reported_state
         fault = state == mr.STATUS_FAULT
         if fault and not self._was_fault:
             self.stats.faults_entered += 1
         self._was_fault = fault
         self.cause = cause
-        self.plausibility = bits
-        self.reported_state = state
-        self.command = u
         self._send_command(u, state)
         self.stats.cycles += 1
         if self.stats.cycles % self.status_every == 0:

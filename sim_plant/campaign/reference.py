@@ -16,9 +16,8 @@ with the bus taken out:
   period late, ``MRS_CtrlStatus`` every 50 periods, its plausibility bits reaching the actuator
   two steps after they were computed (the plant reads the frame while it waits for the next
   command, after that step's command handling);
-* the controller: ``bits = monitor_step(mc, ms, d, d2, r, lat, v, previous_command, r_2, v_2)``,
-  ``u = step(d, r, v, ms.flags & SUSPECT_CHECKS)``,
-  ``u = authority_step(ac, as, u, bits, flags & CUT_CHECKS, flags & FADE_CHECKS)``; the state the
+* the controller: the node's cycle (``firmware_py.cycle``: one monitor step per period, the law
+  held by the monitor's suspicion, the authority limiter) on the held samples; the state the
   node reports is FAULT on ``step()``'s FAULT or ``PLAUS_FAULT``, else DEGRADED on
   ``PLAUS_DEGRADED``, else ``step()``'s (``reported_fault``, ``reported_saturated``).
 
@@ -39,6 +38,7 @@ import numpy as np
 
 import mrsteer_dbc
 from firmware_py import authority as au
+from firmware_py import cycle as cy
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from mrsteer_dbc.names import MSG_CMD, MSG_STATUS, SIG_CMD_ANGLE
@@ -126,10 +126,10 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     clean = None if fault is None else Sensors(
         replace(sc.sensors, faults=(SensorFault(fault.sensor, "scale", fault.start, 1.0),)), ts)
     handling = Actuator(ActuatorConfig(), ts)
-    ctrl = mr.ModelRegulator(config) if config is not None else None
-    mon = pl.PlausibilityMonitor(pl.PlausibilityConfig(ts=ts))
-    ac = None if config is None else au.configure_authority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)))
-    ast = au.AuthorityState()
+    ctrl = None if config is None else cy.Cycle(config, pl.PlausibilityConfig(ts=ts),
+                                                 au.AuthorityConfig(ts=ts, u_max=authority_limit(config)))
+    ci = cy.CycleInputs()
+    cs = cy.CycleState() if ctrl is None else ctrl.state
     every, status_every = cycles(ts), status_cycle(ts)
     pipeline: collections.deque[float] = collections.deque([0.0])
     n = int(round(sc.duration / ts)) + 1
@@ -172,15 +172,13 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                 held[ch] = read[ch]
         speed_true[k], yaw_2_seen[k] = scene.v, yaw_rate_2
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
-        if ctrl is not None and ac is not None:
-            bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"],
-                            held["speed"], command, yaw_rate_2, held[SPEED_REDUNDANT])
-            u = ctrl.step(held["steer"], held["yaw_rate"], held["speed"],
-                          (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
-            u = au.authority_step(ac, ast, u, bits, mon.state.flags & pl.CUT_CHECKS,
-                                  mon.state.flags & pl.FADE_CHECKS)
-            state = ctrl.state.status
-            flags_hist[k] = mon.state.flags
+        if ctrl is not None:
+            ci.delta_driver = ci.monitor_driver = held["steer"]
+            ci.yaw_rate, ci.speed, ci.lat_accel = held["yaw_rate"], held["speed"], held["lat_accel"]
+            ci.delta_driver_redundant, ci.yaw_rate_redundant = held["steer_redundant"], yaw_rate_2
+            ci.speed_redundant = held[SPEED_REDUNDANT]
+            u = ctrl.step(ci)
+            bits, state, flags_hist[k] = cs.plausibility, cs.law.status, cs.monitor.flags
             if (k + 1) % status_every == 0:
                 in_flight = bits
         command = u
@@ -189,7 +187,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         handling.tick()
         position.step(handling.applied)
         r_hist[k], beta_hist[k], u_hist[k] = x[1], x[0], u
-        status[k], bits_hist[k], auth[k] = state, bits, ast.flags
+        status[k], bits_hist[k], auth[k] = state, bits, cs.authority.flags
         applied[k], driver_hist[k], m_z_hist[k] = position.mean, driver, m_z + car.loads.m_z
         mu_hist[k], v_hist[k], gain_hist[k] = scene.params().mu, car.v, scene.correction_gain(t, ts)
         loads_hist.append(car.loads)

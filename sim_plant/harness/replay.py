@@ -47,9 +47,8 @@ from typing import Callable
 import can
 
 import mrsteer_dbc
-from firmware_py import authority as au
+from firmware_py import cycle as cy
 from firmware_py import model_regulator as mr
-from firmware_py import plausibility as pl
 from firmware_py.controller.node import ControllerNode
 from mrsteer_dbc.e2e import E2EStatus
 from mrsteer_dbc.names import (MSG_CMD, MSG_SPEED, MSG_STATUS, MSG_STEER, MSG_YAW,
@@ -118,18 +117,14 @@ class _Replayer:
 
     def _shadow(self, inputs: tuple[float, float, float, float, float, float, float], monitor_steps: int,
                 monitor_driver: float) -> float:
-        """The command the node should send for ``inputs``: the monitor's ``monitor_steps`` steps
-        (none: its held bits; the first with ``monitor_driver``), step() with its suspicion of the
-        yaw rate and the authority limiter, run on copies of the node's states."""
+        """The command the node should send for ``inputs``: its cycle (``firmware_py.cycle``) with
+        ``monitor_steps`` monitor steps, the first with ``monitor_driver``, run on a copy of the
+        node's cycle state."""
         node = self.node
-        d, r, v, lat, d2, r2, v2 = inputs
-        bits, monitor = node.plausibility, copy.deepcopy(node.monitor)
-        for k in range(monitor_steps):
-            bits = pl.monitor_step(node.monitor_coeffs, monitor, monitor_driver if k == 0 else d, d2, r, lat, v,
-                                   node.command, r2, v2)
-        u = mr.step(node.coeffs, copy.deepcopy(node.state), d, r, v, (monitor.flags & pl.SUSPECT_CHECKS) != 0)
-        return au.authority_step(node.authority_coeffs, copy.deepcopy(node.authority), u, bits,
-                                 monitor.flags & pl.CUT_CHECKS, monitor.flags & pl.FADE_CHECKS)
+        i = cy.CycleInputs(*inputs[:3], lat_accel=inputs[3], delta_driver_redundant=inputs[4],
+                           yaw_rate_redundant=inputs[5], speed_redundant=inputs[6], monitor_steps=monitor_steps,
+                           monitor_driver=monitor_driver, starting=node.starting)
+        return cy.step(node.cycle_coeffs, copy.deepcopy(node.cycle_state), i)
 
     def cycle(self, kind: str, line: int, t: float) -> Step:
         node = self.node

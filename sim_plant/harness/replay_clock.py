@@ -90,7 +90,7 @@ class Choice:
 def fork(node: ControllerNode) -> ControllerNode:
     """A copy of ``node`` on a bus of its own; what holds no state (the contract, the
     configuration and the coefficients computed from it) is shared."""
-    shared = (node.contract, node.cfg, node.coeffs, node.monitor_coeffs, node.authority_coeffs)
+    shared = (node.contract, node.cfg, node.cycle_coeffs)
     return copy.deepcopy(node, {id(node.bus): RecordingBus(), **{id(o): o for o in shared}})
 
 
