@@ -27,6 +27,9 @@ class CycleCoefficients:
     law: mr.Coefficients
     monitor: pl.MonitorCoefficients
     authority: au.AuthorityCoefficients
+    # The monitor's checks whose fault the limiter removes at its rate bound instead of fading
+    # (pl.CUT_CHECKS: the pairs); another mask only to weigh the design against its options.
+    cut_checks: int = pl.CUT_CHECKS
 
 
 @dataclass
@@ -60,10 +63,10 @@ class CycleInputs:
     starting: bool = False  # the start state: some input not yet seen (model_regulator.reported_state)
 
 
-def configure(law: mr.ControllerConfig, monitor: pl.PlausibilityConfig,
-              authority: au.AuthorityConfig) -> CycleCoefficients:
+def configure(law: mr.ControllerConfig, monitor: pl.PlausibilityConfig, authority: au.AuthorityConfig,
+              cut_checks: int = pl.CUT_CHECKS) -> CycleCoefficients:
     """The coefficients of the three pieces; ValueError for an impossible configuration."""
-    return CycleCoefficients(mr.configure(law), pl.configure(monitor), au.configure_authority(authority))
+    return CycleCoefficients(mr.configure(law), pl.configure(monitor), au.configure_authority(authority), cut_checks)
 
 
 def reset(s: CycleState) -> None:
@@ -89,7 +92,7 @@ def step(c: CycleCoefficients, s: CycleState, i: CycleInputs) -> float:
     u = mr.step(c.law, s.law, i.delta_driver, i.yaw_rate, i.speed, (flags & pl.SUSPECT_CHECKS) != 0)
     # a pair check's fault (yaw rate or steering) is found while its command builds: removed at the
     # limiter's rate bound, not faded
-    u = au.authority_step(c.authority, s.authority, u, bits, flags & pl.CUT_CHECKS, flags & pl.FADE_CHECKS)
+    u = au.authority_step(c.authority, s.authority, u, bits, flags & c.cut_checks, flags & pl.FADE_CHECKS)
     s.plausibility = bits
     s.command = u
     s.reported = mr.reported_state(s.law.status, bits, i.starting)

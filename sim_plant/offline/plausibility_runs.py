@@ -6,9 +6,9 @@ sensors with their faults) with the firmware's ``step()`` in the loop, as the pl
 controller do on the bus, without a bus: each sensor value is held at its DBC cycle (driver angle
 and yaw rate every control period, speed every 10 ms, ``MRS_RedundantSensors`` every 50 ms,
 all sampled at the step they are sent at), the command acts one period later.  The monitor sees
-what the controller sees; its bits go through ``authority_step`` to the actuator, which is how
-the lead's integration fades the command (until then: ``guard=False`` leaves the command as
-step() gave it).
+what the controller sees, and the controller is ``firmware_py.cycle``: monitor, law and
+authority limiter in the node's order; the limited command reaches the actuator a period later.
+``cut`` is the cycle's ``cut_checks``: the shipped pairs, or another mask to weigh against them.
 
 ``second_yaw`` adds the yaw-rate sensor's second element (issue 18's decision,
 docs/controller.md "A second yaw-rate channel"): a sensor of its own configuration (noise stream,
@@ -19,9 +19,6 @@ the check paused).
 ``second_speed`` gives the monitor the second speed (``RedundantSensors_Speed2``), the
 scenario's own ``speed_redundant`` sensor (with its faults), held at the redundant frame's cycle;
 without it the monitor has none (NaN: the speed pair paused), as before the bus carried it.
-
-``cut`` is the monitor's flags the node passes as ``authority_step``'s cut (the node's
-``CUT_CHECKS``: the pair checks; 0 fades every fault instead).
 
 The error of a faulted sensor is measured against a second, fault-free copy of the same sensor
 models (same seed, same streams), so it is the fault's own contribution, noise excluded, plus
@@ -37,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from firmware_py import cycle
 from firmware_py import model_regulator as mr
 from firmware_py import authority as au
 from firmware_py import plausibility as pl
@@ -238,7 +236,7 @@ def error_bound(sensor: str, cfg: pl.PlausibilityConfig, run: MonitorRun) -> flo
 # each of its stages is a few lines that read best in order.
 def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | None = None,
         controller: mr.ControllerConfig | None = None, authority: au.AuthorityConfig | None = None,
-        guard: bool = True, second_yaw: SensorConfig | None = None, cut: int = pl.CUT_CHECKS,
+        second_yaw: SensorConfig | None = None, cut: int = pl.CUT_CHECKS,
         second_speed: bool = False) -> MonitorRun:
     every = cycles(ts)
     scene = ScenarioState(sc)
@@ -253,10 +251,10 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         bias["yaw_rate_redundant"] = second_yaw.biases()["yaw_rate"]
     if faulted == "speed_redundant" and not second_speed:
         raise ValueError("a fault of the second speed needs second_speed=True (the monitor reads it only then)")
-    reg = mr.ModelRegulator(controller) if controller is not None else mr.ModelRegulator()
-    mon = pl.PlausibilityMonitor(monitor if monitor is not None else pl.PlausibilityConfig(ts=ts))
-    ac = au.configure_authority(authority if authority is not None else au.AuthorityConfig(ts=ts))
-    ast = au.AuthorityState()
+    coefficients = cycle.configure(controller if controller is not None else mr.ControllerConfig(),
+                                   monitor if monitor is not None else pl.PlausibilityConfig(ts=ts),
+                                   authority if authority is not None else au.AuthorityConfig(ts=ts), cut)
+    state, inputs = cycle.CycleState(), cycle.CycleInputs()
     n = int(round(sc.duration / ts)) + 1
     out = {k: np.zeros(n) for k in ("bits", "flags", "r", "aux", "err", "beta")}
     seen = {ch: np.zeros(n) for ch in (*CHANNELS, "yaw_rate_redundant", "speed_redundant")}
@@ -294,22 +292,18 @@ def run(sc: scn.Scenario, ts: float = 0.002, monitor: pl.PlausibilityConfig | No
         for ch in CHANNELS:
             if k % every[ch] == 0:
                 held[ch] = read[ch]
-        # the command sent the period before, as the controller node passes it (the monitor
-        # models the actuator's lag itself)
-        bits = mon.step(held["steer"], held["steer_redundant"], held["yaw_rate"], held["lat_accel"], held["speed"],
-                        pipeline[0], held["yaw_rate_redundant"], held["speed_redundant"])
-        # before the law, as the node: the monitor's suspicion of the yaw rate holds its command
-        u = reg.step(held["steer"], held["yaw_rate"], held["speed"],
-                     guard and (mon.state.flags & pl.SUSPECT_CHECKS) != 0)
-        if guard:
-            u = au.authority_step(ac, ast, u, bits, mon.state.flags & cut, mon.state.flags & pl.FADE_CHECKS)
-        pipeline.append(u)
+        inputs.delta_driver = inputs.monitor_driver = held["steer"]
+        inputs.delta_driver_redundant, inputs.lat_accel = held["steer_redundant"], held["lat_accel"]
+        inputs.yaw_rate, inputs.yaw_rate_redundant = held["yaw_rate"], held["yaw_rate_redundant"]
+        inputs.speed, inputs.speed_redundant = held["speed"], held["speed_redundant"]
+        pipeline.append(cycle.step(coefficients, state, inputs))
         applied = actuator.step(pipeline.popleft())
-        out["bits"][k], out["r"][k], out["aux"][k], out["beta"][k] = bits, float(y[0]), applied, float(y[1])
-        out["flags"][k] = mon.state.flags
+        out["bits"][k], out["r"][k], out["aux"][k] = state.plausibility, float(y[0]), applied
+        out["beta"][k] = float(y[1])
+        out["flags"][k] = state.monitor.flags
         for ch in seen:
             seen[ch][k] = held[ch]
-        st = mon.state
+        st = state.monitor
         for key, value in (("kinematic", st.kin_err), ("steer_pair", st.pair_err), ("model", st.model_err),
                            ("yaw_pair", st.yaw_pair_err), ("turn", st.turn_err),
                            ("speed_pair", st.speed_pair_err)):
