@@ -30,7 +30,7 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     mrs_monitor_config_t mon;
     mrs_authority_config_t auth;
     double status_cycle, every;
-    int i, j;
+    int i, j, rc;
     memset(n, 0, sizeof *n);
     n->bus = bus;
     n->period = 1.0 / cfg->rate_hz;
@@ -43,12 +43,6 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     if (cmd->max[MRS_SIG_CMD_ANGLE] < ctrl.aux_limit) {
         ctrl.aux_limit = cmd->max[MRS_SIG_CMD_ANGLE];
     }
-    if (mrs_configure(&ctrl, &n->coeffs) != 0) {
-        snprintf(err, err_len, "invalid calibration (mrs_configure refused it: a value non-finite, non-positive "
-                 "or out of range)");
-        return -1;
-    }
-    mrs_init_state(&n->state);
     /* The monitor's and the limiter's defaults at the node's period; the limiter's magnitude is
      * the law's effective aux_limit (the calibration's, within the DBC's). */
     mrs_monitor_default_config(&mon);
@@ -56,13 +50,18 @@ int mrs_node_init(mrs_node_t *n, mrs_bus_t *bus, const mrs_node_config_t *cfg, c
     mrs_authority_default_config(&auth);
     auth.ts = n->period;
     auth.u_max = ctrl.aux_limit;
-    if (mrs_monitor_configure(&mon, &n->mon_c) != 0 || mrs_authority_configure(&auth, &n->auth_c) != 0) {
+    rc = mrs_cycle_configure(&ctrl, &mon, &auth, &n->cycle_c);
+    if (rc == MRS_CYCLE_BAD_LAW) {
+        snprintf(err, err_len, "invalid calibration (mrs_configure refused it: a value non-finite, non-positive "
+                 "or out of range)");
+        return -1;
+    }
+    if (rc != 0) {
         snprintf(err, err_len, "invalid plausibility monitor or authority limiter configuration at %g Hz",
                  cfg->rate_hz);
         return -1;
     }
-    mrs_monitor_reset(&n->mon_s);
-    mrs_authority_reset(&n->auth_s);
+    mrs_cycle_reset(&n->cycle_s);
     for (i = 0; i < MRS_N_INPUTS; ++i) {
         mrs_input_t *in = &n->in[i];
         in->msg = msgs[i];
@@ -215,9 +214,9 @@ static int send_command(mrs_node_t *n, double u, unsigned state)
 static int send_status(mrs_node_t *n)
 {
     double phys[MRS_MAX_SIGNALS] = {0.0};
-    phys[MRS_SIG_STATUS_STATE] = (double)n->reported_state;
-    phys[MRS_SIG_STATUS_FLAGS] = (double)n->state.fault_flags;
-    phys[MRS_SIG_STATUS_PLAUS] = (double)n->plaus;
+    phys[MRS_SIG_STATUS_STATE] = (double)n->cycle_s.reported;
+    phys[MRS_SIG_STATUS_FLAGS] = (double)n->cycle_s.law.fault_flags;
+    phys[MRS_SIG_STATUS_PLAUS] = (double)n->cycle_s.plausibility;
     phys[MRS_SIG_STATUS_CAUSE] = (double)n->cause;
     phys[MRS_SIG_STATUS_REJECTED] = (double)(n->stats.rx_rejected % (uint64_t)n->rejected_wrap);
     phys[MRS_SIG_STATUS_OVERRUNS] = (double)(n->stats.overruns % (uint64_t)n->overruns_wrap);
@@ -276,12 +275,29 @@ static int still_starting(mrs_node_t *n)
     return pending;
 }
 
-int mrs_node_control(mrs_node_t *n)
+/* The driver's angle for the monitor's first step of a period of `steps`: the step that takes a
+ * new redundant sample gets the angle that came with it (drained in a burst, the newest angle is
+ * several samples younger, and the steering pair would read the driver's movement since as the
+ * channels' disagreement), else delta_driver (node.py's monitor_driver_angle). */
+static double monitor_driver(mrs_node_t *n, double delta_driver, long steps)
 {
-    unsigned cause = 0u, state;
+    double steer = delta_driver;
+    if ((steps > 0) && n->red_unstepped) {
+        n->red_unstepped = 0;
+        if (!isnan(steer) && !isnan(n->steer_at_red)) {
+            steer = (double)(mrs_real_t)n->steer_at_red; /* the precision of the law's inputs */
+        }
+    }
+    return steer;
+}
+
+/* The period's inputs to the control cycle, and the cause bits of the invalid ones; the inputs
+ * age by one period (node.py's control up to cycle.step). */
+static unsigned period_inputs(mrs_node_t *n, mrs_cycle_inputs_t *c_in)
+{
+    unsigned cause = 0u;
     mrs_real_t values[3];
-    double lat = NAN, steer2 = NAN, speed2 = NAN, yaw2, u_req;
-    int i, fault;
+    int i;
     mrs_input_t *red = &n->in[MRS_IN_REDUNDANT];
     /* node.py's monitor_steps and redundant_inputs, before the ages move on: the yaw-rate
      * samples since the last period (at most its timeout; one to pause with the yaw rate
@@ -289,15 +305,13 @@ int mrs_node_control(mrs_node_t *n)
     const mrs_input_t *yaw = &n->in[1];
     const long samples = n->yaw_samples < yaw->limit ? n->yaw_samples : yaw->limit;
     const long steps = samples > 0 ? samples : (valid(n, yaw) ? 0 : 1);
-    long k;
-    double steer;
-    if (n->starting) {
-        n->starting = still_starting(n);
-    }
+    c_in->lat_accel = NAN;
+    c_in->delta_driver_redundant = NAN;
+    c_in->speed_redundant = NAN;
     if (fresh(n, red) && n->red_usable) {
-        lat = red->value;
-        steer2 = red->extra[0];
-        speed2 = red->extra[1]; /* NaN also when the sender has none (SNA) */
+        c_in->lat_accel = red->value;
+        c_in->delta_driver_redundant = red->extra[0];
+        c_in->speed_redundant = red->extra[1]; /* NaN also when the sender has none (SNA) */
     }
     n->red_cycles += samples;
     n->yaw_samples = 0;
@@ -311,33 +325,35 @@ int mrs_node_control(mrs_node_t *n)
     }
     /* Which measurement this command answers; NONE when no valid yaw rate went into it. */
     n->answers = isnan(values[1]) ? MRS_MEAS_NONE : n->in[1].last_counter;
-    /* The monitor steps on the yaw-rate sensor's samples (a lost one at the newest values) and
-     * holds its verdict between them; it sees the command sent last period (n->command: 0 before
-     * the first).  Before the law: its suspicion of the yaw rate holds the law's command. */
+    /* The monitor sees the law's three inputs at the law's precision (mrs_real_t). */
+    c_in->delta_driver = (double)values[0];
+    c_in->yaw_rate = (double)values[1];
+    c_in->speed = (double)values[2];
     /* The yaw-rate sensor's second element comes with the first: NaN (SNA, or no valid yaw rate)
      * pauses the pair check. */
-    yaw2 = isnan(values[1]) ? (double)NAN : yaw->extra[0];
-    /* The step that takes a new redundant sample (the first) gets the driver's angle that came
-     * with it: drained in a burst, the newest angle is several samples younger, and the steering
-     * pair would read the driver's movement since as the channels' disagreement. */
-    steer = (double)values[0];
-    if ((steps > 0) && n->red_unstepped) {
-        n->red_unstepped = 0;
-        if (!isnan(steer) && !isnan(n->steer_at_red)) {
-            steer = (double)(mrs_real_t)n->steer_at_red; /* the precision of values[] */
-        }
+    c_in->yaw_rate_redundant = isnan(values[1]) ? (double)NAN : yaw->extra[0];
+    c_in->monitor_steps = (int32_t)steps;
+    c_in->monitor_driver = monitor_driver(n, c_in->delta_driver, steps);
+    c_in->starting = n->starting;
+    return cause;
+}
+
+int mrs_node_control(mrs_node_t *n)
+{
+    mrs_cycle_inputs_t c_in;
+    unsigned cause, state;
+    int fault;
+    if (n->starting) {
+        n->starting = still_starting(n);
     }
-    for (k = 0; k < steps; ++k) {
-        n->plaus = mrs_monitor_step(&n->mon_c, &n->mon_s, steer, steer2, (double)values[1], lat,
-                                    (double)values[2], n->command, yaw2, speed2);
-        steer = (double)values[0];
-    }
-    u_req = (double)mrs_step(&n->coeffs, &n->state, values[0], values[1], values[2],
-                             (uint8_t)((n->mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));
-    if (n->state.fault_flags && !cause) {
+    cause = period_inputs(n, &c_in);
+    /* The monitor on the yaw-rate samples (seeing the command sent last period), the law held by
+     * its suspicion of the yaw rate, the limiter: the command and the state to send. */
+    (void)mrs_cycle_step(&n->cycle_c, &n->cycle_s, &c_in);
+    if (n->cycle_s.law.fault_flags && !cause) {
         cause |= MRS_CAUSE_RANGE;
     }
-    if (n->state.status == MRS_STATUS_INACTIVE && !cause) {
+    if (n->cycle_s.law.status == MRS_STATUS_INACTIVE && !cause) {
         cause |= MRS_CAUSE_LOW_SPEED;
     }
     if (n->keyed) {
@@ -346,22 +362,17 @@ int mrs_node_control(mrs_node_t *n)
             cause |= MRS_CAUSE_AUTH;
         }
     }
-    /* independent of the law: a pair's fault removes the command at the rate bound, not faded */
-    n->command = mrs_authority_step(&n->auth_c, &n->auth_s, u_req, n->plaus,
-                                    (uint8_t)((n->mon_s.flags & MRS_CUT_CHECKS) != 0u),
-                                    (uint8_t)((n->mon_s.flags & MRS_FADE_CHECKS) != 0u));
-    if (n->plaus & MRS_PLAUS_FAULT) {
+    if (n->cycle_s.plausibility & MRS_PLAUS_FAULT) {
         cause |= MRS_CAUSE_PLAUSIBILITY;
     }
-    state = mrs_reported_state(n->state.status, n->plaus, n->starting);
-    n->reported_state = state;
+    state = n->cycle_s.reported;
     fault = state == MRS_STATUS_FAULT;
     if (fault && !n->was_fault) {
         ++n->stats.faults_entered;
     }
     n->was_fault = fault;
     n->cause = cause;
-    if (send_command(n, n->command, state) != 0) {
+    if (send_command(n, n->cycle_s.command, state) != 0) {
         return -1;
     }
     ++n->stats.cycles;

@@ -1,9 +1,9 @@
 /*
  * One controller on one bus, C99 port of firmware_py/controller/node.py (ControllerNode): the
  * receive chain of mrsteer_dbc.link.RxLink (length -> CRC -> counter value -> range -> MAC ->
- * counter sequence), each input's freshness, the plausibility monitor, mrs_step() (held on the
- * monitor's suspicion of the yaw rate) and the authority limiter (mrs_monitor.c:
- * firmware_py.plausibility, firmware_py.authority) on its command, and the command and status frames of
+ * counter sequence), each input's freshness, one control cycle per period on the fresh inputs
+ * (mrs_cycle_step: the plausibility monitor, mrs_step() held on the monitor's suspicion of the
+ * yaw rate, the authority limiter; firmware_py.cycle), and the command and status frames of
  * mrsteer_dbc.link.TxLink (alive counter, SecOC fields and MAC when keyed, CRC last).
  * Frames are packed and unpacked only through mrs_contract.c, i.e. the cantools-generated codec.
  */
@@ -14,6 +14,7 @@
 
 #include "mrs_bus.h"
 #include "mrs_controller.h"
+#include "mrs_cycle.h"
 #include "mrs_e2e.h"
 #include "mrs_monitor.h"
 #include "mrs_secoc.h"
@@ -74,14 +75,11 @@ typedef struct {
     mrs_bus_t *bus;
     double period;
     int e2e_fail_max;
-    mrs_coeffs_t coeffs;
-    mrs_state_t state;
+    mrs_cycle_coeffs_t cycle_c; /* the law's, the monitor's and the limiter's coefficients */
+    /* the three states, the command sent last (cycle_s.command), the monitor's bits of its latest
+     * step (cycle_s.plausibility) and the state sent last (cycle_s.reported, mrs_reported_state()) */
+    mrs_cycle_state_t cycle_s;
     mrs_input_t in[MRS_N_INPUTS]; /* driver angle, yaw rate, speed, redundant (lat. accel., 2nd steering) */
-    mrs_monitor_coeffs_t mon_c;
-    mrs_monitor_state_t mon_s;
-    mrs_authority_coeffs_t auth_c;
-    mrs_authority_state_t auth_s;
-    uint8_t plaus; /* the monitor's CtrlStatus_Plausibility bits of its latest step */
     double red_expected; /* control periods per redundant sample (its DBC cycle) */
     long red_cycles; /* monitor steps (yaw-rate samples) since the last accepted redundant frame */
     int red_counter; /* its alive counter; -1 before the first */
@@ -90,7 +88,6 @@ typedef struct {
     int red_unstepped; /* the monitor has yet to step over that redundant sample */
     int yaw_counter; /* alive counter of the newest accepted yaw-rate frame; -1 before the first */
     long yaw_samples; /* yaw-rate samples since the last period, by that counter */
-    unsigned reported_state; /* CtrlStatus_State / AuxSteerCmd_State: mrs_reported_state(), sent last */
     int starting; /* the start state (node.py's _still_starting) */
     long since_first; /* periods since the one that drained the first sensor frame; -1: none yet */
     long start_limit; /* MRS_START_TIMEOUT_S in periods */
@@ -103,7 +100,7 @@ typedef struct {
     uint64_t status_every;
     uint8_t cmd_alive;
     unsigned cause, answers;
-    double command, max_lateness, yaw_stamp;
+    double max_lateness, yaw_stamp;
     int was_fault;
     mrs_stats_t stats;
 } mrs_node_t;
@@ -146,8 +143,8 @@ void mrs_node_time_redundant(mrs_node_t *n, unsigned counter);
 void mrs_node_keep_redundant_angle(mrs_node_t *n);
 void mrs_node_count_yaw(mrs_node_t *n, unsigned counter);
 
-/* Freshness, step, plausibility monitor, authority limiter, command (and status at its cycle),
- * as ControllerNode.control: 0, or -1 when the bus failed. */
+/* Freshness, one control cycle (mrs_cycle_step), causes, command (and status at its cycle), as
+ * ControllerNode.control: 0, or -1 when the bus failed. */
 int mrs_node_control(mrs_node_t *n);
 
 /* The next frame of message msg (MRS_MSG_CMD or MRS_MSG_STATUS) from its physical values: alive

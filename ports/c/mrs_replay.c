@@ -15,10 +15,10 @@
  * DELTA_DRIVER_MONITOR the driver's angle of the monitor's first step, the one that came with a new
  * redundant sample (node.py's monitor_driver_angle), absent: DELTA_DRIVER; STARTING 1 in a cycle of
  * the node's start state (node.py's _still_starting, its inputs not all received yet), absent: 0), as
- * sim_plant/harness/replay.py extracts them from the frames. Each cycle runs as mrs_node_control
- * does: the monitor (STEPS times, the first with DELTA_DRIVER_MONITOR) on the inputs and the
- * previous line's command, u_req = mrs_step(..., its suspicion of the yaw rate), the limiter on
- * u_req; each output line is
+ * sim_plant/harness/replay.py extracts them from the frames. Each cycle is mrs_cycle_step, as in
+ * mrs_node_control: the monitor (STEPS times, the first with DELTA_DRIVER_MONITOR) on the inputs
+ * and the previous line's command, u_req = mrs_step(..., its suspicion of the yaw rate), the
+ * limiter on u_req; each output line is
  * "U STATE FAULT_FLAGS PLAUSIBILITY" (U to 17 significant digits; STATE is the reported one,
  * mrs_reported_state). The frame decoding, E2E, freshness, start state and cause bits stay on the
  * Python side: this driver isolates the law and its guards, so a mismatch it shows is the
@@ -31,6 +31,7 @@
 
 #include "mrs_config.h"
 #include "mrs_controller.h"
+#include "mrs_cycle.h"
 #include "mrs_monitor.h"
 
 #define LINE_MAX_LEN 4096
@@ -45,16 +46,12 @@ static int fail(const char *what, const char *arg)
 int main(int argc, char **argv)
 {
     mrs_config_t g;
-    mrs_coeffs_t c;
-    mrs_state_t s;
     mrs_monitor_config_t mon_cfg;
-    mrs_monitor_coeffs_t mon_c;
-    mrs_monitor_state_t mon_s;
     mrs_authority_config_t auth_cfg;
-    mrs_authority_coeffs_t auth_c;
-    mrs_authority_state_t auth_s;
-    double u_prev = 0.0;
-    uint8_t plaus = 0u; /* the monitor's bits, held while it does not step */
+    mrs_cycle_coeffs_t c;
+    mrs_cycle_state_t s; /* the command sent last and the monitor's bits are held in it */
+    mrs_cycle_inputs_t ci;
+    int rc;
     char err[256];
     char line[LINE_MAX_LEN];
     FILE *in = stdin;
@@ -66,32 +63,29 @@ int main(int argc, char **argv)
     if (mrs_config_load(argv[1], &g, err, sizeof err) != 0) {
         return fail("cannot read", err);
     }
-    if (mrs_configure(&g, &c) != 0) {
-        return fail("invalid calibration in", argv[1]);
-    }
     mrs_monitor_default_config(&mon_cfg);
     mon_cfg.ts = (double)g.ts;
     mrs_authority_default_config(&auth_cfg);
     auth_cfg.ts = (double)g.ts;
     auth_cfg.u_max = (double)g.aux_limit;
-    if (mrs_monitor_configure(&mon_cfg, &mon_c) != 0 || mrs_authority_configure(&auth_cfg, &auth_c) != 0) {
+    rc = mrs_cycle_configure(&g, &mon_cfg, &auth_cfg, &c);
+    if (rc == MRS_CYCLE_BAD_LAW) {
+        return fail("invalid calibration in", argv[1]);
+    }
+    if (rc != 0) {
         return fail("no plausibility monitor or authority limiter at the period of", argv[1]);
     }
-    mrs_monitor_reset(&mon_s);
-    mrs_authority_reset(&auth_s);
+    mrs_cycle_reset(&s);
     if (argc == 3 && strcmp(argv[2], "-") != 0) {
         in = fopen(argv[2], "r");
         if (in == NULL) {
             return fail("cannot read", argv[2]);
         }
     }
-    mrs_init_state(&s);
     while (fgets(line, sizeof line, in) != NULL) {
         double v[10] = {0.0, 0.0, 0.0, NAN, NAN, 1.0, NAN, NAN, NAN, 0.0};
         char *p = line, *end;
         int k;
-        double u_req;
-        unsigned state;
         ++n;
         for (k = 0; k < 10; ++k) {
             const double x = strtod(p, &end);
@@ -119,16 +113,18 @@ int main(int argc, char **argv)
         if (k < 9) {
             v[8] = v[0];
         }
-        for (k = 0; k < (int)v[5]; ++k) {
-            plaus = mrs_monitor_step(&mon_c, &mon_s, k == 0 ? v[8] : v[0], v[4], v[1], v[3], v[2], u_prev, v[6], v[7]);
-        }
-        u_req = (double)mrs_step(&c, &s, (mrs_real_t)v[0], (mrs_real_t)v[1], (mrs_real_t)v[2],
-                                 (uint8_t)((mon_s.flags & MRS_SUSPECT_CHECKS) != 0u));
-        u_prev = mrs_authority_step(&auth_c, &auth_s, u_req, plaus,
-                                    (uint8_t)((mon_s.flags & MRS_CUT_CHECKS) != 0u),
-                                    (uint8_t)((mon_s.flags & MRS_FADE_CHECKS) != 0u));
-        state = mrs_reported_state((unsigned)s.status, (unsigned)plaus, v[9] != 0.0);
-        printf("%.17g %u %u %u\n", u_prev, state, (unsigned)s.fault_flags, (unsigned)plaus);
+        ci.delta_driver = v[0];
+        ci.yaw_rate = v[1];
+        ci.speed = v[2];
+        ci.lat_accel = v[3];
+        ci.delta_driver_redundant = v[4];
+        ci.monitor_steps = (int32_t)v[5];
+        ci.yaw_rate_redundant = v[6];
+        ci.speed_redundant = v[7];
+        ci.monitor_driver = v[8];
+        ci.starting = v[9] != 0.0;
+        (void)mrs_cycle_step(&c, &s, &ci);
+        printf("%.17g %u %u %u\n", s.command, s.reported, (unsigned)s.law.fault_flags, (unsigned)s.plausibility);
     }
     if (in != stdin) {
         fclose(in);
