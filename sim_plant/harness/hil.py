@@ -102,13 +102,14 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
         if iface == bus_open.FALLBACK[0] and cfg.channel is None:
             # A private bus for this run: nothing else on it, and it goes away with the run.
             channel = f"hil-{os.getpid()}-{int(time.time() * 1000) % 100000}"
-            procs.append(launch.start("bus broker", launch.broker(channel), work, env))
+            procs.append(launch.start("bus broker", launch.broker(channel), work, env, preload=True))
             wait_for_socket(channel, procs[-1])
         bus = launch.BusArgs(iface, channel)
         say(f"bus: {iface} {channel}" if channel else f"bus: {iface}")
 
         logger = launch.start("logger", launch.logger(bus, launch.LoggerSettings(
-            work / "traffic.log", iface_name=str(channel), stats_out=work / "logger.json")), work, env, stdout=True)
+            work / "traffic.log", iface_name=str(channel), stats_out=work / "logger.json")), work, env, stdout=True,
+            preload=True)
         procs.append(logger)
         wait_ready(logger)
 
@@ -117,13 +118,13 @@ def run(cfg: HilConfig, progress: Callable[[str], None] | None = None) -> HilRun
                 cfg.rate_hz, launch.write_calibration(work, ctrl),
                 trigger="sensors" if cfg.mode == "lockstep" else "clock", q_form=cfg.controller,
                 stats_out=work / "controller.json", secoc=cfg.secoc_key is not None,
-                program=cfg.controller_program)), work, env))
+                program=cfg.controller_program)), work, env, preload=True))
             wait_stderr(procs[-1], "running at")  # bus open, filters set: the first frame will count
         plant = launch.start("plant", launch.plant(bus, launch.PlantSettings(
             cfg.rate_hz, cfg.mode, cfg.scenario, delay_steps=cfg.delay_steps, v=cfg.v, mu=cfg.mu, mz=cfg.mz,
             duration=cfg.duration, plant=cfg.plant, actuator=cfg.actuator, sensors=cfg.sensors, seed=cfg.seed,
             sensor_faults=cfg.sensor_faults, no_controller=cfg.controller == "none", trace_out=work / TRACE, stats_out=work / "plant.json",
-            secoc=cfg.secoc_key is not None)), work, env)
+            secoc=cfg.secoc_key is not None)), work, env, preload=True)
         procs.append(plant)
         impl = "" if cfg.controller_program is None else f" ({' '.join(cfg.controller_program)})"
         say(f"running {sc.name}: {sc.duration:g} s, {cfg.mode}, {cfg.rate_hz:g} Hz, controller {cfg.controller}{impl}")

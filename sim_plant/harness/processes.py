@@ -110,9 +110,10 @@ class _Forked:
         self.send_signal(signal.SIGKILL)
 
 
-def _run_node(entry: str, argv: list[str], env: dict[str, str], stdout: str, stderr: str) -> None:
-    """The forked child: the node's own stdio and environment, then its ``main``."""
+def _run_node(name: str, entry: str, argv: list[str], env: dict[str, str], stdout: str, stderr: str) -> None:
+    """The forked child: the node's name, stdio and environment, then its ``main``."""
     _pdeathsig()
+    _name_process(name)
     for fd, path in ((1, stdout), (2, stderr)):
         target = os.open(path, os.O_WRONLY | os.O_APPEND)
         os.dup2(target, fd)
@@ -125,6 +126,16 @@ def _run_node(entry: str, argv: list[str], env: dict[str, str], stdout: str, std
     os.environ.update(env)
     module, _, func = entry.partition(":")
     sys.exit(getattr(importlib.import_module(module), func)(argv))
+
+
+def _name_process(name: str) -> None:
+    """The node's name where ``ps -o comm``, ``top`` and /proc/PID/comm show it: a forked node's
+    command line is its supervisor's."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(15, name.replace(" ", "-").encode()[:15])  # PR_SET_NAME, at most 15 bytes
+    except OSError:
+        pass
 
 
 _FORK = multiprocessing.get_context("fork")
@@ -140,7 +151,7 @@ def spawn_preloaded(name: str, entry: str, argv: list[str], work: Path, env: dic
     err = open(f"{stem}.stderr", "w+b")
     out_path = f"{stem}.stdout" if stdout else os.devnull
     out = open(out_path, "w+b") if stdout else None
-    process = _FORK.Process(target=_run_node, args=(entry, argv, env, out_path, err.name), name=name)
+    process = _FORK.Process(target=_run_node, args=(name, entry, argv, env, out_path, err.name), name=name)
     with _signals_held():
         process.start()
     return Proc(name, _Forked(process, out), err)
