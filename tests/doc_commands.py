@@ -8,8 +8,12 @@ says so in an HTML comment on the line before its fence, with the reason::
 
     <!-- doc-test: skip: REASON -->
 
-Blocks of one file run in the file's order in one copy of the repository, so a block may use
-what an earlier block of the same file wrote (a log, a campaign).  Inline code spans are prose:
+A block either needs the machine to itself (``needs_quiet_machine``: a realtime loop, a
+benchmark, anything not known to be offline) or is offline (it computes, or runs the bus in
+lockstep, and its result does not depend on the machine's load).  The quiet blocks run one at a
+time in one copy of the repository, in the docs' order, so such a block may use what an earlier
+one wrote; the offline blocks run beside other tests in a copy of their own, each using only
+what it writes itself.  Inline code spans are prose:
 one that holds a whole command line with arguments and no placeholder must also appear in a
 block (``inline_commands_outside_blocks``), so that what a reader would type is run.
 """
@@ -89,6 +93,22 @@ def blocks(path: Path) -> list[Block]:
 
 def all_blocks() -> list[Block]:
     return [b for doc in DOCS for b in blocks(doc)]
+
+
+#: Commands whose outcome does not depend on the machine's load: computation, file tools, and
+#: ``hil run`` in its default lockstep mode (the plant waits for each command).  Anything else (a
+#: realtime run, a benchmark, the fault matrix, the bus nodes, ``make demo``) needs the machine.
+_OFFLINE = re.compile(r"^(\. \.venv/bin/activate|export \w+=.*|python( -m cantools)? .*|cantools .*|dask .*"
+                      r"|make paper|make -C ports/c (check|node)|ports/c/build/mrs_node --help"
+                      r"|mrsteer (--help|design|sim|campaign|replay|hil evidence)\b.*"
+                      r"|mrsteer hil run\b(?!.*--mode realtime)(?!.*--controller-cmd).*)$")
+
+
+def needs_quiet_machine(block: Block) -> bool:
+    """Whether a block must run alone: some command of it is not known to be offline."""
+    if block.commands and block.commands[0].startswith("python - <<"):
+        return False  # a script: the firmware in-process
+    return not all(_OFFLINE.match(_strip_comment(c)) for c in block.commands)
 
 
 def inline_commands_outside_blocks() -> list[str]:

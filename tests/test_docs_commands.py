@@ -2,8 +2,9 @@
 
 The ``sh`` and ``python`` blocks run in a copy of the repository with the virtual environment
 activated and ``MRSTEER_QUICK=1``; a block passes when every line exits 0 and nothing prints a
-traceback.  Together they take minutes: ``make test-slow`` runs them, ``make test`` the reader's
-own tests below."""
+traceback.  Together they take minutes: ``make test-slow`` runs them (the offline blocks beside
+its other tests, those that need the machine alone one at a time), ``make test`` the reader's own
+tests below."""
 
 from __future__ import annotations
 
@@ -14,24 +15,52 @@ import pytest
 import doc_commands as dc
 
 _RUNNABLE = [b for b in dc.all_blocks() if b.tag != "skip"]
-
-
-def _param(block: dc.Block) -> object:
-    return pytest.param(block, id=block.name, marks=[pytest.mark.slow, pytest.mark.serial])
+_QUIET = [pytest.param(b, id=b.name, marks=[pytest.mark.slow, pytest.mark.serial])
+          for b in _RUNNABLE if dc.needs_quiet_machine(b)]
+_OFFLINE = [pytest.param(b, id=b.name, marks=pytest.mark.slow) for b in _RUNNABLE if not dc.needs_quiet_machine(b)]
 
 
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One copy of the repository that every block runs in, in the docs' order."""
+    """One copy of the repository that the blocks needing the machine run in, in the docs' order."""
     return dc.repo_copy(tmp_path_factory.mktemp("docs") / "mrsteer")
 
 
-@pytest.mark.parametrize("block", [_param(b) for b in _RUNNABLE])
+@pytest.fixture(scope="module")
+def offline_tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The offline blocks' copy of the repository."""
+    return dc.repo_copy(tmp_path_factory.mktemp("docs-offline") / "mrsteer")
+
+
+@pytest.mark.parametrize("block", _QUIET)
 def test_doc_block_runs_as_written(block: dc.Block, tree: Path) -> None:
+    _runs_clean(block, tree)
+
+
+@pytest.mark.parametrize("block", _OFFLINE)
+def test_offline_doc_block_runs_as_written(block: dc.Block, offline_tree: Path) -> None:
+    _runs_clean(block, offline_tree)
+
+
+def _runs_clean(block: dc.Block, tree: Path) -> None:
     proc = dc.run(block, tree)
     shown = f"{block.name}:\n{block.script}--- stdout\n{proc.stdout[-3000:]}--- stderr\n{proc.stderr[-3000:]}"
     assert proc.returncode == 0, shown
     assert "Traceback (most recent call last)" not in proc.stdout + proc.stderr, shown
+
+
+def test_realtime_runs_and_benchmarks_need_the_machine_and_computation_does_not(tmp_path: Path) -> None:
+    def block(*commands: str) -> dc.Block:
+        return dc.Block(tmp_path / "x.md", 1, commands)
+
+    for quiet in ("mrsteer hil run --scenario handover --mode realtime", "mrsteer bench --quick", "make demo",
+                  "mrsteer faults run --secoc", "mrsteer controller &", "mrsteer hil run --controller-cmd x",
+                  "mrsteer hil demo", "sudo tools/vcan.sh up 2"):
+        assert dc.needs_quiet_machine(block("mrsteer design busload", quiet)), quiet
+    for offline in ("mrsteer design margins --reference   # about 10 min", "mrsteer hil run --scenario s.toml",
+                    "mrsteer campaign run campaigns/example.toml --out out/camp", "make -C ports/c check",
+                    "cantools decode dbc/mrsteer.dbc < out/run1/traffic.log", "mrsteer hil evidence"):
+        assert not dc.needs_quiet_machine(block(offline)), offline
 
 
 def test_every_skipped_block_says_why() -> None:
