@@ -174,94 +174,118 @@ TURN_BLOCK = 10
 
 @dataclass(frozen=True)
 class PlausibilityConfig:
-    """Calibration of the monitor.  Angles in rad (front wheel), rates in rad/s, times in s."""
+    """Calibration of the monitor.  Angles in rad (front wheel), rates in rad/s, times in s.
 
+    Each field's comment starts with its unit in brackets (``[1]``: a ratio) and says what the
+    field bounds; ``python -m mrsteer_cli.doc_tables --write`` renders them into
+    docs/controller.md's table of thresholds, so they are written here once."""
+
+    # [s] the monitor's step: one yaw-rate sample (the control period by the DBC's MRS_ControlLoop)
     ts: float = 0.002
-    speed_min: float = 5.0  # m/s: below, a_y / v and K_n(v) say too little; checks pause
-    yaw_bound: float = 0.035  # |a_y / v - r| <= yaw_bound + yaw_rel min(|a_y / v|, |r|), rad/s (2 deg/s)
+    # [m/s] below it every check but the speed step and the speed pair pauses: a_y / v and K_n(v) say
+    # too little there
+    speed_min: float = 5.0
+    # [rad/s] kinematic bound, constant part (2 deg/s): |a_y / v - r less the family's beta'| <=
+    # yaw_bound + yaw_rel min(|a_y / v|, |r|) (+ side_accel / v while the yaw-rate pair runs)
+    yaw_bound: float = 0.035
+    # [1] kinematic bound, relative part, on the smaller of |a_y / v| and |r|, so that a wrong a_y or
+    # yaw rate cannot widen its own bound
     yaw_rel: float = 0.1
-    yaw_count: int = 1  # samples of the redundant frame (50 ms each) over the bound, net (docs/controller.md)
-    yaw_raw_fraction: float = 0.5  # ... and the uncompensated residual over this fraction of it
-    steer_bound: float = 0.004  # |delta - delta_2|, rad (0.23 deg of wheel angle)
-    steer_count: int = 1  # samples (50 ms each) over the bound, net (docs/controller.md)
-    model_margin: float = 0.15  # |r - r_model| <= margin + model_rel |r_model|
+    # [samples] redundant samples (50 ms each) over the kinematic bound, counted up and down, to trip;
+    # the residual is already a mean over KIN_WINDOW samples
+    yaw_count: int = 1
+    # [1] the uncompensated residual a_y / v - r must also exceed this fraction of the bound: a sensor
+    # error moves both residuals alike
+    yaw_raw_fraction: float = 0.5
+    # [rad] steering pair: |delta - delta_2| at each redundant sample (0.23 deg of wheel angle); at 40
+    # m/s, K_n(v) times it is the kinematic yaw bound
+    steer_bound: float = 0.004
+    # [samples] redundant samples over steer_bound, counted up and down, to trip
+    steer_count: int = 1
+    # [rad/s] model bound, constant part: |r - r_model| <= model_margin + model_rel |r_model|
+    model_margin: float = 0.15
+    # [1] model bound, relative part: on low mu the car yaws between 0 and 1 times the nominal car
     model_rel: float = 1.0
-    model_tau: float = 0.15  # lag of the nominal car's yaw response, s
-    model_time: float = 0.15  # s over the model bound to trip
-    frozen_time: float = 0.2  # s unchanged while the partner has moved, to trip
-    frozen_move_yaw: float = 0.02  # rad/s the partner (a_y / v or r) must move
-    frozen_move_steer: float = 0.003  # rad the other steering channel must move
+    # [s] first-order lag of the nominal car's yaw response r_model = K_n(v) (delta_driver + aux)
+    model_tau: float = 0.15
+    # [s] net time over the model bound (counted up and down per step) to trip
+    model_time: float = 0.15
+    # [s] a value bit-for-bit unchanged this long while its partner moved is frozen
+    frozen_time: float = 0.2
+    # [rad/s] how far the yaw rate's partner (a_y / v; r for a_y) must move for the frozen check
+    frozen_move_yaw: float = 0.02
+    # [rad] how far the other steering channel must move for the frozen check
+    frozen_move_steer: float = 0.003
+    # [m] the nominal car (the controller's own, firmware_py.calibration): centre of gravity to front axle
     nominal_l_f: float = NOMINAL_L_F
+    # [m] the nominal car: centre of gravity to rear axle
     nominal_l_r: float = NOMINAL_L_R
+    # [kg] the nominal car's mass
     nominal_mass: float = NOMINAL_MASS
+    # [N/rad] the nominal car's front cornering stiffness
     nominal_c_f: float = NOMINAL_C_F
+    # [N/rad] the nominal car's rear cornering stiffness
     nominal_c_r: float = NOMINAL_C_R
-    # s without a usable redundant sample after which the kinematic window restarts; a shorter
-    # gap (one sample withheld or lost: 100 ms between two used ones) keeps it (docs/controller.md)
+    # [s] without a usable redundant sample for longer, the kinematic window restarts; a shorter gap
+    # (one sample withheld or lost) is spanned by the next sample's interval
     kin_gap: float = 0.15
-    # The kinematic check's family of nominal cars: every friction in [mu_min, 1] (the tyres'
-    # stiffness scaled by mu), so that the low-mu car's side-slip rate is not a yaw-rate error
+    # [1] lowest friction of the kinematic check's family of nominal cars (tyre stiffness scaled by mu)
+    # without the yaw-rate pair: a low-mu car's side-slip rate is not a yaw-rate error
     mu_min: float = 0.5
-    # The actuator's nominal lag: ``aux_cmd_applied`` is the command sent the period before,
-    # and the angle it puts on the car follows it by a first-order lag of this (docs/controller.md)
+    # [s] nominal first-order lag from the command sent the period before to the angle it puts on the
+    # car (kinematic and model checks)
     actuator_tau: float = 0.025
-    # |mean of r - r_2 over YAW_PAIR_WINDOW samples| <= this, rad/s: above two elements' noise
-    # (0.028 deg/s/sqrt(Hz)) and offsets (0.3 deg/s each, opposite) by 5.4 SDs (docs/controller.md)
+    # [rad/s] yaw-rate pair: |mean of r - r_2 over YAW_PAIR_WINDOW samples| over it trips; above two
+    # elements' noise and opposite 0.3 deg/s offsets
     yaw_pair_bound: float = 0.03
-    # The largest lag the sensors' filters may put on the car's a_y and yaw rate (the 30 Hz
-    # second-order Butterworth's delay, sqrt(2) / (2 pi 30 Hz) = 7.5 ms): the kinematic check's
-    # family of nominal cars sees the wheel angle through every lag in [0, sensor_tau], so that a
-    # steering step is not taken for a yaw-rate error whatever the sensors' filters (docs/controller.md)
+    # [s] largest lag the sensors' filters put on a_y and r (a 30 Hz 2nd-order Butterworth's delay): the
+    # family sees the wheel angle through every lag in [0, sensor_tau]
     sensor_tau: float = 0.0075
-    # The lateral acceleration a side force no nominal car has (a gust of wind) may put in a_y,
-    # m/s^2: the kinematic bound widens by side_accel / v while the yaw-rate pair is running,
-    # which then finds every yaw-rate error itself, so that the kinematic check is the lateral
-    # acceleration's and the gust is not taken for a sensor error (docs/controller.md)
+    # [m/s^2] side force's acceleration (a gust) the kinematic bound allows, as side_accel / v, while
+    # the yaw-rate pair runs and finds yaw-rate errors itself
     side_accel: float = 0.6
-    # m/s: the most the speed may change from one value to the next (a 20 ms frame; 1.5 m/s is
-    # 75 m/s^2 there, and 15 m/s^2 across the 100 ms a timed-out frame may leave): more is a
-    # sensor that jumped (stuck at another value, an offset or a gain from its onset), which
-    # reschedules K_n(v) at once (docs/controller.md)
+    # [m/s] speed step: the most the speed may change from one value to the next (75 m/s^2 over a 20 ms
+    # frame); more is a sensor that jumped
     speed_step: float = 1.5
-    # The steady-turn speed check (7; docs/controller.md): it runs where |r| >= turn_yaw_min
-    # (rad/s), in blocks over which r stays within turn_yaw_tol (rad/s) and a_y within
-    # turn_lat_tol + turn_lat_rel |a_y| (m/s^2) of the block's first sample; it trips when
-    # |v - a_y / r| > turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r| (m/s), the two
-    # biases the offsets the yaw-rate and a_y sensors may have (rad/s, m/s^2)
+    # [rad/s] the steady-turn speed check runs at redundant samples where |r| is at least this
     turn_yaw_min: float = 0.1
+    # [rad/s] within a steady-turn block r stays within this of the block's first sample, else the block
+    # restarts
     turn_yaw_tol: float = 0.05
+    # [m/s^2] within a block a_y stays within turn_lat_tol + turn_lat_rel |a_y| of the block's first sample
     turn_lat_tol: float = 0.1
+    # [1] the relative part of that a_y tolerance
     turn_lat_rel: float = 0.08
+    # [1] steady-turn bound: |v - a_y / r| <= turn_speed_rel v + (turn_yaw_bias v + turn_lat_bias) / |r|
     turn_speed_rel: float = 0.02
+    # [rad/s] the yaw-rate offset the steady-turn bound allows (0.63 deg/s: issue 18 calls 0.6 deg/s normal)
     turn_yaw_bias: float = 0.011
+    # [m/s^2] the a_y offset the steady-turn bound allows
     turn_lat_bias: float = 0.1
-    # |r - r_2| of a single sample over this, rad/s, is a suspicion: the command may shrink but
-    # not grow for up to YAW_PAIR_WINDOW such samples (re-armed by as many within it in a row).
-    # Two thirds of the bound: 2.4 SDs above two opposite 0.3 deg/s offsets (docs/controller.md)
+    # [rad/s] one sample of |r - r_2| over it is a suspicion: the law's command may shrink but not grow,
+    # for at most YAW_PAIR_WINDOW samples (re-armed by as many within it in a row); in (0,
+    # yaw_pair_bound]
     yaw_pair_hold: float = 0.02
-    # The speed pair (8; docs/controller.md): |v - v_2| <= speed_pair_bound + speed_pair_rel
-    # min(v, v_2) (m/s): above the second source's rounding (0.15 m/s), the tyres' rolling-radius
-    # spread (a few %) and the wheels' slip in normal driving; over it for speed_pair_time (s) trips
+    # [m/s] speed pair: |v - v_2| <= speed_pair_bound + speed_pair_rel min(v, v_2); above the second
+    # speed's rounding (0.15 m/s)
     speed_pair_bound: float = 1.0
+    # [1] speed pair, relative part: the tyres' rolling-radius spread and the wheels' slip in normal driving
     speed_pair_rel: float = 0.05
+    # [s] net time over the speed pair's bound (counted up and down per step) to trip
     speed_pair_time: float = 0.1
-    # rad of wheel angle the driver's angle may move in one sample before the steering pair
-    # suspects it (0.86 deg): 7.5 rad/s at 500 Hz, 1.5 rad/s at 100 Hz, above the fastest hand
-    # (about 1 rad/s); a burst of seven samples at that hand reaches it (docs/controller.md,
-    # "The steering pair's suspicion")
+    # [rad] the driver's angle moving by more than this in one sample between two redundant samples is a
+    # suspicion (0.86 deg: faster than any hand at 100-500 Hz)
     steer_jump: float = 0.015
-    # The family's lowest friction while the yaw-rate pair is running (which then finds every
-    # yaw-rate error itself, as for side_accel): the issue's and the paper's lowest mu, 0.3, so
-    # that a car sliding on it is not taken for an a_y or yaw-rate error.  Without the pair the
-    # kinematic check is the yaw rate's and mu_min keeps it sharp (docs/controller.md, "Out-voted")
+    # [1] the kinematic family's lowest friction while the yaw-rate pair runs (the paper's lowest mu): a
+    # car sliding on it is not taken for a sensor error
     mu_min_paired: float = 0.3
-    # While the speed falls at speed_brake_decel (m/s^2) or more (seen through a first-order lag
-    # of speed_brake_tau, s), a second speed below the speed may be speed_slip_rel min(v, v_2)
-    # further off: braked wheels slip, 10-20 % under ABS, and the second speed is wheel speeds.
-    # 0.5 m/s^2 is under the deceleration at which ABS acts on any road of mu >= 0.1; 0.25 is
-    # ABS's slip with its cycle's dips (docs/controller.md, "Braking: the wheels' slip")
+    # [m/s^2] the car brakes (for the speed pair) while its speed falls at this or more: under the
+    # deceleration at which ABS acts on any road of mu >= 0.1
     speed_brake_decel: float = 0.5
+    # [s] the first-order lag through which the speed's fall is seen
     speed_brake_tau: float = 0.05
+    # [1] while braking, a second speed below the speed may be speed_slip_rel min(v, v_2) further off:
+    # braked wheels slip, 10-20 % under ABS
     speed_slip_rel: float = 0.25
 
 
