@@ -4,8 +4,8 @@ An independent limit on how far and how long the auxiliary command may act, what
 it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
 ``authority_step(c, s, u_request, plaus_bits, cut, fade)`` once per control period (scalar arithmetic, no
 allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
-bit (float64) in ``ports/c/mrs_monitor.c``; the reasoning is in docs/controller.md, "Bounded
-authority".  Meant to run where the command leaves the controller and again at the actuator.
+bit (float64) in ``ports/c/mrs_monitor.c``; docs/controller.md, "Bounded
+authority", says what it does, docs/decisions/0008-authority-fades-rate-bound-and-re-arm.md why.  Meant to run where the command leaves the controller and again at the actuator.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class AuthorityConfig:
 
     ts: float = 0.002
     u_max: float = math.radians(3.0)  # magnitude: the actuator's range
-    rate_max: float = 10.0  # rad/s: a 6 deg reversal in >= 10.5 ms; above the law's needs (docs/controller.md)
+    rate_max: float = 10.0  # rad/s: a 6 deg reversal in >= 10.5 ms; above the law's needs (decision 0008)
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 when the time is up: a hand-back to the driver
     fault_fade_rate: float = math.radians(30.0)  # rad/s toward 0 on a plausibility fault: a wrong command
     panic_window: float = 2.0  # s: the upper end of the paper's 0.5-2 s panic reaction time

@@ -13,7 +13,7 @@ and ``s`` only, no allocation, no calls.  The bounded authority that acts on
 its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to
 ``ports/c/mrs_monitor.c``.
 
-The checks (thresholds and their reasoning: docs/controller.md, "Plausibility monitor"):
+The checks (docs/controller.md, "Plausibility monitor"; the reasoning: docs/decisions/0002-0007):
 
 1. **Kinematic** (yaw rate against lateral acceleration): a_y = v (beta' + r), so in steady
    state r = a_y / v; the residual a_y / v - r is beta', which the car keeps small.  Evaluated
@@ -133,11 +133,11 @@ FROZEN_STEER_2 = 0x40
 MISSING = 0x80  # a redundant input is missing (not latched)
 #: The yaw-rate pair's latest sample is over ``yaw_pair_hold``, which its window has not
 #: confirmed (not latched): the node passes it (``SUSPECT_CHECKS``) to ``step()``'s ``hold``, on
-#: which the law's command may shrink but not grow (docs/controller.md, "The pair's suspicion").
+#: which the law's command may shrink but not grow (docs/decisions/0004-suspicions-hold-the-law.md).
 SUSPECT_YAW_PAIR = 0x800
 #: The driver's angle moved by more than ``steer_jump`` in one sample since the last redundant
 #: sample (not latched): held as ``SUSPECT_YAW_PAIR`` until the steering pair judges it at the
-#: next one (docs/controller.md, "The steering pair's suspicion").
+#: next one (docs/decisions/0004-suspicions-hold-the-law.md).
 SUSPECT_STEER_JUMP = 0x2000
 #: The kinematic (1) or the model (2) check tripped while the yaw rate's second element confirmed
 #: it (latched): not the yaw rate, but a_y, the car (past its grip limit, spinning, it is neither
@@ -156,7 +156,7 @@ STEER_CHECKS = CHECK_STEER_PAIR | FROZEN_STEER | FROZEN_STEER_2
 #: The degraded states: a redundant input missing, or the car outside the model.
 DEGRADED_CHECKS = MISSING | OUTSIDE_MODEL
 #: The pair checks, which find a fault while the command it drove is still building: the node
-#: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/controller.md).
+#: passes ``flags & CUT_CHECKS`` as ``authority_step``'s ``cut`` (docs/decisions/0003-a-second-yaw-rate-element-and-the-cut.md).
 CUT_CHECKS = CHECK_YAW_PAIR | CHECK_STEER_PAIR | CHECK_SPEED | CHECK_SPEED_PAIR
 #: The flags on which the command fades though no fault bit is set: the node passes
 #: ``flags & FADE_CHECKS`` as ``authority_step``'s ``fade``.

@@ -1,5 +1,5 @@
 """The checks that infer the yaw rate or the speed from a model give way to two measurements
-that agree (docs/controller.md, "Out-voted: the paper's scenarios on low mu"): the model check
+that agree (docs/decisions/0005-two-measurements-out-vote-a-model.md): the model check
 while the yaw rate's second element and a_y / v both confirm it, the steady-turn check while the
 second speed confirms the speed, and the kinematic family reaches mu_min_paired while the pair
 runs.  The paper's six operating conditions (10/20/40 m/s on mu 1 and 0.3) on its own linear car

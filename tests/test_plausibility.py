@@ -531,7 +531,7 @@ def _campaign_sample(duration: float = 3.0, **values: float) -> scn.Scenario:
 #: Strong disturbances the controller holds (side slip below 2 deg) that the first monitor took
 #: for a yaw-rate fault 0.1-0.2 s after their onset: the command faded and each car spun (side
 #: slip 100-380 deg).  The causes: the nominal car's beta' taken from the command rather than
-#: the lagging actuator, and the low-mu car's beta' (docs/controller.md, "Plausibility monitor").
+#: the lagging actuator, and the low-mu car's beta' (docs/decisions/0002-kinematic-check-against-a-family-of-cars.md).
 HELD = [dict(disturbance=0, v=20.0, mu=0.5, yaw_moment=3000.0), dict(disturbance=0, v=18.8, mu=0.52, yaw_moment=-3113.0),
         dict(disturbance=1, v=30.0, mu=0.6, mu_split=0.2, deceleration=7.0),
         dict(disturbance=1, v=20.0, mu=0.8, mu_split=0.2, deceleration=8.0)]

@@ -1,4 +1,4 @@
-"""The speed pair check (monitor check 8, docs/controller.md "A second speed"): the speed against
+"""The speed pair check (monitor check 8, docs/decisions/0006-speed-checks.md): the speed against
 a second, independent speed (RedundantSensors_Speed2).  Synthetic inputs against the check's
 arithmetic, then the closed loop of sim_plant.offline.plausibility_runs with the car's second
 speed, on the slow speed drift in a gentle curve that no other check sees."""
@@ -156,7 +156,7 @@ def test_the_second_speed_sensor_reads_the_bus_resolution_and_nan_without_one() 
 
 # The case the other speed checks leave open: a falling speed reading in a curve gentler than the
 # steady-turn check's turn_yaw_min (r 0.088 rad/s at 10 m/s on mu 0.3), long enough that without
-# the pair the law's caused yaw passes the 0.05 rad/s target (docs/controller.md: after 6 s).
+# the pair the law's caused yaw passes the 0.05 rad/s target (docs/decisions/0006-speed-checks.md).
 _ONSET, _RATE = 1.4, -1.0
 
 
@@ -186,7 +186,7 @@ def test_in_closed_loop_the_pair_finds_a_slow_speed_drift_in_a_gentle_curve() ->
 
 
 def test_without_the_pair_the_same_drift_passes_the_caused_yaw_target() -> None:
-    # the reason for the pair (docs/controller.md): no other check sees this drift
+    # the reason for the pair (docs/decisions/0006-speed-checks.md): no other check sees this drift
     twin, run = _drift(False)
     assert run.report_time is None
     assert np.abs(run.r_true - twin.r_true).max() > 0.05

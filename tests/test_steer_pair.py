@@ -1,7 +1,7 @@
 """The steering pair in closed loop (issue 18): one redundant sample over the bound trips it, and
 the limiter removes the command at its rate bound, so that a driver's angle stuck at 0 in the
 fault matrix's curve keeps the yaw its command causes under the target at every onset phase
-(docs/controller.md, "Why one sample and the cut")."""
+(docs/decisions/0003-a-second-yaw-rate-element-and-the-cut.md)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def test_a_stuck_driver_angle_causes_less_than_the_target_at_every_onset_phase()
         # the jump (1.5 deg in one sample) held the command until the pair saw it: nothing caused
         assert 0.0 <= caused <= 0.002, (phase, caused)
     # Without the suspicion the law answers the stuck angle at full speed until the pair sees it:
-    # the worst phase waits 48 ms and the command's yaw is the figure docs/controller.md gives.
+    # the worst phase waits 48 ms, and the command's yaw is over the target (docs/decisions/0004-suspicions-hold-the-law.md).
     unheld = [_caused(p, pl.PlausibilityConfig(steer_jump=1e3), pl.CUT_CHECKS)[0] for p in PHASES_MS]
     assert 0.02 < max(unheld) <= CAUSED_YAW_TARGET
     # What the shipped settings are for: three samples and the 30 deg/s fault fade miss it.
@@ -48,7 +48,7 @@ def test_a_stuck_driver_angle_causes_less_than_the_target_at_every_onset_phase()
 
 def test_the_worst_case_the_pair_alone_left_is_held_at_every_phase() -> None:
     # 10 m/s on mu 1: the curve needs 3.1 deg of wheel, and that angle stuck at 0 and found a
-    # frame late caused 0.055 rad/s without the suspicion (docs/controller.md)
+    # frame late caused 0.055 rad/s without the suspicion (docs/decisions/0004-suspicions-hold-the-law.md)
     worst = {}
     for steer_jump in (0.015, 1e3):
         caused = []

@@ -1,4 +1,4 @@
-"""The yaw-rate pair check (issue 18's decision, docs/controller.md "A second yaw-rate channel"):
+"""The yaw-rate pair check (issue 18's decision, docs/decisions/0003-a-second-yaw-rate-element-and-the-cut.md):
 the monitor compares the yaw-rate sensor's two elements over a 10 ms window, and the limiter
 removes the command at once on its fault.  Synthetic inputs against the window's arithmetic,
 then the closed loop of sim_plant.offline.plausibility_runs with a second element."""

@@ -6,7 +6,7 @@
  * divisions by calibration values and the only exp()); mrs_monitor_step() and
  * mrs_authority_step() are one control period of scalar arithmetic on the structs: no heap,
  * no recursion, no library call.  docs/controller.md, "Plausibility monitor", gives the
- * thresholds and the reasoning.
+ * checks and thresholds; docs/decisions/0002-0008 the reasoning.
  */
 #ifndef MRS_MONITOR_H
 #define MRS_MONITOR_H

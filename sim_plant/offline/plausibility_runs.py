@@ -11,7 +11,7 @@ authority limiter in the node's order; the limited command reaches the actuator 
 ``cut`` is the cycle's ``cut_checks``: the shipped pairs, or another mask to weigh against them.
 
 ``second_yaw`` adds the yaw-rate sensor's second element (issue 18's decision,
-docs/controller.md "A second yaw-rate channel"): a sensor of its own configuration (noise stream,
+docs/decisions/0003-a-second-yaw-rate-element-and-the-cut.md): a sensor of its own configuration (noise stream,
 offset), never faulted, sampled with the first as one ``MRS_YawRate`` frame would carry both,
 for the monitor's pair check, as ``MRS_YawRate`` carries it; without it the car has none (NaN:
 the check paused).

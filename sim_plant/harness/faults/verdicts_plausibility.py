@@ -107,7 +107,7 @@ def row_bound(sensor: str, cfg: PlausibilityConfig, r: float, v: float, pair: bo
     """``sensor_bound``; for a speed on a car without the second speed (``speed_pair`` False),
     which has no bound on its error, the largest change the jump check lets pass between two
     samples (``speed_step``), which bounds only a step fault's error (without the pair a
-    drifting speed has no error bound outside a steady turn: docs/controller.md)."""
+    drifting speed has no error bound outside a steady turn: docs/decisions/0006-speed-checks.md)."""
     if sensor in ("speed", "speed_redundant") and not speed_pair:
         return cfg.speed_step
     return float(sensor_bound(sensor, cfg, r, v, pair, speed_pair))
