@@ -1,6 +1,6 @@
 # Quick start: `make demo` runs the main job (HIL demo), `make test` runs the test suite (on two
-# pytest-xdist workers). `make test-slow` runs the checks too long for it, one at a time (the
-# fault matrices, every documented command; .ci/run runs both). `make paper` regenerates the
+# pytest-xdist workers). `make test-slow` runs the checks too long for it (the fault matrices,
+# every documented command; .ci/run runs both). `make paper` regenerates the
 # paper's figures.
 # Both create .venv (Python >= 3.10) and install the project into it when needed.
 PYTHON ?= python3
@@ -27,7 +27,8 @@ test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "not slow"
 
 # The slow tests that share the machine well run on both cores; then, one at a time, those that
-# need it to themselves (marker serial: realtime runs, the docs' blocks in their order).
+# need it to themselves (marker serial: realtime runs, the benchmark, the docs' blocks that run
+# one of them, in the docs' order).
 test-slow: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile -m "slow and not serial" --durations=10
 	$(VENV)/bin/python -m pytest -q -m "slow and serial" --durations=10
