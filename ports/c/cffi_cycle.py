@@ -1,0 +1,80 @@
+"""The C control cycle as a Python extension (cffi, API mode): ``sim_plant.campaign._c_cycle``,
+compiled when the project is installed (``setup.py``'s ``cffi_modules``; ``pip install -e .``).
+
+What it compiles is the port itself (``mrs_controller.c``, ``mrs_monitor.c``, ``mrs_cycle.c``,
+``mrs_config.c`` and the batch loop ``mrs_cycle_batch.c``) in float64 with the flags the port's
+Makefile uses for its bit-for-bit checks (``-std=c99 -O2 -ffp-contract=off``: no fused
+multiply-add, so every operation rounds as Python's).  The declarations below are the part of
+the headers Python calls; ``...`` leaves a struct's layout to the compiler.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from cffi import FFI
+
+HERE = Path(__file__).resolve().parent
+SOURCES = ("mrs_controller.c", "mrs_monitor.c", "mrs_cycle.c", "mrs_config.c", "mrs_cycle_batch.c")
+MODULE = "sim_plant.campaign._c_cycle"
+
+CDEF = """
+typedef struct { double ts; double aux_limit; ...; } mrs_config_t;
+typedef struct { double ts; ...; } mrs_monitor_config_t;
+typedef struct { double ts; double u_max; ...; } mrs_authority_config_t;
+typedef struct { ...; } mrs_authority_coeffs_t;
+typedef struct { ...; } mrs_authority_state_t;
+typedef struct { ...; } mrs_cycle_coeffs_t;
+typedef struct { ...; } mrs_cycle_state_t;
+
+typedef struct {
+    const double *delta_driver;
+    const double *yaw_rate;
+    const double *speed;
+    const double *lat_accel;
+    const double *delta_driver_redundant;
+    const double *yaw_rate_redundant;
+    const double *speed_redundant;
+    const double *monitor_driver;
+    const int32_t *monitor_steps;
+    const uint8_t *starting;
+} mrs_cycle_batch_inputs_t;
+
+typedef struct {
+    double *command;
+    uint8_t *plausibility;
+    uint8_t *reported;
+    uint8_t *status;
+    uint16_t *monitor_flags;
+    uint8_t *authority_flags;
+} mrs_cycle_batch_outputs_t;
+
+int mrs_config_load(const char *path, mrs_config_t *g, char *err, size_t err_len);
+void mrs_monitor_default_config(mrs_monitor_config_t *cfg);
+void mrs_authority_default_config(mrs_authority_config_t *cfg);
+int mrs_authority_configure(const mrs_authority_config_t *cfg, mrs_authority_coeffs_t *c);
+int mrs_cycle_configure(const mrs_config_t *law, const mrs_monitor_config_t *monitor,
+                        const mrs_authority_config_t *authority, mrs_cycle_coeffs_t *c);
+void mrs_cycle_batch_reset(int32_t n, mrs_cycle_state_t *states);
+void mrs_cycle_batch(int32_t n, const mrs_cycle_coeffs_t *c, mrs_cycle_state_t *states,
+                     const mrs_cycle_batch_inputs_t *in, const mrs_cycle_batch_outputs_t *out);
+void mrs_authority_batch_reset(int32_t n, mrs_authority_state_t *states);
+void mrs_authority_batch(int32_t n, const mrs_authority_coeffs_t *c, mrs_authority_state_t *states,
+                         const double *u_request, const uint8_t *plaus_bits, double *u);
+"""
+
+ffibuilder = FFI()
+ffibuilder.cdef(CDEF)
+ffibuilder.set_source(
+    MODULE,
+    '#include "mrs_config.h"\n#include "mrs_cycle_batch.h"\n',
+    # (setuptools takes paths relative to setup.py's directory, where it runs)
+    sources=[os.path.relpath(HERE / name) for name in SOURCES],
+    include_dirs=[os.path.relpath(HERE)],
+    extra_compile_args=["-std=c99", "-O2", "-ffp-contract=off"],
+    libraries=["m"],
+)
+
+if __name__ == "__main__":
+    ffibuilder.compile(verbose=True)
