@@ -22,6 +22,7 @@ import numpy as np
 from firmware_py import calibration_file
 from firmware_py import model_regulator as mr
 
+_WHY = ""  # why the extension cannot be imported
 try:
     from sim_plant.campaign._c_cycle import ffi, lib
 except ImportError as exc:  # (not built: no C compiler when the project was installed)
