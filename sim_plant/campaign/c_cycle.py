@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,11 +51,12 @@ OUTPUTS = {"command": ("double *", np.float64), "plausibility": ("uint8_t *", np
            "monitor_flags": ("uint16_t *", np.uint16), "authority_flags": ("uint8_t *", np.uint8)}
 
 
-def _ptr(ctype: str, a: np.ndarray):  # noqa: ANN202 (a cffi pointer)
+def _ptr(ctype: str, a: np.ndarray) -> Any:
+    """A C pointer of ``ctype`` to ``a``'s buffer (``a`` outlives its use: the caller keeps it)."""
     return ffi.cast(ctype, ffi.from_buffer(a))
 
 
-def law_config(config: mr.ControllerConfig):  # noqa: ANN201 (a cffi mrs_config_t *)
+def law_config(config: mr.ControllerConfig) -> Any:
     """``config`` as the C law's ``mrs_config_t``, through a calibration file (the C node's one mapping)."""
     require()
     g = ffi.new("mrs_config_t *")
@@ -67,7 +69,8 @@ def law_config(config: mr.ControllerConfig):  # noqa: ANN201 (a cffi mrs_config_
     return g
 
 
-def _authority_config(ts: float, u_max: float):  # noqa: ANN202
+def _authority_config(ts: float, u_max: float) -> Any:
+    """The C limiter's defaults at ``ts`` with the magnitude ``u_max`` (as the C node's)."""
     cfg = ffi.new("mrs_authority_config_t *")
     lib.mrs_authority_default_config(cfg)
     cfg.ts, cfg.u_max = ts, u_max
