@@ -7,6 +7,8 @@ step.  The car is out of this comparison (``test_campaign_engine`` holds the who
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -128,3 +130,23 @@ def test_campaign_run_without_the_built_c_cycle_fails_in_one_line(monkeypatch: p
     assert err.count("\n") == 1 and err.startswith("mrsteer: campaign run: the C control cycle"), err
     with pytest.raises(c_cycle.NotBuilt):
         engine.simulate(sampling.samples(spec.parse(SPEC, "c.toml"), np.arange(2)), None, 0.01)
+
+
+def test_a_build_older_than_the_port_s_sources_is_refused_in_one_line(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    from mrsteer_cli import cli
+
+    files = c_cycle.ffi.string(c_cycle.lib.mrs_c_cycle_files()).decode().split(",")
+    assert {"mrs_cycle.c", "mrs_cycle_batch.c", "mrs_monitor.h"} <= set(files)
+    for name in files:
+        shutil.copy(c_cycle.PORT / name, tmp_path / name)
+    monkeypatch.setattr(c_cycle, "PORT", tmp_path)
+    assert c_cycle.built_from_the_port()  # the installed build is the checkout's
+    with (tmp_path / "mrs_monitor.c").open("a") as f:
+        f.write("/* an edit since the build */\n")
+    assert not c_cycle.built_from_the_port()
+    assert cli.main(["campaign", "run", "campaigns/does-not-matter.toml"]) != 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "built from other sources than ports/c" in err, err

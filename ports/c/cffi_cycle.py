@@ -10,6 +10,7 @@ the headers Python calls; ``...`` leaves a struct's layout to the compiler.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
@@ -17,7 +18,17 @@ from cffi import FFI
 
 HERE = Path(__file__).resolve().parent
 SOURCES = ("mrs_controller.c", "mrs_monitor.c", "mrs_cycle.c", "mrs_config.c", "mrs_cycle_batch.c")
+HEADERS = ("mrs_controller.h", "mrs_monitor.h", "mrs_cycle.h", "mrs_config.h", "mrs_cycle_batch.h")
 MODULE = "sim_plant.campaign._c_cycle"
+
+
+def digest(files: tuple[str, ...], where: Path) -> str:
+    """SHA-256 over ``files`` of ``where`` in their order: the module carries its sources' digest,
+    so that ``sim_plant.campaign.c_cycle`` finds a build older than ``ports/c``."""
+    h = hashlib.sha256()
+    for name in files:
+        h.update(name.encode() + b"\0" + (where / name).read_bytes() + b"\0")
+    return h.hexdigest()
 
 CDEF = """
 typedef struct { double ts; double aux_limit; ...; } mrs_config_t;
@@ -62,13 +73,17 @@ void mrs_cycle_batch(int32_t n, const mrs_cycle_coeffs_t *c, mrs_cycle_state_t *
 void mrs_authority_batch_reset(int32_t n, mrs_authority_state_t *states);
 void mrs_authority_batch(int32_t n, const mrs_authority_coeffs_t *c, mrs_authority_state_t *states,
                          const double *u_request, const uint8_t *plaus_bits, double *u);
+const char *mrs_c_cycle_files(void);
+const char *mrs_c_cycle_digest(void);
 """
 
 ffibuilder = FFI()
 ffibuilder.cdef(CDEF)
 ffibuilder.set_source(
     MODULE,
-    '#include "mrs_config.h"\n#include "mrs_cycle_batch.h"\n',
+    '#include "mrs_config.h"\n#include "mrs_cycle_batch.h"\n'
+    f'static const char *mrs_c_cycle_files(void) {{ return "{",".join(SOURCES + HEADERS)}"; }}\n'
+    f'static const char *mrs_c_cycle_digest(void) {{ return "{digest(SOURCES + HEADERS, HERE)}"; }}\n',
     # (setuptools takes paths relative to setup.py's directory, where it runs)
     sources=[os.path.relpath(HERE / name) for name in SOURCES],
     include_dirs=[os.path.relpath(HERE)],

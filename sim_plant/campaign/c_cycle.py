@@ -14,6 +14,7 @@ node's.  Inputs and outputs are numpy arrays allocated once per batch; cffi pass
 
 from __future__ import annotations
 
+import hashlib
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -35,11 +36,31 @@ class NotBuilt(ImportError):
     """The C cycle's extension is not there."""
 
 
+#: The port's sources, where this is a checkout (an editable install); None elsewhere.
+PORT = Path(__file__).resolve().parents[2] / "ports" / "c"
+
+
+def built_from_the_port() -> bool:
+    """The extension was compiled from the port's sources as they are now (True where there is
+    no checkout to compare with): ``ports/c/cffi_cycle.py`` stores their digest in it."""
+    files = ffi.string(lib.mrs_c_cycle_files()).decode().split(",")
+    if not all((PORT / name).is_file() for name in files):
+        return True
+    h = hashlib.sha256()
+    for name in files:
+        h.update(name.encode() + b"\0" + (PORT / name).read_bytes() + b"\0")
+    return h.hexdigest() == ffi.string(lib.mrs_c_cycle_digest()).decode()
+
+
 def require() -> None:
-    """Raise ``NotBuilt`` (one line) where the extension cannot be imported."""
+    """Raise ``NotBuilt`` (one line) where the extension cannot be imported, or was built from
+    other sources than the checkout's ``ports/c`` now has."""
     if lib is None:
         raise NotBuilt("the C control cycle (sim_plant/campaign/_c_cycle, built from ports/c by `pip install -e .`) "
                        f"cannot be imported ({_WHY}): install the project again where a C compiler (gcc) is found")
+    if not built_from_the_port():
+        raise NotBuilt("the C control cycle (sim_plant/campaign/_c_cycle) was built from other sources than ports/c "
+                       "has now: build it again with `pip install -e .` (make venv does)")
 
 
 #: The per-period inputs, in the order of ``mrs_cycle_batch_inputs_t``'s double arrays.
