@@ -9,7 +9,10 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo paper test test-slow venv clean
 
-$(STAMP): pyproject.toml
+# (setup.py compiles the C control cycle the campaigns step: a change of its sources installs again)
+C_CYCLE := ports/c/cffi_cycle.py $(wildcard $(addprefix ports/c/,mrs_controller.[ch] mrs_monitor.[ch] mrs_cycle.[ch] \
+           mrs_config.[ch] mrs_cycle_batch.[ch]))
+$(STAMP): pyproject.toml setup.py $(C_CYCLE)
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(VENV)/bin/python -m pip install --quiet -e '.[dev]'

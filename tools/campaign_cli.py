@@ -75,8 +75,12 @@ class Progress:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from sim_plant.campaign import runner, spec
+    from sim_plant.campaign import c_cycle, runner, spec
 
+    try:  # the engine steps the C cycle, compiled at install: without it, one line (not a worker's traceback)
+        c_cycle.require()
+    except c_cycle.NotBuilt as exc:
+        return fail(getattr(args, "prog", "mrsteer campaign run"), str(exc))
     c = spec.load(args.campaign)
     out = args.out or Path("out") / f"campaign-{c.name}"
     check_output_dir("--out", out)

@@ -6,11 +6,10 @@
 * ``batch_car``, ``batch_sensors``, ``loads``: the realistic car and actuator, the sensors, the
   disturbances vectorised; ``noise``: the sensors' per-row noise streams, seeded and drawn as
   the scalar sensors draw them;
-* ``batch_law``: the firmware's law vectorised; ``engine``: the closed loop over a batch;
-  ``batch_tally``: its figures per row, each row's run to its end (a spin ends it);
-* ``batch_monitor``: issue 18's plausibility monitor vectorised (``batch_speed_checks``: its two
-  checks on the speed, the speed pair among them; ``batch_authority``: the authority limiter);
-  ``batch_faults``: the sampled sensor faults and their figures;
+* ``c_cycle``: the C port's control cycle over a batch's rows (``ports/c/mrs_cycle_batch.c``,
+  compiled with cffi at install), and the actuators' own authority limiters;
+* ``engine``: the closed loop over a batch; ``batch_tally``: its figures per row, each row's run
+  to its end (a spin ends it); ``batch_faults``: the sampled sensor faults and their figures;
 * ``reference``: the same closed loop from the product's scalar classes, as the controller node
   runs them (the engine's oracle);
 * ``results``: a chunk's table, the criteria, Parquet files; ``runner``: chunks on Dask, resume;

@@ -18,10 +18,11 @@ scalar oracle ``reference.run`` has them:
    its elements) sent every period, the speed every 10, the lateral acceleration (the car's a_y
    at the actuator's position as the step begins), the second steering channel and the second
    speed every 25 (``MRS_RedundantSensors``), each held between;
-5. the controller: the law (``BatchLaw``), the plausibility monitor given the command sent the
-   period before (``BatchMonitor``), the authority limiter on its bits and on the cut of the
-   checks in ``CUT_CHECKS`` (the pairs, the speed's: ``BatchAuthority``);
-   the state reported FAULT on ``PLAUS_FAULT``;
+5. the controller: the C port's control cycle (``mrs_cycle_step``: the plausibility monitor
+   given the command sent the period before, the law held on its suspicion, the authority
+   limiter on its bits, cut and fade) for every row in one call (``c_cycle.CycleBatch``, the
+   actuators' own limiters ``c_cycle.AuthorityBatch``); the state reported FAULT on
+   ``PLAUS_FAULT``;
 6. the actuator's position follows the handled command, and the car advances with the
    driver's angle plus the position's mean over the step.
 
@@ -46,15 +47,12 @@ import math
 
 import numpy as np
 
-from firmware_py import authority as au
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
 from sim_plant.campaign.batch_sensors import BatchSensors
-from sim_plant.campaign.batch_law import BatchLaw
-from sim_plant.campaign.batch_authority import BatchAuthority
-from sim_plant.campaign.batch_monitor import BatchMonitor
+from sim_plant.campaign.c_cycle import AuthorityBatch, CycleBatch
 from sim_plant.campaign.batch_tally import Ends, Tally, end_traces, scatter
 from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
@@ -174,7 +172,7 @@ class _Group:
         self.loads = GripLoads(s, self.car) if grip else IntactLoads(s)
         self.actuator = BatchPositionActuator(s["actuator_tau"], s["actuator_rate"], ACTUATOR_LIMIT_DEG, ts)
         # The actuator's own authority limit (actuator.Actuator), on the status frames' bits
-        self.act_limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=math.radians(ACTUATOR_LIMIT_DEG)), n)
+        self.act_limiter = AuthorityBatch(ts, math.radians(ACTUATOR_LIMIT_DEG), n)
         self.fault_free = s["fault_sensor"] == 0
         self.faults = None if self.fault_free.all() else BatchFaults(s)
         self.sensors = BatchSensors(s["noise_density"], s["bias"], s[NOISE_SEED], ts, faults=self.faults, steps=steps)
@@ -182,11 +180,8 @@ class _Group:
         if self.every["steer"] != 1 or self.every["yaw_rate"] != 1:
             raise ValueError("the batch engine expects the driver's angle and the yaw rate every period")
         self.status_every = status_cycle(ts)
-        self.law = self.monitor = self.limiter = None
-        if config is not None:  # the controller node: the monitor, step() (held on its suspicion), the limiter
-            self.law = BatchLaw(config, n)
-            self.monitor = BatchMonitor(pl.PlausibilityConfig(ts=ts), n)
-            self.limiter = BatchAuthority(au.AuthorityConfig(ts=ts, u_max=authority_limit(config)), n)
+        # the controller node's cycle (C): the monitor, step() (held on its suspicion), the limiter
+        self.cycle = CycleBatch(config, authority_limit(config), n) if config is not None else None
         self.panic_until = s["onset"] + s["reaction_time"]
         self.onset = s["onset"]
         self.gain_step = ts / s["driver_time_constant"]
@@ -210,7 +205,8 @@ class _Group:
         act_latched = np.zeros(rows, dtype=np.int64)
         in_flight: np.ndarray | None = None  # a status frame's bits, read by the plant next step
         held: dict[str, np.ndarray] = {}
-        controlled = self.law is not None and self.monitor is not None and self.limiter is not None
+        cycle = self.cycle
+        controlled = cycle is not None
         tally = Tally(rows, controlled)
         ends = Ends(rows, n)
         final = np.empty((3, rows))  # beta, r, v of each row's last step that spun
@@ -221,7 +217,7 @@ class _Group:
         tracked = sensors.tracked
         speed_faulted = "speed" in tracked
         figures = (FaultFigures(self.faults, n, ts, sensors.biases)
-                   if self.faults is not None and self.monitor is not None else None)
+                   if self.faults is not None and controlled else None)
         track_speed = figures is not None and speed_faulted
         track_speed2 = figures is not None and "speed_redundant" in tracked
         track_steer2 = figures is not None and "steer_redundant" in tracked
@@ -281,18 +277,16 @@ class _Group:
                 elif track_speed:
                     sensors.speed(car.v)  # its error, every step
                 steer = sensors.steer(driver)
-                if controlled:
-                    # (the held pair passed as the same arrays until the next sample: the monitor's shortcut)
-                    bits = self.monitor.step(steer, held["steer2"], yaw, held["lat"], held["speed"], pending,
-                                             sensors.yaw_rate_redundant(r), held["speed2"])
-                    u = self.law.step(steer, yaw, held["speed"], (self.monitor.flags & pl.SUSPECT_CHECKS) != 0)
-                    u = self.limiter.step(u, bits, self.monitor.flags & pl.CUT_CHECKS,
-                                          self.monitor.flags & pl.FADE_CHECKS)
-                    tally.control(j, u, self.law.status, bits, self.limiter.flags)
+                if cycle is not None:
+                    # (the outputs are the cycle's arrays, overwritten next period: what outlives it is copied)
+                    u = cycle.step(steer, held["steer2"], yaw, held["lat"], held["speed"],
+                                   sensors.yaw_rate_redundant(r), held["speed2"])
+                    bits, flags = cycle.out["plausibility"], cycle.out["monitor_flags"]
+                    tally.control(j, u, cycle.out["status"], bits, cycle.out["authority_flags"])
                     if (k + 1) % self.status_every == 0:
-                        in_flight = bits
+                        in_flight = bits.astype(np.int64)
                     if figures is not None:
-                        figures.step(k, sensors.error, bits, r, car.v, self.monitor.flags, live, ending)
+                        figures.step(k, sensors.error, bits, r, car.v, flags, live, ending)
                     if self.shadow is not None:  # (while both runs are on)
                         whole = np.abs(r[self.pairs] - r[self.twins])
                         on = after if live is None else after & live[self.pairs] & live[self.twins]
