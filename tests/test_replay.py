@@ -313,6 +313,10 @@ def test_the_c_port_is_judged_against_the_python_firmware_in_every_cycle(
     assert not off.agrees and len(port) == 1 and port[0].line == result.steps[k].recorded.line
 
 
+# A realtime matrix row: beside the other worker's tests its monitor has raised a timing false
+# alarm (OUTSIDE_MODEL at 0.10 s, issue 53), so it runs alone.
+@pytest.mark.slow
+@pytest.mark.serial
 def test_a_fault_matrix_rows_kept_log_replays_with_its_kept_calibration(tmp_path: Path,
                                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """``faults run --keep``: the controller's log of the baseline row replays to every command
