@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 from firmware_py.controller import node as rt
 from firmware_py.controller.options import RATES_HELP, RateError, calibration_for_rate
 from firmware_py.platform.cli import add_quick_arg, describe, EXIT_INTERRUPTED, fail, Parser
+from sim_plant.campaign.c_cycle import NotBuilt
 
 if TYPE_CHECKING:
     from mrsteer_bench.loop_compare import CompareSettings
@@ -122,6 +123,10 @@ def run(names: Sequence[str], quick: bool, say: Callable[[str], None],
     from mrsteer_bench.cpu_load import default_procs
 
     out: dict[str, Any] = {"quick": quick, "python": platform.python_version(), "machine": platform.machine()}
+    if "campaign" in names:
+        from sim_plant.campaign import c_cycle
+
+        c_cycle.require()  # the engine steps the C cycle: without it, one line before any run
     t0 = time.monotonic()
     if "step" in names:
         say("firmware step() ...")
@@ -176,7 +181,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer bench") -> int:
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         res = run(names, args.quick, say, loop_settings)
-    except (RuntimeError, OSError, ValueError) as exc:
+    except (RuntimeError, OSError, ValueError, NotBuilt) as exc:
         return fail(prog, describe(exc))
     except KeyboardInterrupt:
         return fail(prog, "interrupted; every process it started is stopped, no table", EXIT_INTERRUPTED)

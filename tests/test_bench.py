@@ -59,6 +59,17 @@ def test_bench_rejects_unknown_names(capsys: pytest.CaptureFixture[str]) -> None
     assert exc.value.code == 2 and "nonsense" in capsys.readouterr().err
 
 
+def test_the_campaign_bench_without_the_built_c_cycle_fails_in_one_line_before_any_run(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from sim_plant.campaign import c_cycle
+
+    monkeypatch.setattr(c_cycle, "lib", None)
+    monkeypatch.setattr(c_cycle, "_WHY", "No module named 'sim_plant.campaign._c_cycle'")
+    assert main(["bench", "--quick", "--only", "step", "--only", "campaign"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("mrsteer: bench: the C control cycle"), err  # not step()'s run
+
+
 def test_loop_benchmark_measures_a_live_controller() -> None:
     r = loop_timing(500.0, 1.5, pin=False)
     assert r["cycles"] > 300 and r["latency_samples"] > 100
