@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import pytest
+
 import mrsteer_cli.doc_tables as dt
 from firmware_py import plausibility as pl
 
@@ -23,3 +25,10 @@ def test_a_hand_edited_value_is_found() -> None:
     assert "| `yaw_bound` | 0.035 rad/s |" in text
     edited = text.replace("| `yaw_bound` | 0.035 rad/s |", "| `yaw_bound` | 0.04 rad/s |")
     assert dt.render(edited) == text
+
+
+def test_bad_usage_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        dt.main([])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and "--write" in err, err

@@ -9,7 +9,6 @@ monitor, from ``firmware_py.plausibility.PlausibilityConfig``'s defaults and eac
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import inspect
 import re
@@ -17,6 +16,7 @@ import sys
 from pathlib import Path
 
 from firmware_py import plausibility as pl
+from firmware_py.platform.cli import Parser
 
 ROOT = Path(__file__).resolve().parents[1]
 CONTROLLER_MD = ROOT / "docs" / "controller.md"
@@ -84,7 +84,7 @@ def check(path: Path = CONTROLLER_MD) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m mrsteer_cli.doc_tables", description=__doc__.splitlines()[0])
+    parser = Parser(prog="python -m mrsteer_cli.doc_tables", description=__doc__.splitlines()[0])
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument("--write", action="store_true", help="regenerate the tables in place")
     mode.add_argument("--check", action="store_true", help="exit 1 when a table is not current")
