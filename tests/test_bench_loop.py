@@ -90,11 +90,22 @@ def test_ratio_is_python_over_c_and_undefined_without_a_c_figure() -> None:
 
 
 def test_c_targets_are_judged_at_their_bounds() -> None:
-    at = {"lateness_p99_us": 100.0, "missed_cycles": 0, "latency_p99_us": 500.0}
-    assert all(v["met"] for v in lc.judge_c(at).values())
-    over = lc.judge_c({"lateness_p99_us": 100.5, "missed_cycles": 1, "latency_p99_us": 501.0})
+    at = {"lateness_p99_us": 100.0, "missed_cycles": 2, "latency_p99_us": 500.0}
+    assert all(v["met"] for v in lc.judge_c(at, empty_rt_missed=2).values())
+    over = lc.judge_c({"lateness_p99_us": 100.5, "missed_cycles": 3, "latency_p99_us": 501.0}, empty_rt_missed=2)
     assert not any(v["met"] for v in over.values())
-    assert over["missed_cycles"]["value"] == 1.0 and over["latency_p99_us"]["target"] == 500.0
+    assert over["missed_cycles"] == {"target": 2.0, "value": 3.0, "met": False}
+    assert over["latency_p99_us"]["target"] == 500.0
+    # no missed cycle is allowed where the empty real-time loop missed none
+    assert not lc.judge_c({**at, "missed_cycles": 1}, empty_rt_missed=0)["missed_cycles"]["met"]
+
+
+def test_the_real_time_empty_loop_runs_as_long_as_each_controller(monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: dict[str, float] = {}
+    monkeypatch.setattr(lc.loop, "bare_loop_lateness", lambda hz, s: seen.setdefault("no_rt", s) and {})
+    monkeypatch.setattr(lc.loop, "rt_loop_lateness", lambda hz, s, pin: seen.setdefault("rt", s) and {})
+    lc.empty_loops(500.0, 30.0, True)
+    assert seen == {"no_rt": lc.BASELINE_MAX_S, "rt": 30.0}
 
 
 def test_compare_runs_both_controllers_quiet_then_under_the_load() -> None:
@@ -108,6 +119,8 @@ def test_compare_runs_both_controllers_quiet_then_under_the_load() -> None:
     assert res["ratios"]["quiet"]["missed_cycles"] is None  # C missed none
     assert res["c_targets"]["quiet"]["latency_p99_us"]["met"] is True
     assert res["c_targets"]["loaded"]["latency_p99_us"]["met"] is False
+    # the C node's 0 missed cycles against the fake empty real-time loop's 7
+    assert res["c_targets"]["quiet"]["missed_cycles"] == {"target": 7.0, "value": 0.0, "met": True}
     assert res["runs"]["loaded"]["c"]["implementation"] == "c" and len(res["runs"]["quiet"]["loadavg_before"]) == 3
 
 
@@ -131,7 +144,7 @@ def test_table_shows_both_controllers_the_ratio_and_the_targets() -> None:
     # quiet: python, c, py/c, loaded: python, c, py/c, target, met
     assert rows["lateness p99 (us)"] == ["200", "50", "4.00", "100", "50", "2.00", "<=", "100", "yes/yes"]
     assert rows["latency p99 (us)"] == ["1600", "400", "4.00", "1800", "900", "2.00", "<=", "500", "yes/NO"]
-    assert rows["missed cycles"] == ["3", "0", "-", "3", "0", "-", "0", "in", "30", "s", "yes/yes"]
+    assert rows["missed cycles"] == ["3", "0", "-", "3", "0", "-", "<=", "empty", "RT", "yes/yes"]
     assert rows["empty loop, RT+pin (us)"] == ["4/5/6,", "7", "missed"] * 2
     assert "2 busy-loop processes" in table and "fallback bus" in table and "SCHED_FIFO 50" in table
     assert "plant and broker: SCHED_FIFO 40, CPUs [0]" in table
