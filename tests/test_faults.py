@@ -439,3 +439,20 @@ def test_a_known_defect_is_named_only_when_it_is_the_only_failure() -> None:
     table = format_table([known, failed])
     assert f"{row.name:<38}{row.expected:<42}KNOWN" in table and "issue 53" in table
     assert table.endswith("0/2 rows pass, 1 fail as a known defect")
+
+
+def test_a_killed_plants_outage_starts_after_its_last_frame_even_one_logged_after_the_kill() -> None:
+    """The dead plant's last yaw-rate frame can reach the bus after the SIGKILL (it was in the
+    broker's queue): the controller's timeout runs from that frame, so the outage does too."""
+    from types import SimpleNamespace
+
+    from sim_plant.harness.faults.verdicts import outage
+    c = mrsteer_dbc.load()
+    yaw = c.frame_id("MRS_YawRate")
+    cycle = c.cycle_time_s("MRS_YawRate", 0.002)
+    row = next(r for r in ROWS if r.kill_plant)
+    frames = [Frame(t, yaw, b"") for t in (1.000, 1.002, 1.004, 1.5, 1.502)]
+    e = SimpleNamespace(row=row, setup=SimpleNamespace(ts=0.002), killed_at=1.003, restarted=1.4, frames=frames,
+                        bridge={"first_affected": None, "last_affected": None})
+    # the frame at 1.004 was sent before the kill at 1.003 and logged after it
+    assert outage(e) == (pytest.approx(1.004 + cycle), 1.5)

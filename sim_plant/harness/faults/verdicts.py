@@ -190,9 +190,12 @@ def outage(e: Evidence) -> tuple[float | None, float | None]:
     if e.row.kill_plant and e.killed_at is not None:
         c, ts = mrsteer_dbc.load(), e.setup.ts
         # The outage, as the controller saw it: from when the dead plant's next yaw-rate frame
-        # was due to the restarted plant's first one.
+        # was due to the restarted plant's first one.  The dead plant's last frame is the last
+        # before the restart, not before the kill: a frame it sent just before dying can reach
+        # the bus after the kill on a loaded machine, and the controller's timeout runs from it.
         yaws = [t_ for t_, fid, _ in e.frames if fid == c.frame_id(names.MSG_YAW)]
-        last = max((t_ for t_ in yaws if t_ <= e.killed_at), default=None)
+        end = e.restarted if e.restarted is not None else float("inf")
+        last = max((t_ for t_ in yaws if t_ < end), default=None)
         affected0 = None if last is None else last + (c.cycle_time_s(names.MSG_YAW, ts) or ts)
         affected1 = min((t_ for t_ in yaws if e.restarted is not None and t_ >= e.restarted), default=e.killed_at)
     return affected0, affected1
