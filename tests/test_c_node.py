@@ -136,6 +136,27 @@ def test_a_keyed_c_node_sends_no_command_before_the_first_sync(c_node) -> None:
     assert verifier.verify(cmd, data, decoded.signals)  # signed for the adopted epoch
 
 
+def test_a_keyed_c_node_withholds_commands_while_its_last_sync_is_stale(c_node) -> None:
+    """As the Python node: no valid sync for three sync cycle times (300 ms, 150 cycles at 500 Hz)
+    and no command goes out until the next sync, here a restarted actuator's first."""
+    contract = mrsteer_dbc.load()
+    key = bytes(range(16))
+    sync_id = contract.frame_id("MRS_SecOCSync")
+    first = mrsteer_dbc.secoc.CommandVerifier(contract, key, lambda: 1.8e9)
+    restarted = mrsteer_dbc.secoc.CommandVerifier(contract, key, lambda: 1.8e9 + 1.0)
+    script = [f"key {key.hex()}", f"rx {sync_id:X} {first.next_sync().hex()}", *["ctl"] * 200,
+              f"rx {sync_id:X} {restarted.next_sync().hex()}", "ctl"]
+    out = _secoc_check_output(script).splitlines()
+    cmd_id = f"{contract.frame_id('MRS_AuxSteerCmd'):03X}#"
+    sent = [any(f.startswith(cmd_id) for f in line.split()) for line in out[2:202]]
+    assert all(sent[:150]) and not any(sent[151:])
+    last = [f for f in out[203].split() if f.startswith(cmd_id)]
+    assert len(last) == 1
+    data, cmd = bytes.fromhex(last[0].split("#")[1]), contract.frame_id("MRS_AuxSteerCmd")
+    decoded = contract.decode(cmd, data)
+    assert decoded is not None and restarted.verify(cmd, data, decoded.signals)
+
+
 def test_the_c_node_rounds_the_command_toward_zero_as_the_contract_does(c_node) -> None:
     """The C TX path (the generated pack) and the Python contract encode every command alike, the
     3 deg limit as 52359 (2.99995 deg, not 52360: 3.00001 deg); random angles, ties included."""

@@ -357,9 +357,18 @@ def test_controller_signs_once_synced_and_reports_a_lost_sync(channel: str) -> N
         results = [cycle(k) for k in range(3, 302)]
         assert all(ok for ok, _ in results)
         assert not any(cause & names.CAUSE_AUTH for _, cause in results)
-        # No sync for three of its cycles (300 ms): still signing, but the status says so.
+        # No sync for three of its cycles (300 ms): the status says so and no command goes out
+        # (the actuator has moved two epochs on, or restarted: it would reject it as an attack).
+        withheld = node.stats.cmd_withheld
         late = [cycle(k) for k in range(302, 312)][1:]  # the sync came in cycle 3: 300 cycles is the limit
-        assert all(cause & names.CAUSE_AUTH for _, cause in late)
+        assert all(not ok and cause & names.CAUSE_AUTH for ok, cause in late)
+        assert node.stats.cmd_withheld == withheld + 9 and verifier.stats.failed == 0
+        # A restarted actuator's first sync: signing again at once, every command verified.
+        verifier = secoc.CommandVerifier(C, KEY, lambda: clock() + 1.0)
+        vb.send(can.Message(arbitration_id=SYNC_ID, data=verifier.next_sync(), is_extended_id=False))
+        again = [cycle(k) for k in range(312, 316)]
+        assert all(ok and not cause & names.CAUSE_AUTH for ok, cause in again)
+        assert verifier.stats.failed == 0
         forged = bytearray(verifier.next_sync())
         forged[7] ^= 0x01
         vb.send(can.Message(arbitration_id=SYNC_ID, data=bytes(forged), is_extended_id=False))

@@ -40,8 +40,9 @@ SecOC key (``--secoc``/``--secoc-key``) step 1 also takes the actuator's ``MRS_S
 frames and verifies each sensor frame's MAC (a failure counts as a rejected frame of cause
 ``CAUSE_AUTH``), and step 4 signs each command (``mrsteer_dbc.secoc``); without a valid sync
 for ``SYNC_STALE_CYCLES`` of its cycle time the status reports ``CAUSE_AUTH``.  Until the first
-authentic sync (at power-up) no command is sent at all (``cmd_withheld``): the actuator could not
-verify it, and a rejected command is an alarm there.
+authentic sync (at power-up), and while the last one is that stale (the actuator restarted or
+the syncs are lost), no command is sent at all (``cmd_withheld``): the actuator could not verify
+it, and a rejected command is an alarm there.
 
 Two triggers: ``clock`` (default) runs on absolute deadlines of the monotonic clock, counting
 overruns; ``sensors`` runs one cycle per received yaw-rate frame (for lockstep runs with the
@@ -387,9 +388,11 @@ class ControllerNode:
             self._send_status()
 
     def _send_command(self, u: float, state: int) -> None:
-        if self.signer is not None and not self.signer.synced:
-            # No freshness yet: the actuator would reject the command (AUTOSAR SecOC sends no
-            # PDU without freshness); its own timeout holds it at zero meanwhile.
+        if self.signer is not None and (not self.signer.synced or self._sync_age > self.sync_limit):
+            # No freshness, or none fresh (no valid sync for SYNC_STALE_CYCLES: the actuator has
+            # moved on, or restarted and will issue a new epoch): the actuator would reject the
+            # command, and a rejected command is an alarm there. AUTOSAR SecOC sends no PDU
+            # without freshness; the actuator's own timeout holds it at zero meanwhile.
             self.stats.cmd_withheld += 1
             return
         self.bus.send(self.tx.frame(MSG_CMD, {SIG_CMD_STATE: state, SIG_CMD_ANGLE: u, SIG_CMD_MEAS: self._answers}))

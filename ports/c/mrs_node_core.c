@@ -201,8 +201,8 @@ static int send_frame(mrs_node_t *n, int msg, double *phys)
 static int send_command(mrs_node_t *n, double u, unsigned state)
 {
     double phys[MRS_MAX_SIGNALS] = {0.0};
-    if (n->keyed && !mrs_signer_synced(&n->signer)) {
-        ++n->stats.cmd_withheld; /* no freshness yet: the actuator could not verify it (node.py) */
+    if (n->keyed && (!mrs_signer_synced(&n->signer) || n->sync_age > n->sync_limit)) {
+        ++n->stats.cmd_withheld; /* no fresh freshness: the actuator could not verify it (node.py) */
         return 0;
     }
     phys[MRS_SIG_CMD_STATE] = (double)state;
