@@ -157,6 +157,26 @@ def test_a_keyed_c_node_withholds_commands_while_its_last_sync_is_stale(c_node) 
     assert decoded is not None and restarted.verify(cmd, data, decoded.signals)
 
 
+def test_a_keyed_c_node_counts_sensor_frames_before_its_first_sync_as_unsynced(c_node) -> None:
+    """As the Python node (stats.py): not verifiable yet is not an authentication failure."""
+    contract = mrsteer_dbc.load()
+    key = bytes(range(16))
+    master = mrsteer_dbc.secoc.CommandVerifier(contract, key, lambda: 1.8e9)
+    signer = mrsteer_dbc.secoc.SensorSigner(contract, key)
+    sync = master.next_sync()
+    yaw = contract.frame_id("MRS_YawRate")
+    frames = [signer.sign("MRS_YawRate", {"YawRate_YawRate": 0.0}, k, master.current) for k in range(4)]
+    # a valid CRC and the next counter, a MAC under another key: fails once the epoch is known
+    forged = mrsteer_dbc.secoc.SensorSigner(contract, bytes(16)).sign("MRS_YawRate", {"YawRate_YawRate": 0.0}, 3,
+                                                                      master.current)
+    script = [f"key {key.hex()}", *(f"rx {yaw:X} {f.hex()}" for f in frames[:2]), "stats",
+              f"rx {contract.frame_id('MRS_SecOCSync'):X} {sync.hex()}", f"rx {yaw:X} {frames[2].hex()}",
+              f"rx {yaw:X} {bytes(forged).hex()}", "stats"]
+    out = _secoc_check_output(script).splitlines()
+    assert out[3] == "rx_rejected=2 rx_auth_failed=0 rx_unsynced=2"
+    assert out[7] == "rx_rejected=3 rx_auth_failed=1 rx_unsynced=2"
+
+
 def test_the_c_node_rounds_the_command_toward_zero_as_the_contract_does(c_node) -> None:
     """The C TX path (the generated pack) and the Python contract encode every command alike, the
     3 deg limit as 52359 (2.99995 deg, not 52360: 3.00001 deg); random angles, ties included."""

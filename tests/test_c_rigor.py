@@ -198,9 +198,9 @@ def _py_class(node: rt.ControllerNode, fid: int, data: bytes) -> str:
     """What ``ControllerNode.receive`` did with a frame, from its public counters: accepted,
     ignored, mac, or the cause bit of another rejection."""
     s = node.stats
-    before = (s.rx_ignored, s.rx_rejected, s.rx_auth_failed, s.syncs_rejected)
+    before = (s.rx_ignored, s.rx_rejected, s.rx_auth_failed + s.rx_unsynced, s.syncs_rejected)
     node.receive(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
-    after = (s.rx_ignored, s.rx_rejected, s.rx_auth_failed, s.syncs_rejected)
+    after = (s.rx_ignored, s.rx_rejected, s.rx_auth_failed + s.rx_unsynced, s.syncs_rejected)
     if after == before:
         return "accepted"
     if after[0] != before[0]:

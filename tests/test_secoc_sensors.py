@@ -225,3 +225,16 @@ def test_controller_with_secoc_faults_on_forged_sensor_frames_with_cause_auth(ch
     assert node.stats.rx_auth_failed == 30
     assert node.cause & names.CAUSE_AUTH and node.state.status == mr.STATUS_FAULT
     assert values[names.MSG_YAW] == pytest.approx(yaw_values(29)["YawRate_YawRate"], abs=1e-6)
+
+
+def test_sensor_frames_before_the_first_sync_are_unverifiable_not_failed(channel: str) -> None:
+    """A controller that starts after the actuator's sync cannot verify what comes before the
+    next one: counted apart (``rx_unsynced``), so that ``rx_auth_failed`` stays an alarm."""
+    stream = _stream_with_yaw_replays(True, 0)
+    first_sync = next(i for i, (fid, _) in enumerate(stream) if fid == C.frame_id(secoc.SYNC))
+    second_sync = next(i for i, (fid, _) in enumerate(stream) if fid == C.frame_id(secoc.SYNC) and i > first_sync)
+    node, values = _controller_run(True, stream[first_sync + 1:], channel)
+    before = second_sync - first_sync - 1  # sensor frames between the missed sync and the next
+    assert node.stats.rx_unsynced == before > 0
+    assert node.stats.rx_auth_failed == 0 and node.stats.rx_rejected == before
+    assert values[names.MSG_YAW] == pytest.approx(yaw_values(199)["YawRate_YawRate"], abs=1e-6)

@@ -247,7 +247,10 @@ class ControllerNode:
             else:
                 self.stats.rx_rejected += 1
                 if got is Rejected.MAC:
-                    self.stats.rx_auth_failed += 1
+                    if self.signer is not None and self.signer.epoch is None:
+                        self.stats.rx_unsynced += 1
+                    else:
+                        self.stats.rx_auth_failed += 1
                 inp = self.inputs[frame_id]
                 inp.rejects += 1
                 inp.bad_cause = got.cause

@@ -454,7 +454,7 @@ int main(int argc, char **argv)
             sensor_event(it);
         }
     }
-    if ((uint64_t)fg.sensor_rejected != node.stats.rx_rejected || (uint64_t)fg.sensor_mac != node.stats.rx_auth_failed ||
+    if ((uint64_t)fg.sensor_rejected != node.stats.rx_rejected || (uint64_t)fg.sensor_mac != node.stats.rx_auth_failed + node.stats.rx_unsynced ||
         (uint64_t)fg.syncs_rejected != node.stats.syncs_rejected) {
         fg.bad += oracle_fail(n, "the node's rejection counters differ from its verdicts", -1, 0);
     }

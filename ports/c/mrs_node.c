@@ -264,7 +264,7 @@ static int write_stats(const char *path, const mrs_node_t *n, const char *platfo
     }
     fprintf(f, "{\n  \"cycles\": %llu, \"overruns\": %llu, \"missed_cycles\": %llu,\n"
             "  \"rx_frames\": %llu, \"rx_rejected\": %llu, \"rx_ignored\": %llu,\n"
-            "  \"syncs_rejected\": %llu, \"rx_auth_failed\": %llu, \"tx_frames\": %llu,\n"
+            "  \"syncs_rejected\": %llu, \"rx_auth_failed\": %llu, \"rx_unsynced\": %llu, \"tx_frames\": %llu,\n"
             "  \"cmd_withheld\": %llu, \"faults_entered\": %llu,\n"
             "  \"lateness_p50_s\": %.17g, \"lateness_p99_s\": %.17g, \"lateness_max_s\": %.17g,\n"
             "  \"rss_kb_loop_start\": %ld, \"rss_kb_loop_end\": %ld, \"rss_kb_growth\": %ld,\n"
@@ -272,7 +272,7 @@ static int write_stats(const char *path, const mrs_node_t *n, const char *platfo
             (unsigned long long)s->cycles, (unsigned long long)s->overruns, (unsigned long long)s->missed_cycles,
             (unsigned long long)s->rx_frames, (unsigned long long)s->rx_rejected, (unsigned long long)s->rx_ignored,
             (unsigned long long)s->syncs_rejected, (unsigned long long)s->rx_auth_failed,
-            (unsigned long long)s->tx_frames, (unsigned long long)s->cmd_withheld,
+            (unsigned long long)s->rx_unsynced, (unsigned long long)s->tx_frames, (unsigned long long)s->cmd_withheld,
             (unsigned long long)s->faults_entered,
             mrs_lateness_percentile(&s->lateness, 0.5), mrs_lateness_percentile(&s->lateness, 0.99), s->lateness.max,
             s->rss_kb_loop_start, s->rss_kb_loop_end, s->rss_kb_loop_end - s->rss_kb_loop_start, platform);

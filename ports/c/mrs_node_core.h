@@ -57,7 +57,7 @@ typedef struct {
 
 typedef struct {
     uint64_t cycles, overruns, missed_cycles, rx_frames, rx_rejected, rx_ignored, syncs_rejected, rx_auth_failed,
-        tx_frames, cmd_withheld, faults_entered;
+        rx_unsynced, tx_frames, cmd_withheld, faults_entered;
     mrs_lateness_t lateness;
     long rss_kb_loop_start, rss_kb_loop_end;
 } mrs_stats_t;

@@ -129,7 +129,11 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
     if (v != MRS_RX_ACCEPTED) {
         ++n->stats.rx_rejected;
         if (v == MRS_RX_MAC) {
-            ++n->stats.rx_auth_failed;
+            if (n->verifier.have_current) {
+                ++n->stats.rx_auth_failed;
+            } else {
+                ++n->stats.rx_unsynced; /* no epoch to verify against yet (stats.py) */
+            }
         }
         ++in->rejects;
         in->bad_cause = cause_of(v);

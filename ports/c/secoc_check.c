@@ -87,6 +87,10 @@ int main(void)
             puts("ok");
         } else if (strcmp(word, "rx") == 0 && sscanf(line, "%*s %159s %159s", a, b) == 2) {
             printf("%d\n", on_rx(a, b));
+        } else if (strcmp(word, "stats") == 0) {
+            printf("rx_rejected=%llu rx_auth_failed=%llu rx_unsynced=%llu\n",
+                   (unsigned long long)node.stats.rx_rejected, (unsigned long long)node.stats.rx_auth_failed,
+                   (unsigned long long)node.stats.rx_unsynced);
         } else if (strcmp(word, "ctl") == 0) {
             sent[0] = '\0';
             if (mrs_node_control(&node) != 0) {

@@ -321,7 +321,9 @@ def check_secoc(e: Evidence, v: Verdict) -> None:
         v.observed.append(f"plant: {plant['cmd_auth_failed']} failed SecOC")
         if ctl_stats is not None:
             sensor_failed = ctl_stats.get("rx_auth_failed", 0)
-            v.observed.append(f"controller: {sensor_failed} sensor frames failed SecOC")
+            unsynced = ctl_stats.get("rx_unsynced", 0)
+            v.observed.append(f"controller: {sensor_failed} sensor frames failed SecOC"
+                              + (f", {unsynced} unverifiable before its first sync" if unsynced else ""))
             # With E2E alone an aliased replay is accepted and the live frame rejected instead, so
             # the count of rejections proves nothing here: the MAC must be what refused them.
             # (Corrupted frames are refused earlier, by their CRC, length or range.)
