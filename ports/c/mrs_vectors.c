@@ -142,11 +142,9 @@ int mrs_vectors_main(int argc, char **argv, const mrs_vectors_probe_t *probe)
             return fail("malformed row in", argv[2]);
         }
         if (probe != NULL) {
-            probe->before(probe->ctx);
-        }
-        u = mrs_step(&c, &s, (mrs_real_t)v[1], (mrs_real_t)v[2], (mrs_real_t)v[3], 0u);
-        if (probe != NULL) {
-            probe->after(probe->ctx, v[1], v[2], v[3]);
+            u = probe->step(probe->ctx, &c, &s, (mrs_real_t)v[1], (mrs_real_t)v[2], (mrs_real_t)v[3]);
+        } else {
+            u = mrs_step(&c, &s, (mrs_real_t)v[1], (mrs_real_t)v[2], (mrs_real_t)v[3], 0u);
         }
         track((double)u, v[4], &u_err, &u_mag);
         track((double)s.u_prev, v[6], &u_err, &u_mag);

@@ -11,11 +11,14 @@
 #ifndef MRS_VECTORS_H
 #define MRS_VECTORS_H
 
-/* Called around each row's mrs_step(): the target counts the instructions between them and
- * steps the whole cycle on the row's inputs (delta_driver, yaw_rate, speed) in after(). */
+#include "mrs_controller.h"
+
+/* A probe's step() replaces each row's mrs_step(c, s, delta_driver, yaw_rate, speed, 0) and must
+ * call it: the target measures the call (instructions, stack) and steps the whole cycle on the
+ * row's inputs. */
 typedef struct {
-    void (*before)(void *ctx);
-    void (*after)(void *ctx, double delta_driver, double yaw_rate, double speed);
+    mrs_real_t (*step)(void *ctx, const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver,
+                       mrs_real_t yaw_rate, mrs_real_t speed);
     void *ctx;
 } mrs_vectors_probe_t;
 
