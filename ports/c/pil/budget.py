@@ -18,13 +18,14 @@ Exit 0, or 1 with one line per failing vector / a stale table, or 2 with one lin
 
 from __future__ import annotations
 
-import argparse
 import re
 import statistics
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from firmware_py.platform.cli import Parser  # bad usage: one line, exit 2, as every command's
 
 HERE = Path(__file__).resolve().parent
 PORT = HERE.parent
@@ -195,7 +196,7 @@ def render(doc: str, body: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Check the PIL target's vectors; print its budget table.")
+    parser = Parser(description="Check the PIL target's vectors; print its budget table.")
     parser.add_argument("build", type=Path, help="the target's build directory (ports/c/build/pil)")
     parser.add_argument("cores", nargs="+", help="cores run: " + ", ".join(CORES))
     group = parser.add_mutually_exclusive_group()
