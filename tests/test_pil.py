@@ -63,7 +63,7 @@ def test_every_vector_passes_on_both_cores(pil: str) -> None:
 
 def test_the_budget_table_in_the_doc_is_what_the_target_gives(pil: str) -> None:
     proc = _budget("--check", str(DOC))
-    assert proc.returncode == 0, f"docs/porting.md's budget table is stale: run `make -C ports/c pil-table`\n{proc.stderr}"
+    assert proc.returncode == 0, f"docs/porting.md's table is stale: run `make -C ports/c pil-table`\n{proc.stderr}"
 
 
 def test_a_hand_edited_budget_is_found(pil: str, tmp_path: Path) -> None:

@@ -28,7 +28,8 @@ static void fault(void)
 __attribute__((section(".vectors"), used)) static const struct {
     uint32_t *initial_sp;
     void (*handler[15])(void);
-} vectors = {&__stack_top, {Reset_Handler, fault, fault, fault, fault, fault, 0, 0, 0, 0, fault, fault, 0, fault, fault}};
+} vectors = {&__stack_top,
+             {Reset_Handler, fault, fault, fault, fault, fault, 0, 0, 0, 0, fault, fault, 0, fault, fault}};
 
 /* Before any C: the FPU's coprocessors (CPACR CP10, CP11) on, or the first FP instruction faults. */
 __attribute__((naked)) void Reset_Handler(void)
