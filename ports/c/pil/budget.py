@@ -118,6 +118,18 @@ def verdicts(core: Core, res: Results) -> list[str]:
     return failures
 
 
+def stack_verdicts(core: Core, build: Path, res: Results) -> list[str]:
+    """The painted stack against the call graph's worst: deeper than the graph can only be what
+    the graph does not know (libgcc's helpers); none painted means the painting is broken."""
+    failures = []
+    for root, key in (("mrs_step", "law_stack"), ("cycle", "cycle_stack")):
+        static, unknown = static_stack(build, root)
+        painted = res.stack.get(key, 0)
+        if painted == 0 or (not unknown and painted > static):
+            failures.append(f"pil {core.name}: {root}'s painted stack {painted} B against {static} B in the call graph")
+    return failures
+
+
 def _tool(*cmd: str) -> str:
     return subprocess.run(list(cmd), capture_output=True, text=True, check=True).stdout
 
@@ -232,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"pil: no results: {exc.strerror}: {exc.filename} (make -C ports/c pil)", file=sys.stderr)
         return 2
-    failures = [f for c in cores for f in verdicts(c, results[c.name])]
+    failures = [f for c in cores for f in verdicts(c, results[c.name])
+                + stack_verdicts(c, args.build / c.name, results[c.name])]
     for f in failures:
         print(f, file=sys.stderr)
     if failures:
