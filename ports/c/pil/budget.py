@@ -95,13 +95,13 @@ def read_results(path: Path) -> Results:
     return Results(lines, steps, counts, stack, zero)
 
 
-def verdicts(core: Core, res: Results) -> list[str]:
-    """One line per failure: a vector whose target line is not the host's, or not exact in float64."""
+def verdicts(core: Core, res: Results, vectors: Path) -> list[str]:
+    """One line per failure: a vector whose target line is not the host's, or not exact in float64;
+    counts missing or not zeroed."""
     failures = []
-    files = sorted(VECTORS.glob("*__*.csv"))
-    for f in files:
+    for f in sorted(vectors.glob("*__*.csv")):
         got = res.lines.get(f.name)
-        cfg = VECTORS / (f.name.split("__")[0] + ".cfg")
+        cfg = vectors / (f.name.split("__")[0] + ".cfg")
         host = subprocess.run([str(PORT / core.host_runner), str(cfg), str(f)], capture_output=True, text=True,
                               check=True).stdout.strip()
         if got != host:
@@ -113,8 +113,9 @@ def verdicts(core: Core, res: Results) -> list[str]:
             failures.append(f"pil {core.name}: {f.name}: not exact: {got}")
     if any(n != 0 for n in res.zero.values()) or len(res.zero) != 2:
         failures.append(f"pil {core.name}: the markers back to back count {res.zero}, not 0")
-    if res.counts["law"] and len(res.counts["law"]) != res.steps:
-        failures.append(f"pil {core.name}: {len(res.counts['law'])} counted steps for {res.steps} rows")
+    for kind, counted in res.counts.items():
+        if len(counted) != res.steps:
+            failures.append(f"pil {core.name}: {len(counted)} counted {kind} steps for {res.steps} rows")
     return failures
 
 
@@ -231,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = Parser(description="Check the PIL target's vectors; print its budget table.")
     parser.add_argument("build", type=Path, help="the target's build directory (ports/c/build/pil)")
     parser.add_argument("cores", nargs="+", help="cores run: " + ", ".join(CORES))
+    parser.add_argument("--vectors", type=Path, default=VECTORS, metavar="DIR",
+                        help="the vector files the target ran (default: tests/vectors)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--write", type=Path, metavar="DOC", help="write the table into DOC")
     group.add_argument("--check", type=Path, metavar="DOC", help="fail if DOC's table is not this one")
@@ -244,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"pil: no results: {exc.strerror}: {exc.filename} (make -C ports/c pil)", file=sys.stderr)
         return 2
-    failures = [f for c in cores for f in verdicts(c, results[c.name])
+    failures = [f for c in cores for f in verdicts(c, results[c.name], args.vectors)
                 + stack_verdicts(c, args.build / c.name, results[c.name])]
     for f in failures:
         print(f, file=sys.stderr)
