@@ -39,7 +39,7 @@ def _cc(out: Path, *sources: str, defines: tuple[str, ...] = (), include: Path =
 @pytest.fixture(scope="module")
 def runners(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("cport")
-    src = [str(PORT / "mrs_controller.c"), str(PORT / "mrs_config.c"), str(PORT / "run_vectors.c")]
+    src = [str(PORT / f) for f in ("mrs_controller.c", "mrs_config.c", "mrs_vectors.c", "run_vectors.c")]
     return {"f64": _cc(d / "rv64", *src), "f32": _cc(d / "rv32", *src, defines=("-DMRS_FLOAT32",))}
 
 
