@@ -129,7 +129,7 @@ static void store(mrs_node_t *n, mrs_input_t *in, mrs_rx_verdict_t v, const doub
     if (v != MRS_RX_ACCEPTED) {
         ++n->stats.rx_rejected;
         if (v == MRS_RX_MAC) {
-            if (n->verifier.have_current) {
+            if (n->verifier.have_current != 0) {
                 ++n->stats.rx_auth_failed;
             } else {
                 ++n->stats.rx_unsynced; /* no epoch to verify against yet (stats.py) */
