@@ -73,3 +73,12 @@ def test_bad_usage_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) ->
         dt.main([])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1 and "--write" in err, err
+
+
+def test_a_broken_summary_is_one_line_and_exit_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "cut-short.json").write_text('{"campaign": ', encoding="utf-8")
+    monkeypatch.setattr(dt, "CAMPAIGN_RESULTS", tmp_path)
+    assert dt.main(["--check"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cut-short.json" in err, err

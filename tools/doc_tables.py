@@ -144,12 +144,12 @@ def _share(x: float | None) -> str:
     return "—" if x is None else f"{100 * x:.1f} %"
 
 
-def campaign_results_table(folder: Path = CAMPAIGN_RESULTS) -> str:
+def campaign_results_table(folder: Path | None = None) -> str:
     """One row per campaign summary in ``folder`` and calibration: runs, passed, spun, and each
     criterion's failures (how many failed it alone in brackets) with its largest figure."""
     out = ["| campaign | calibration | runs | passed | spun | failed: criterion (alone), largest figure |",
            "|---|---|---|---|---|---|"]
-    for path in sorted(folder.glob("*.json")):
+    for path in sorted((folder or CAMPAIGN_RESULTS).glob("*.json")):
         try:
             summary = json.loads(path.read_text(encoding="utf-8"))
         except json.JSONDecodeError as e:
