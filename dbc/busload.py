@@ -68,7 +68,7 @@ class BusLoad:
         }
 
 
-#: The bus the shipped design budgets, bit/s (classic CAN at 500 kbit/s: docs/design.md, "Bus load").
+#: The bus the shipped design budgets, bit/s (classic CAN at 500 kbit/s: docs/design.md, `mrsteer design busload`).
 BITRATE = 500_000
 
 

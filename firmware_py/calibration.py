@@ -42,7 +42,7 @@ PAPER_TAU = 0.006
 #: The auxiliary actuator's range, +- rad of front-wheel angle (paper, sec. 4.1: +-3 deg).
 AUX_LIMIT = math.radians(3.0)
 
-#: The shipped schedule (docs/design.md, "The scheduled law"): speed breakpoints in m/s, and
+#: The shipped schedule (docs/design.md, "The shipped law"): speed breakpoints in m/s, and
 #: K, tau = tau_Q (1 + K) of eq. (22) and tau_n of eq. (18) at each.  The search that found it
 #: worked in tau_Q (4.8, 9.0, 5.6, 13.6, 12.8, 14.1 ms).
 SHIPPED_SPEED = (5.0, 10.0, 20.0, 30.0, 40.0, 50.0)

@@ -15,7 +15,7 @@ the controller, issue 18's safe state). The excursion is replayed on the run's c
 state at the onset, with the scenario's loads (side force, braking, grip) at each step, and
 with the scenario's driver model correcting the car without the excursion for its own yaw rate
 (``driver_gains``; a driver who holds the wheel corrects nothing). A campaign's
-``fault_yaw_rate`` is the same figure (docs/campaigns.md, "What the command caused").
+``fault_yaw_rate`` is the same figure (docs/campaigns.md, "[criteria]").
 
 Before the onset the twin and the run are the same run; their largest difference there is the
 figure's floor (``caused_yaw_twin_mismatch_deg``: the bus carries the measurements quantised to
