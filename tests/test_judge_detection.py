@@ -58,15 +58,21 @@ class _Rows:
     rows = {"steer": np.array([True, False])}
 
 
-def test_fault_figures_count_alarms_before_the_onset_and_the_detection_from_the_bound() -> None:
+@pytest.mark.parametrize("block", [1, 64, 400], ids=("step by step", "in blocks", "at once"))
+def test_fault_figures_count_alarms_before_the_onset_and_the_detection_from_the_bound(block: int) -> None:
     ts, n = 0.002, 400
     cfg = pl.PlausibilityConfig(ts=ts)
     judge = FaultFigures(_Rows(), n, ts)
-    error = np.where(np.arange(n) >= 120, 2.0 * cfg.steer_bound, 0.0)  # over its bound from step 120
-    for k in range(n):
-        bits = np.array([pl.PLAUS_DEGRADED if k == 50 else pl.PLAUS_STEER if k >= 180 else 0,
-                         pl.PLAUS_DEGRADED if k == 7 else 0])
-        judge.step(k, np.array([error[k], 0.0]), bits, np.zeros(2), np.full(2, 20.0))
+    k = np.arange(n)
+    error = np.stack([np.where(k >= 120, 2.0 * cfg.steer_bound, 0.0), np.zeros(n)], axis=1)  # over from step 120
+    bits = np.stack([np.where(k == 50, pl.PLAUS_DEGRADED, np.where(k >= 180, pl.PLAUS_STEER, 0)),
+                     np.where(k == 7, pl.PLAUS_DEGRADED, 0)], axis=1)
+    for k0 in range(0, n, block):
+        s = slice(k0, k0 + block)
+        if block == 1:
+            judge.step(k0, error[k0], bits[k0], np.zeros(2), np.full(2, 20.0))
+        else:
+            judge.steps(k0, error[s], bits[s], np.zeros((bits[s].shape[0], 2)), np.full((bits[s].shape[0], 2), 20.0))
     figures = judge.result()
     assert figures["false_alarms"].tolist() == [1, 1]  # step 50 (a DEGRADED: no report); the other row's 7
     assert figures["detection_time"][0] == pytest.approx((180 - 120) * ts)

@@ -231,7 +231,7 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
                   v: np.ndarray, r_clean: np.ndarray | None, flags: np.ndarray,
                   bias: dict[str, float]) -> tuple[int, float, float]:
     """(false_alarms, detection_time, twin_yaw_rate) of a run: the engine's judge
-    (``judge.detection.FaultFigures``) on a batch of one, a step at a time, with the fault's own
+    (``judge.detection.FaultFigures``) on a batch of one, with the fault's own
     ``error``, the true yaw rate ``r`` and speed ``v``, the healthy offsets ``bias``; the run's
     last step its end (a spin's); twin_yaw_rate the largest |r - ``r_clean``| from the onset
     over the steps both runs have (0 without ``r_clean``)."""
@@ -241,8 +241,7 @@ def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.
         return int(np.count_nonzero(bits != 0)), 0.0, 0.0
     rows = _OneFault(np.array([fault.start]), np.array([1]), {fault.sensor: np.array([True])})
     judge = FaultFigures(rows, bits.size, ts, bias)
-    for k in range(bits.size):
-        judge.step(k, error[k:k + 1], bits[k:k + 1], r[k:k + 1], v[k:k + 1], flags[k:k + 1])
+    judge.steps(0, error[:, None], bits[:, None], r[:, None], v[:, None], flags[:, None])
     figures = judge.result()
     m = 0 if r_clean is None else min(r.size, r_clean.size)  # (a run that spun ends early)
     twin = float(np.max(np.where(after[:m], np.abs(r[:m] - r_clean[:m]), 0.0), initial=0.0))

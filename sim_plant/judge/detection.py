@@ -121,26 +121,44 @@ class FaultFigures:
         the monitor's detailed flags (their OUTSIDE_MODEL is a report; a missing input's
         DEGRADED is not); ``live`` the rows whose run includes step k (None: all; a run that spun
         has ended), ``ending`` those whose run ends with it (None: none)."""
+        def one(x: np.ndarray | int | None) -> np.ndarray | int | None:
+            return x if x is None or np.ndim(x) == 0 else np.asarray(x)[None]
+        self.steps(k, one(error), one(bits), one(r_true), one(v_true), one(flags), one(live), one(ending))
+
+    def steps(self, k0: int, error: np.ndarray, bits: np.ndarray, r_true: np.ndarray, v_true: np.ndarray,
+              flags: np.ndarray | int = 0, live: np.ndarray | None = None, ending: np.ndarray | None = None) -> None:
+        """``step`` over the steps k0, k0 + 1, ... at once: every argument steps x rows (a
+        single run: a batch of one, a column)."""
+        m = np.shape(error)[0]
         if live is not None:
             bits, flags = np.where(live, bits, 0), np.where(live, flags, 0)
-        after = self.faulted & (self.faults.onset <= k * self.ts)
-        self.alarms += (bits != 0) & ~after
+        t = (k0 + np.arange(m))[:, None] * self.ts
+        after = self.faulted & (self.faults.onset <= t)
+        self.alarms += np.count_nonzero((bits != 0) & ~after, axis=0)
         fault = ((bits & pl.PLAUS_FAULT) != 0) | ((flags & pl.OUTSIDE_MODEL) != 0)  # the report
-        first = fault & ~self.reported
-        self.reported |= fault
-        self.report_step = np.where(first, k, self.report_step)
-        braking = False
+        fault = np.broadcast_to(fault, after.shape)
+        seen_before = self.reported | np.vstack([np.zeros_like(fault[:1]), np.logical_or.accumulate(fault, axis=0)[:-1]])
+        first = fault & ~seen_before
+        self.reported = self.reported | fault.any(axis=0)
+        self.report_step = np.where(first.any(axis=0), k0 + np.argmax(first, axis=0), self.report_step)
+        braking: bool | np.ndarray = False
         if self.speed_faulted:  # only a speed's bound widens while the car brakes
-            braking = False if self.v_prev is None else is_braking(self.v_prev, v_true, self.ts, self.cfg)
-            self.v_prev = v_true.copy()
-        bound = np.full(error.shape, np.inf)
+            v_before = np.vstack([v_true[:1] if self.v_prev is None else self.v_prev[None], v_true[:-1]])
+            braking = is_braking(v_before, v_true, self.ts, self.cfg)
+            if self.v_prev is None:
+                braking[0] = False
+            self.v_prev = v_true[-1].copy()
+        bound = np.full(np.shape(error), np.inf)
         seen = error
         for channel, on in self.channels.items():
             bound = np.where(on, sensor_bound(channel, self.cfg, r_true, v_true, True, speed_pair=True,
                                               braking=braking), bound)
             seen = np.where(on, error + check_offset(channel, self.bias, v_true, after), seen)
         over = np.abs(seen) > bound
-        self.tracker.step(k, over if live is None else over & live, first, ending)
+        if live is not None:
+            over = over & live
+        for j in range(m):
+            self.tracker.step(k0 + j, over[j], first[j], None if ending is None else ending[j])
 
     def result(self) -> dict[str, np.ndarray]:
         ex, rep, ts = self.tracker.exceeded, self.report_step, self.ts
