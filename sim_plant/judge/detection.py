@@ -137,7 +137,8 @@ class FaultFigures:
         self.alarms += np.count_nonzero((bits != 0) & ~after, axis=0)
         fault = ((bits & pl.PLAUS_FAULT) != 0) | ((flags & pl.OUTSIDE_MODEL) != 0)  # the report
         fault = np.broadcast_to(fault, after.shape)
-        seen_before = self.reported | np.vstack([np.zeros_like(fault[:1]), np.logical_or.accumulate(fault, axis=0)[:-1]])
+        earlier = np.logical_or.accumulate(fault, axis=0)[:-1]  # a report in the block's steps before
+        seen_before = self.reported | np.vstack([np.zeros_like(fault[:1]), earlier])
         first = fault & ~seen_before
         self.reported = self.reported | fault.any(axis=0)
         self.report_step = np.where(first.any(axis=0), k0 + np.argmax(first, axis=0), self.report_step)

@@ -83,7 +83,8 @@ class MonitorRun:
         the fault cannot have moved, its command acting a period later; the healthy
         controller's, in a steady state) to zero."""
         k0 = onset_step(self.t, start)
-        return 0.0 if k0 is None else excursion_yaw([float(a) for a in self.aux[k0:]], float(self.t[1] - self.t[0]), car)
+        dt = float(self.t[1] - self.t[0])
+        return 0.0 if k0 is None else excursion_yaw([float(a) for a in self.aux[k0:]], dt, car)
 
     def first(self, mask: np.ndarray) -> float | None:
         idx = np.flatnonzero(mask)

@@ -3,8 +3,8 @@ command causes stays below 0.05 rad/s"), from the plant's trace.
 
 What the faulty sensor's command is measured against: anything between what the healthy
 controller would hold and the safe state is not counted. The healthy controller's value is the
-applied angle at the onset, where the row starts in a steady state (``judge.caused_yaw.steady``). The safe
-state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets the car yaw at
+applied angle at the onset, where the row starts in a steady state (``judge.caused_yaw.steady``).
+The safe state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets the car yaw at
 0.2 rad/s, but that is the car without the controller, not the fault. The same holds when the
 faulty controller backs off toward zero before its report, which it is allowed to do at any
 time.
@@ -37,6 +37,7 @@ from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.faults.evidence import Evidence
 from sim_plant.harness.faults.settings import row_scenario
 from sim_plant.judge.caused_yaw import STEADY_TIME, excursion_yaw, steady
+
 
 @dataclass(frozen=True)
 class CausedYaw:
