@@ -145,9 +145,10 @@ def test_the_replayed_drivers_correction_stops_at_the_drivers_clamp() -> None:
 
 
 def test_kept_and_the_excursion_over_arrays_are_the_scalars_by_hand() -> None:
-    a, h = np.array([-0.03, -0.01, 0.005, 0.01]), np.array([-0.02, -0.02, -0.02, 0.0])
-    assert kept(a, h).tolist() == [-0.02, -0.01, 0.0, 0.0]
-    assert excursion(a, h) == pytest.approx([-0.01, 0.0, 0.005, 0.01])
+    a = np.array([-0.03, -0.01, 0.005, 0.01, 0.03, 0.01, -0.01])
+    h = np.array([-0.02, -0.02, -0.02, 0.0, 0.02, 0.02, 0.02])
+    assert kept(a, h).tolist() == [-0.02, -0.01, 0.0, 0.0, 0.02, 0.01, 0.0]
+    assert excursion(a, h) == pytest.approx([-0.01, 0.0, 0.005, 0.01, 0.01, 0.0, -0.01])
     assert kept(0.03, 0.02) == 0.02 and kept(-0.01, 0.02) == 0.0
 
 
