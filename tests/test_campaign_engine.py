@@ -164,7 +164,7 @@ def test_batch_equals_scalar_with_faults_of_either_speed_and_the_second_yaw_elem
     second speed (``RedundantSensors_Speed2``, the speed pair's other half) and the yaw-rate
     sensor's second element, each kind: traces, bits and figures against the reference.  Either
     speed's error is judged against the speed pair's bound at the true speed
-    (``plausibility_runs.speed_pair_bound``): each of these leaves it and is reported."""
+    (``judge.bounds.speed_pair_bound``): each of these leaves it and is reported."""
     from sim_plant.campaign.params import FAULT_CHANNELS, FAULT_KINDS
 
     c = spec.parse(FAULTS.format(seed=5), "faults.toml")

@@ -116,7 +116,7 @@ def test_the_figure_lets_the_scenarios_driver_correct_the_car_without_the_excurs
     # handover's driver corrects from 1.5 s: an excursion of 0.3 deg held for 0.8 s from 2 s is
     # partly taken back by the driver of the car without it, so the figure is below the
     # uncorrected replay's, and equal to the replay with the scenario's gains.
-    from sim_plant.offline.excursion_yaw import excursion_yaw
+    from sim_plant.judge.caused_yaw import excursion_yaw
 
     sc = scn.load("handover").with_sensor_faults((SensorFault("yaw_rate", "stuck", 1.8, 0.01),))
     twin = [float(a) for a in plausibility_runs.run(sc.without_sensor_faults(), TS, controller=CTRL,

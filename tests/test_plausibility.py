@@ -19,6 +19,7 @@ from sim_plant.campaign import params
 from sim_plant.car import scenario as scn
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.car.sensors import SensorConfig, YawRateSensorConfig
+from sim_plant.judge import bounds as jb
 from sim_plant.offline import plausibility_runs as pr
 
 TS = 0.002
@@ -364,18 +365,18 @@ def test_the_healthy_offsets_a_check_sees_with_a_fault() -> None:
     import numpy as np
 
     bias = {"yaw_rate": 0.004, "lat_accel": 0.1, "yaw_rate_redundant": -0.001}
-    assert pr.check_offset("lat_accel", bias, 20.0, True) == pytest.approx(0.1 - 0.004 * 20.0)
-    assert pr.check_offset("yaw_rate", bias, 20.0, True) == pytest.approx(0.004 - 0.1 / 20.0)
-    assert pr.check_offset("yaw_rate", bias, 20.0, True, by_pair=True) == pytest.approx(0.004 + 0.001)
-    assert pr.check_offset("yaw_rate_redundant", bias, 20.0, True) == pytest.approx(-0.001 - 0.004)
+    assert jb.check_offset("lat_accel", bias, 20.0, True) == pytest.approx(0.1 - 0.004 * 20.0)
+    assert jb.check_offset("yaw_rate", bias, 20.0, True) == pytest.approx(0.004 - 0.1 / 20.0)
+    assert jb.check_offset("yaw_rate", bias, 20.0, True, by_pair=True) == pytest.approx(0.004 + 0.001)
+    assert jb.check_offset("yaw_rate_redundant", bias, 20.0, True) == pytest.approx(-0.001 - 0.004)
     for sensor in ("steer", "steer_redundant", "speed", "speed_redundant"):
-        assert pr.check_offset(sensor, bias, 20.0, True) == 0.0
+        assert jb.check_offset(sensor, bias, 20.0, True) == 0.0
     rows = {"yaw_rate": np.array([0.004, -0.002]), "lat_accel": 0.0}
-    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0]), True) == pytest.approx([-0.04, 0.06])
-    assert pr.check_offset("lat_accel", {}, 30.0, True) == 0.0  # no offsets given: none
+    assert jb.check_offset("lat_accel", rows, np.array([10.0, 30.0]), True) == pytest.approx([-0.04, 0.06])
+    assert jb.check_offset("lat_accel", {}, 30.0, True) == 0.0  # no offsets given: none
     # none before the fault's onset, a bool or one per row
-    assert pr.check_offset("lat_accel", bias, 20.0, False) == 0.0
-    assert pr.check_offset("lat_accel", rows, np.array([10.0, 30.0]), np.array([False, True])) == pytest.approx(
+    assert jb.check_offset("lat_accel", bias, 20.0, False) == 0.0
+    assert jb.check_offset("lat_accel", rows, np.array([10.0, 30.0]), np.array([False, True])) == pytest.approx(
         [0.0, 0.06])
     # the sensors' own: SI, and none on exact sensors, which add no bias
     cfg = SensorConfig(yaw_rate=YawRateSensorConfig(bias_deg_s=0.3))
@@ -392,27 +393,27 @@ def test_the_error_bound_every_verdict_uses_is_one_formula_on_floats_and_arrays(
     import numpy as np
 
     cfg = pl.PlausibilityConfig()
-    assert pr.sensor_bound("yaw_rate", cfg, -0.2, 20.0, True) == pytest.approx(0.035 + 0.1 * 0.2)
-    assert pr.sensor_bound("lat_accel", cfg, 0.2, 20.0, False) == pytest.approx((0.035 + 0.1 * 0.2) * 20.0)
-    assert pr.sensor_bound("lat_accel", cfg, 0.2, 20.0, True) == pytest.approx((0.035 + 0.02) * 20.0 + 0.6)
-    assert pr.sensor_bound("steer_redundant", cfg, 0.2, 20.0, True) == cfg.steer_bound == pr.sensor_bound(
+    assert jb.sensor_bound("yaw_rate", cfg, -0.2, 20.0, True) == pytest.approx(0.035 + 0.1 * 0.2)
+    assert jb.sensor_bound("lat_accel", cfg, 0.2, 20.0, False) == pytest.approx((0.035 + 0.1 * 0.2) * 20.0)
+    assert jb.sensor_bound("lat_accel", cfg, 0.2, 20.0, True) == pytest.approx((0.035 + 0.02) * 20.0 + 0.6)
+    assert jb.sensor_bound("steer_redundant", cfg, 0.2, 20.0, True) == cfg.steer_bound == jb.sensor_bound(
         "steer", cfg, 0.0, 5.0, False)
-    assert pr.sensor_bound("yaw_rate_redundant", cfg, 0.5, 40.0, False) == cfg.yaw_pair_bound
+    assert jb.sensor_bound("yaw_rate_redundant", cfg, 0.5, 40.0, False) == cfg.yaw_pair_bound
     with pytest.raises(ValueError, match="without the second speed"):
-        pr.sensor_bound("speed", cfg, 0.0, 20.0, True)
+        jb.sensor_bound("speed", cfg, 0.0, 20.0, True)
     # with the second speed either speed's is the pair's at the true speed, plus half the
     # second speed's 0.3 m/s LSB with its share of the relative term
     for sensor in ("speed", "speed_redundant"):
-        assert pr.sensor_bound(sensor, cfg, 0.4, 20.0, False, speed_pair=True) == pytest.approx(
+        assert jb.sensor_bound(sensor, cfg, 0.4, 20.0, False, speed_pair=True) == pytest.approx(
             1.0 + 0.05 * 20.0 + 0.15 * 1.05)
     r, v, pair = np.array([-0.3, 0.0, 0.1, 0.1]), np.array([10.0, 25.0, 40.0, 4.9]), np.array([True, False, True, True])
     for sensor in ("yaw_rate", "lat_accel", "speed", "steer", "yaw_rate_redundant"):
-        rows = pr.sensor_bound(sensor, cfg, r, v, pair, speed_pair=True)
-        assert rows.tolist() == [pr.sensor_bound(sensor, cfg, float(a), float(b), bool(c), True)
+        rows = jb.sensor_bound(sensor, cfg, r, v, pair, speed_pair=True)
+        assert rows.tolist() == [jb.sensor_bound(sensor, cfg, float(a), float(b), bool(c), True)
                                  for a, b, c in zip(r, v, pair)]
         # below speed_min (5 m/s) the checks pause and the law is off: no bound to pass
         assert rows[-1] == math.inf and np.isfinite(rows[:-1]).all()
-        assert pr.sensor_bound(sensor, cfg, 0.0, cfg.speed_min, True, True) < math.inf
+        assert jb.sensor_bound(sensor, cfg, 0.0, cfg.speed_min, True, True) < math.inf
 
 
 @pytest.mark.parametrize("kind, value", [("scale", 0.5), ("stuck", 5.5), ("bias", 3.0), ("stuck", 33.0)])

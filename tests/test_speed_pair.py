@@ -13,6 +13,7 @@ import pytest
 from firmware_py import plausibility as pl
 from sim_plant.car.sensor_faults import SensorFault, parse_spec
 from sim_plant.car.sensors import CHANNELS, ChannelConfig, SensorConfig, Sensors, YawRateSensorConfig
+from sim_plant.judge import bounds as jb
 from sim_plant.offline import plausibility_runs as pr
 
 CFG = pl.PlausibilityConfig()
@@ -172,7 +173,7 @@ def test_in_closed_loop_the_pair_finds_a_slow_speed_drift_in_a_gentle_curve() ->
     twin, run = _drift(True)
     assert not np.any(twin.bits & (pl.PLAUS_FAULT | pl.PLAUS_DEGRADED))
     assert twin.margins["speed_pair"] < 0.5
-    over = run.exceeded_time(pr.speed_pair_bound(CFG, 10.0))
+    over = run.exceeded_time(jb.speed_pair_bound(CFG, 10.0))
     assert over is not None and run.fault_time is not None
     assert run.fault_time - over <= 0.3
     # The second speed reads 9.9 (10 m/s at 0.3 m/s per LSB), so the pair trips once
@@ -242,19 +243,19 @@ def test_a_second_speed_within_only_the_braking_allowance_does_not_out_vote_the_
 def test_the_judges_braking_periods_and_their_widened_bound() -> None:
     # braking_of: the true speed falling at BRAKING_SHARE of speed_brake_decel or more in a period
     # (the monitor's 20 ms sawtooth opens the allowance in part from about 0.85 of it)
-    ts, share = CFG.ts, pr.BRAKING_SHARE
+    ts, share = CFG.ts, jb.BRAKING_SHARE
     v = np.array([20.0, 20.0, 20.0 - 0.99 * share * CFG.speed_brake_decel * ts,
                   20.0 - 2.0 * share * CFG.speed_brake_decel * ts, 21.0])
     assert braking_of_list(v) == [False, False, False, True, False]
-    assert pr.braking_of(np.stack([v, v], axis=1), ts, CFG)[:, 1].tolist() == braking_of_list(v)
-    plain = pr.speed_pair_bound(CFG, 20.0)
+    assert jb.braking_of(np.stack([v, v], axis=1), ts, CFG)[:, 1].tolist() == braking_of_list(v)
+    plain = jb.speed_pair_bound(CFG, 20.0)
     assert plain == pytest.approx(1.0 + 0.05 * 20.0 + 0.15 * 1.05)
-    assert pr.speed_pair_bound(CFG, 20.0, True) == pytest.approx(plain + CFG.speed_slip_rel * 20.0)
-    both = pr.speed_pair_bound(CFG, np.array([20.0, 20.0]), np.array([False, True]))
+    assert jb.speed_pair_bound(CFG, 20.0, True) == pytest.approx(plain + CFG.speed_slip_rel * 20.0)
+    both = jb.speed_pair_bound(CFG, np.array([20.0, 20.0]), np.array([False, True]))
     assert both.tolist() == pytest.approx([plain, plain + CFG.speed_slip_rel * 20.0])
-    assert pr.sensor_bound("speed_redundant", CFG, 0.0, 20.0, True, True, True) == pytest.approx(both[1])
-    assert pr.sensor_bound("yaw_rate", CFG, 0.0, 20.0, True, True, True) == CFG.yaw_bound  # only the speeds widen
+    assert jb.sensor_bound("speed_redundant", CFG, 0.0, 20.0, True, True, True) == pytest.approx(both[1])
+    assert jb.sensor_bound("yaw_rate", CFG, 0.0, 20.0, True, True, True) == CFG.yaw_bound  # only the speeds widen
 
 
 def braking_of_list(v: np.ndarray) -> list[bool]:
-    return pr.braking_of(v, CFG.ts, CFG).tolist()
+    return jb.braking_of(v, CFG.ts, CFG).tolist()

@@ -13,7 +13,7 @@ import pytest
 from firmware_py import plausibility as pl
 from sim_plant.car.sensor_faults import SensorFault
 from sim_plant.car.vehicle import VehicleParams
-from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET
+from sim_plant.judge.caused_yaw import CAUSED_YAW_TARGET
 from sim_plant.harness.faults.settings import CURVE_SCENARIO, PLAUS_START
 from sim_plant.offline import plausibility_runs as pr
 

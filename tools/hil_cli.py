@@ -17,7 +17,7 @@ from sim_plant.car.options import add_car_args, add_sensor_fault_arg
 from sim_plant.car.scenario import SPEED_RANGE
 from sim_plant.car.vehicle import MAX_MU, VehicleParams
 from sim_plant.harness.launch import add_controller_impl_args, program_of
-from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET
+from sim_plant.judge.caused_yaw import CAUSED_YAW_TARGET
 from sim_plant.harness.faults.settings import PLAUS_DETECT
 from sim_plant.offline import experiments
 from sim_plant.offline.closed_loop import CONTROLLERS

@@ -49,7 +49,7 @@ import numpy as np
 
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
-from sim_plant.campaign.batch_faults import BatchFaults, FaultFigures
+from sim_plant.campaign.batch_faults import BatchFaults
 from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
 from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.c_cycle import AuthorityBatch, CycleBatch
@@ -58,6 +58,8 @@ from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
 from sim_plant.car.scenario_play import DRIVER_LIMIT
+from sim_plant.judge.caused_yaw import kept as kept_of
+from sim_plant.judge.detection import FaultFigures
 from sim_plant.offline.plausibility_runs import cycles
 
 #: Per-row results: name -> unit, description.
@@ -72,14 +74,14 @@ METRICS = {
     "authority_steps": ("", "periods the controller's authority limiter bound the command"),
     "false_alarms": ("", "steps with PLAUS_FAULT or PLAUS_DEGRADED before the sensor fault's onset (all, without one)"),
     "detection_time": ("s", "first PLAUS_FAULT or OUTSIDE_MODEL (DEGRADED) less when the fault's error (plus "
-                            "the healthy biases its check sees: plausibility_runs.check_offset) left "
-                            "its bound (plausibility_runs.sensor_bound; either speed's: the speed pair's; none below "
+                            "the healthy biases its check sees: judge.bounds.check_offset) left "
+                            "its bound (judge.bounds.sensor_bound; either speed's: the speed pair's; none below "
                             "speed_min) for 0.3 s "
                             "(0: it never did, or was reported before, or no controller; inf: never reported; "
                             "NaN: no sensor fault)"),
     "fault_yaw_rate": ("rad/s", "the yaw rate the faulty sensor makes the command cause: largest |r - r'| from "
                                 "the sensor fault's onset, r' the same car without the applied angle's excursion "
-                                "beyond the fault-free twin's and zero (offline.excursion_yaw, as hil run's "
+                                "beyond the fault-free twin's and zero (judge.caused_yaw, as hil run's "
                                 "caused_yaw_rad_s; a fade is not counted; 0 without a controller, NaN without "
                                 "a sensor fault)"),
     "twin_yaw_rate": ("rad/s", "largest |r - r of the fault-free twin| (each at its step's start) from the sensor "
@@ -117,7 +119,7 @@ def simulate(samples: SampleSet, config: mr.ControllerConfig | None, duration: f
 
     A row with a sensor fault runs beside a twin without it (the same sample, noise and all), and
     beside a third car that the row's own angles drive less their *excursion*, the part outside
-    the range from the twin's applied angle to zero (``offline.excursion_yaw.excursion``): from
+    the range from the twin's applied angle to zero (``judge.caused_yaw.excursion``): from
     the fault's onset, ``fault_yaw_rate`` is the largest difference of the row's and the third
     car's true yaw rates (the yaw rate the fault makes the command cause, the figure ``hil run``
     reports; a fade toward zero is not counted), ``twin_yaw_rate`` the largest of the row's and
@@ -334,7 +336,7 @@ class _Group:
                         nominal: np.ndarray) -> None:
         """The third car of each faulted row one step on: the row's loads; the actuator position's
         mean over the step, from the fault's onset on (``after``) less its excursion beyond
-        [min(0, h), max(0, h)], h the twin's (``excursion_yaw.excursion``); the row's driver angle
+        [min(0, h), max(0, h)], h the twin's (``judge.caused_yaw.kept``); the row's driver angle
         plus the correction the driver (where ``steering``; None: every row) would have added for
         this car's yaw rate (``excursion_yaw``'s ``driver_gain``, at the row's speed; clamped on
         the row's clamped angle, as the replay).  Before the onset it is the row's own car: the
@@ -346,7 +348,7 @@ class _Group:
         step = self.gain_step[at] * (shadow.r - self.car.r[at]) / nominal[at]
         self.shadow_correction -= step if steering is None else np.where(steering, step, 0.0)
         applied, healthy = mean[at], mean[self.twins]
-        kept = np.clip(applied, np.minimum(healthy, 0.0), np.maximum(healthy, 0.0))
+        kept = kept_of(applied, healthy)
         delta = np.clip(driver[at] + self.shadow_correction, -DRIVER_LIMIT, DRIVER_LIMIT)
         delta += np.where(after, kept, applied)
         m_z = np.broadcast_to(m_z, driver.shape)[at]

@@ -50,8 +50,9 @@ from sim_plant.car.nonlinear import spun
 from sim_plant.car.plants import Car
 from sim_plant.car.sensors import CHANNELS, SPEED_REDUNDANT, Sensors
 from sim_plant.car.sensor_faults import SensorFault
-from sim_plant.offline.excursion_yaw import excursion_yaw
-from sim_plant.offline.plausibility_runs import MonitorRun, braking_of, check_offset, cycles, sensor_bound
+from sim_plant.judge.caused_yaw import excursion_yaw
+from sim_plant.judge.detection import FaultFigures
+from sim_plant.offline.plausibility_runs import cycles
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,8 @@ class ReferenceRun:
     authority: np.ndarray
     final_speed: float
     false_alarms: int  # steps with a plausibility bit before the sensor fault's onset (all, without one)
-    detection_time: float  # engine.METRICS' definition, from plausibility_runs.MonitorRun (NaN: no fault)
-    fault_yaw_rate: float  # excursion_yaw's figure against the fault-free twin (engine.METRICS; NaN: no fault)
+    detection_time: float  # engine.METRICS' definition, by judge.detection.FaultFigures (NaN: no fault)
+    fault_yaw_rate: float  # judge.caused_yaw.excursion_yaw against the fault-free twin (engine.METRICS; NaN: no fault)
     twin_yaw_rate: float  # |r - r of the fault-free twin|, largest from the onset (NaN: no fault)
     applied: np.ndarray
     spun: bool  # the car spun at the last step (``nonlinear.spun``)
@@ -137,7 +138,7 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     applied, driver_hist, m_z_hist, mu_hist, v_hist, gain_hist = (np.empty(n) for _ in range(6))
     loads_hist = []
     status, bits_hist, auth, flags_hist = (np.zeros(n, dtype=np.int64) for _ in range(4))
-    error, speed_true, yaw_2_seen = np.zeros(n), np.zeros(n), np.zeros(n)
+    error, speed_true = np.zeros(n), np.zeros(n)
     held: dict[str, float] = {}
     command = 0.0  # the command sent the period before: what acts on the car now
     in_flight: int | None = None  # a status frame's plausibility bits, not yet read by the plant
@@ -165,12 +166,11 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
         truth["yaw_rate_redundant"], truth[SPEED_REDUNDANT] = truth["yaw_rate"], wheels
         if fault is not None and clean is not None:
             clean.at(t)
-            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor]) + check_offset(
-                fault.sensor, bias, scene.v, t >= fault.start)
+            error[k] = read[fault.sensor] - getattr(clean, fault.sensor)(truth[fault.sensor])
         for ch in (*CHANNELS, SPEED_REDUNDANT):
             if k % every[ch] == 0:
                 held[ch] = read[ch]
-        speed_true[k], yaw_2_seen[k] = scene.v, yaw_rate_2
+        speed_true[k] = scene.v
         u, bits, state = 0.0, 0, mr.STATUS_INACTIVE  # no controller: no command, no status
         if ctrl is not None:
             ci.delta_driver = ci.monitor_driver = held["steer"]
@@ -199,9 +199,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     else:
         last, advanced = n - 1, n
     kept = slice(0, last + 1)
-    r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true, yaw_2_seen = (
-        a[kept] for a in (r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true,
-                          yaw_2_seen))
+    r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true = (
+        a[kept] for a in (r_hist, beta_hist, u_hist, applied, status, bits_hist, auth, flags_hist, error, speed_true))
     caused, clean = math.nan, None
     if fault is not None and ctrl is not None:
         # the yaw rate the fault makes the command cause: the excursion beyond the same run
@@ -218,8 +217,8 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
     elif fault is not None:
         caused = 0.0  # no controller: nothing caused
     # (without a controller nothing is reported or caused: no fault figures, as the engine's)
-    figures = fault_figures(fault if ctrl is not None else None, ts, bits_hist, r_hist, u_hist, error, speed_true,
-                            None if clean is None else clean.r, yaw_2_seen, flags_hist)
+    figures = fault_figures(fault if ctrl is not None else None, ts, bits_hist, r_hist, error, speed_true,
+                            None if clean is None else clean.r, flags_hist, bias)
     if fault is None:
         figures = (figures[0], math.nan, math.nan)
     elif ctrl is None:
@@ -228,26 +227,31 @@ def run(sc: scn.Scenario, config: mr.ControllerConfig | None, ts: float = 0.002)
                         caused, figures[2], applied, advanced < n, advanced)
 
 
-def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, command: np.ndarray,
-                  error: np.ndarray, v: np.ndarray, r_clean: np.ndarray | None,
-                  yaw_rate_2: np.ndarray, flags: np.ndarray | None = None) -> tuple[int, float, float]:
-    """(false_alarms, detection_time, twin_yaw_rate) of a run, by ``plausibility_runs``'
-    ``MonitorRun.exceeded_time`` against ``sensor_bound`` at the true yaw rate ``r`` and the
-    true speed ``v`` (the car has the second speed: ``speed_pair``), the yaw-rate pair running
-    while ``yaw_rate_2`` (what the monitor saw) is there; twin_yaw_rate the largest |r -
-    ``r_clean``| from the onset over the steps both runs have (0 without ``r_clean``)."""
+def fault_figures(fault: SensorFault | None, ts: float, bits: np.ndarray, r: np.ndarray, error: np.ndarray,
+                  v: np.ndarray, r_clean: np.ndarray | None, flags: np.ndarray,
+                  bias: dict[str, float]) -> tuple[int, float, float]:
+    """(false_alarms, detection_time, twin_yaw_rate) of a run: the engine's judge
+    (``judge.detection.FaultFigures``) on a batch of one, with the fault's own
+    ``error``, the true yaw rate ``r`` and speed ``v``, the healthy offsets ``bias``; the run's
+    last step its end (a spin's); twin_yaw_rate the largest |r - ``r_clean``| from the onset
+    over the steps both runs have (0 without ``r_clean``)."""
     t = np.arange(bits.size) * ts
     after = t >= fault.start if fault is not None else np.zeros(bits.size, dtype=bool)
-    false_alarms = int(np.count_nonzero((bits != 0) & ~after))
     if fault is None:
-        return false_alarms, 0.0, 0.0
-    cfg = pl.PlausibilityConfig(ts=ts)
-    run = MonitorRun(t, bits, r, command, error, fault.sensor, {}, {"yaw_rate_redundant": yaw_rate_2},
-                     np.zeros(bits.size), flags)
-    bound = sensor_bound(fault.sensor, cfg, r, v, np.isfinite(yaw_rate_2), speed_pair=True,
-                         braking=braking_of(v, ts, cfg))
-    exceeded, reported = run.exceeded_time(bound), run.report_time
-    detection = 0.0 if exceeded is None else math.inf if reported is None else max(0.0, reported - exceeded)
+        return int(np.count_nonzero(bits != 0)), 0.0, 0.0
+    rows = _OneFault(np.array([fault.start]), np.array([1]), {fault.sensor: np.array([True])})
+    judge = FaultFigures(rows, bits.size, ts, bias)
+    judge.steps(0, error[:, None], bits[:, None], r[:, None], v[:, None], flags[:, None])
+    figures = judge.result()
     m = 0 if r_clean is None else min(r.size, r_clean.size)  # (a run that spun ends early)
     twin = float(np.max(np.where(after[:m], np.abs(r[:m] - r_clean[:m]), 0.0), initial=0.0))
-    return false_alarms, detection, twin
+    return int(figures["false_alarms"][0]), float(figures["detection_time"][0]), twin
+
+
+@dataclass(frozen=True)
+class _OneFault:
+    """A run's sensor fault as ``FaultFigures`` reads a batch's (``judge.detection.FaultRows``)."""
+
+    onset: np.ndarray
+    sensor: np.ndarray
+    rows: dict[str, np.ndarray]

@@ -60,7 +60,7 @@ class ScenarioState:
         """How far the driver's correction moves in a step of ``dt`` at t per rad/s of yaw-rate
         error (``driver_angle``'s integrator; rad per rad/s): dt / (time_constant K_n(v)) while
         the driver corrects (``model`` mode, past the panic time), else 0.  A replay of a run
-        under another command (``offline.excursion_yaw``) lets its driver correct its own car."""
+        under another command (``judge.caused_yaw.excursion_yaw``) lets its driver correct its own car."""
         return dt / self.sc.driver.time_constant / self._nominal_gain() if self._correcting(t) else 0.0
 
     def loads(self, t: float) -> dist.Loads:

@@ -8,7 +8,7 @@ seed and, with the faults kept dormant, the same noise streams) and calibration 
 sensor fault, played offline
 (``offline.plausibility_runs.run``, the plant node's step and the controller's cycle side by
 side, with the bus's one-step delay). Only the excursion of the run's applied angle beyond the
-twin's or beyond zero counts (``offline.excursion_yaw``): the healthy controller's answer to a
+twin's or beyond zero counts (``judge.caused_yaw``): the healthy controller's answer to a
 disturbance or to the driver after the onset is not the fault's, and neither is a fade to zero
 (fading out a command that rejects a disturbance lets the car yaw, but that is the car without
 the controller, issue 18's safe state). The excursion is replayed on the run's car from its
@@ -42,7 +42,7 @@ from sim_plant.car.sensors import dormant_faults
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.hil_steps import Step
 from sim_plant.offline import plausibility_runs
-from sim_plant.offline.excursion_yaw import excursion_yaw
+from sim_plant.judge.caused_yaw import excursion_yaw, onset_step
 
 #: The twin may differ from the run before the onset by at most this (rad, 0.05 deg: five times
 #: the bus's quantisation differences measured in a 3 deg transient).
@@ -72,7 +72,7 @@ def caused_yaw_figures(steps: list[Step], sc: scn.Scenario, ctrl: mr.ControllerC
     if delay_steps != 1:
         return none(f"the fault-free twin has the bus's one-step delay, the run {delay_steps}")
     onset = min(f.start for f in faults)
-    k0 = next((i for i, s in enumerate(steps) if s.t_s >= onset - 1e-9), None)
+    k0 = onset_step([s.t_s for s in steps], onset)
     if k0 is None or k0 + 1 >= len(steps):
         return none("the run ends at the fault's onset")
     # The faults kept but dormant: the twin's sensors draw from the run's noise streams.

@@ -14,7 +14,7 @@ every 100 ms); ``first_degraded_s`` likewise the first of the run of DEGRADED co
 up to the first status with the degraded bit (4), or that status's time when the command there
 was not DEGRADED (a FAULT outranks it).  The plant's trace also gives when the faulted
 sensor's error (its reading less the same sensor's without the fault, at the trace's true values: the fault's own; plus the
-healthy sensors' biases its check sees with it, ``plausibility_runs.check_offset``) first
+healthy sensors' biases its check sees with it, ``judge.bounds.check_offset``) first
 exceeded the bound the monitor checks it against, the moment from which issue 18
 counts its 300 ms (``error_over_bound_s``; ``yaw_error_over_bound_s`` the same for a yaw-rate
 fault): for the yaw rate the kinematic check's ``yaw_bound``, or the yaw-rate pair's
@@ -44,7 +44,7 @@ from sim_plant.car import scenario as scn
 from sim_plant.car.disturbances import sum_loads
 from sim_plant.car.sensors import Sensors, dormant_faults
 from sim_plant.harness.hil_steps import Step
-from sim_plant.offline.plausibility_runs import check_offset, is_braking, sensor_bound
+from sim_plant.judge.bounds import check_offset, is_braking, sensor_bound
 
 _FAULT_BITS = names.PLAUS_YAW | names.PLAUS_STEER
 
@@ -127,7 +127,7 @@ def error_over_bound(steps: list[Step], sc: scn.Scenario, ts: float) -> float | 
     speed pair's ``speed_pair_bound``).  The error is the fault's own: the reading the plant sent
     less what the same sensor (its noise, filter, quantisation and bias; ``sensors.dormant_faults``)
     reads of the trace's true value at each step of ``ts`` s without the fault, plus the healthy
-    sensors' offsets its check sees with it (``plausibility_runs.check_offset``: the yaw rate's
+    sensors' offsets its check sees with it (``judge.bounds.check_offset``: the yaw rate's
     by the pair's when the car has the second element).  A sensor's filter lag in a fast
     transient, or its noise, is not the fault's."""
     cfg = pl.PlausibilityConfig()

@@ -3,15 +3,15 @@ command causes stays below 0.05 rad/s"), from the plant's trace.
 
 What the faulty sensor's command is measured against: anything between what the healthy
 controller would hold and the safe state is not counted. The healthy controller's value is the
-applied angle at the onset, where the row starts in a steady state (``STEADY_MOVE``). The safe
-state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets the car yaw at
+applied angle at the onset, where the row starts in a steady state (``judge.caused_yaw.steady``).
+The safe state is zero: fading out a command that was rejecting paper-fig9's 4000 Nm lets the car yaw at
 0.2 rad/s, but that is the car without the controller, not the fault. The same holds when the
 faulty controller backs off toward zero before its report, which it is allowed to do at any
 time.
 
 The command's *excursion* is the applied angle's distance outside [min(0, a0), max(0, a0)].
 The figure is the peak yaw rate the excursion gives the run's own car
-(``sim_plant.offline.excursion_yaw``): the plant's car (the paper's linear one, eqs. 14/16,
+(``sim_plant.judge.caused_yaw``): the plant's car (the paper's linear one, eqs. 14/16,
 exact by superposition; or the nonlinear one, replayed with and without the excursion from the
 trace's side slip and yaw rate at the onset) at the plant's step, the trace's speed at the onset
 and friction at each step, the scenario's mass, the trace's driver angle and yaw moment (the
@@ -23,7 +23,8 @@ A campaign's ``fault_yaw_rate`` is this figure against its fault-free twin's ang
 as ``hil run``'s; its ``twin_yaw_rate``, |r − r of the fault-free twin|, counts the fade and any
 backing-off as well (docs/campaigns.md), even on a straight road: the fade of the little the twin
 holds against the sensors' bias and noise. The matrix judges the figure on every sensor row at
-every rate (``verdicts_plausibility.judge_caused_yaw``; docs/faults.md, "The sensor rows").
+every rate against ``judge.caused_yaw.CAUSED_YAW_TARGET`` (``verdicts_plausibility.judge_caused_yaw``;
+docs/faults.md, "The sensor rows").
 """
 
 from __future__ import annotations
@@ -35,19 +36,7 @@ from sim_plant.car.plants import LINEAR
 from sim_plant.car.vehicle import VehicleParams
 from sim_plant.harness.faults.evidence import Evidence
 from sim_plant.harness.faults.settings import row_scenario
-from sim_plant.offline.excursion_yaw import excursion_yaw
-
-#: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s (met at or below
-#: it, as a campaign's criteria are).
-CAUSED_YAW_TARGET = 0.05
-#: The onset counts as a steady state when the applied angle moved less than this in the
-#: ``STEADY_TIME`` before it (rad, 0.5 deg). The held value then stands for the healthy
-#: controller's. Measured on the baselines' traces from the sensor rows' onset (1.0 s), they moved
-#: 0.03 deg (paper-fig9) and 0.19 deg (the curve, still settling), and the figure there, the
-#: floor of a fault-free run, is 0.0004 and 0.00001 rad/s. The frozen row starts in the yaw
-#: moment's transient (degrees in 0.1 s) and gets none.
-STEADY_MOVE = 8.7e-3
-STEADY_TIME = 0.1
+from sim_plant.judge.caused_yaw import STEADY_TIME, excursion_yaw, steady
 
 
 @dataclass(frozen=True)
@@ -76,7 +65,7 @@ def caused_yaw(e: Evidence, start: float) -> CausedYaw:
     if i0 < 0 or i0 >= len(tr.t) - 1:
         return CausedYaw(None, "the plant's trace does not span the onset")
     before = tr.applied[bisect.bisect_left(tr.t, tr.t[i0] - STEADY_TIME, hi=i0 + 1):i0 + 1]
-    if max(before) - min(before) > STEADY_MOVE:
+    if not steady(before):
         return CausedYaw(None, "the command was moving at the onset")
     car = VehicleParams(v=cols["v_m_s"][i0], mu=cols["mu"][i0], mass=sc.mass)
     ts = tr.t[i0 + 1] - tr.t[i0]

@@ -25,7 +25,7 @@ the command faded to zero (``_check_degraded_row``):
 The error is the falsified signal on the controller's bus less the same frame's value on the
 vehicle's (the bridge forwards each frame once, in order, so the n-th frames pair up; a fault
 the plant injects, under ``--secoc``, is measured less true in the plant's trace), against
-the bound ``offline.plausibility_runs.sensor_bound`` states: the yaw rate's ``yaw_bound +
+the bound ``judge.bounds.sensor_bound`` states: the yaw rate's ``yaw_bound +
 yaw_rel |r|`` (r: the vehicle's yaw-rate frame), the lateral acceleration's the same times v
 plus ``side_accel`` when the car has the yaw-rate sensor's second element, a
 steering channel's ``steer_bound``, the yaw-rate sensor's second element's ``yaw_pair_bound``
@@ -44,19 +44,17 @@ import mrsteer_dbc
 from firmware_py import model_regulator as mr
 from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, PlausibilityConfig
 from mrsteer_dbc import names
-from sim_plant.harness.faults.caused_yaw import CAUSED_YAW_TARGET, caused_yaw
+from sim_plant.harness.faults.caused_yaw import caused_yaw
 from sim_plant.harness.faults.evidence import Evidence, stall_gaps, stalled
 from sim_plant.car.sensors import DBC_SIGNALS
 from sim_plant.harness.hil_plausibility import latched_degraded
 from sim_plant.harness.faults.settings import BUS_RESOLUTION, PLAUS_DETECT, PLAUS_FADE, STATUS_CYCLE
 from sim_plant.nodes.candump_log import Frame
-from sim_plant.offline.plausibility_runs import sensor_bound
+from sim_plant.judge.bounds import sensor_bound
+from sim_plant.judge.caused_yaw import CAUSED_YAW_TARGET
+from sim_plant.judge.detection import ErrorSample, exceeded_at
 
 _MISSING = names.CAUSE_STEER_MISSING | names.CAUSE_YAW_MISSING | names.CAUSE_SPEED_MISSING
-
-#: A sample of the falsified signal as the controller got it: (t, error, bound).
-ErrorSample = tuple[float, float, float]
-
 
 def _series(frames: list[Frame], name: str, *signals: str) -> list[list[tuple[float, float]]]:
     """Each of ``signals`` of the message ``name`` as (t, value), decoded once per frame."""
@@ -137,22 +135,6 @@ def error_series(e: Evidence, cfg: PlausibilityConfig = PlausibilityConfig()) ->
     return [(tc, got - x, row_bound(sensor, cfg, _latest(yaw, yaw_t, tv, 0.0), _latest(speed, speed_t, tv, 0.0), pair,
                                     speed_pair))
             for (tv, x), (tc, got) in zip(truth, seen)]
-
-
-def exceeded_at(series: list[ErrorSample], until: float | None, hold: float = PLAUS_DETECT) -> float | None:
-    """When the error left its bound to stay over it for ``hold`` s, or until ``until`` (the
-    report) if sooner; ``None`` if it never did by then.  A brief excursion does not count."""
-    start = None
-    for t, err, bound in series:
-        if until is not None and t > until:
-            break
-        if abs(err) > bound:
-            start = t if start is None else start
-            if t - start >= hold:
-                return start
-        else:
-            start = None
-    return start if until is not None else None
 
 
 def check_quiet_monitor(e: Evidence, fails: list[str], observed: list[str]) -> None:

@@ -1,5 +1,8 @@
-"""The yaw rate a command's excursion made the car turn at (issue 18's "the yaw rate its own
-command causes"), replayed on the run's own car from what its trace recorded.
+"""The yaw rate a faulty sensor's command caused (issue 18's "the yaw rate its own command causes
+stays below 0.05 rad/s", ``CAUSED_YAW_TARGET``), replayed on the run's own car from what its trace
+recorded: the fault matrix's ``caused_yaw``, ``hil run``'s ``caused_yaw_rad_s``, the campaigns'
+``fault_yaw_rate`` (their engine steps the same replay beside each row: ``kept``) and the offline
+runs' ``MonitorRun.caused_yaw`` all take it from here.
 
 The *excursion* of an applied front-wheel angle ``a`` is its distance outside the range from
 the healthy controller's angle ``h`` to zero, the safe state: ``a - clamp(a, min(0, h),
@@ -39,6 +42,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from sim_plant.car.disturbances import Loads
 from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.plants import LINEAR, NONLINEAR, PLANTS
@@ -46,9 +51,43 @@ from sim_plant.car.scenario_play import DRIVER_LIMIT
 from sim_plant.car.vehicle import DiscretePlant, VehicleParams
 
 
-def excursion(a: float, h: float) -> float:
+#: Issue 18's bound on the yaw rate a faulty sensor's command may cause, rad/s (met at or below
+#: it, as a campaign's criteria are).
+CAUSED_YAW_TARGET = 0.05
+#: Where no fault-free twin gives the healthy controller's angle (the fault matrix), the angle
+#: held at the onset stands for it when it moved less than this in the ``STEADY_TIME`` before
+#: (rad, 0.5 deg). Measured on the matrix's baselines' traces from the sensor rows' onset (1.0 s),
+#: they moved 0.03 deg (paper-fig9) and 0.19 deg (the curve, still settling), and the figure
+#: there, the floor of a fault-free run, is 0.0004 and 0.00001 rad/s. The frozen row starts in
+#: the yaw moment's transient (degrees in 0.1 s) and gets none.
+STEADY_MOVE = 8.7e-3
+STEADY_TIME = 0.1
+
+
+def kept(a: float | np.ndarray, h: float | np.ndarray) -> float | np.ndarray:
+    """The applied angle ``a`` clamped to [min(0, h), max(0, h)] (rad): what of it the healthy
+    controller's ``h`` or the safe state explains (floats, or arrays of rows)."""
+    if np.ndim(a) == 0 and np.ndim(h) == 0:
+        return min(max(a, min(0.0, h)), max(0.0, h))
+    return np.clip(a, np.minimum(h, 0.0), np.maximum(h, 0.0))
+
+
+def excursion(a: float | np.ndarray, h: float | np.ndarray) -> float | np.ndarray:
     """The part of the applied angle ``a`` outside [min(0, h), max(0, h)] (rad)."""
-    return a - min(max(a, min(0.0, h)), max(0.0, h))
+    return a - kept(a, h)
+
+
+def steady(before: Sequence[float] | np.ndarray) -> bool:
+    """Whether the applied angles of the ``STEADY_TIME`` up to the onset moved less than
+    ``STEADY_MOVE``: the angle held there then stands for the healthy controller's."""
+    return bool(len(before)) and max(before) - min(before) <= STEADY_MOVE
+
+
+def onset_step(t: Sequence[float] | np.ndarray, onset: float) -> int | None:
+    """The first step of ``t`` (s, the run's own clock) at or after ``onset`` (1 ns of rounding
+    allowed: k ts may fall short of an onset on the step grid); None past the run's end."""
+    k = int(np.searchsorted(np.asarray(t, dtype=float), onset - 1e-9, side="left"))
+    return k if k < len(t) else None
 
 
 def excursion_yaw(applied: Sequence[float], ts: float, car: VehicleParams, kind: str = LINEAR,

@@ -1,5 +1,5 @@
 """The yaw rate a command's excursion caused, replayed on the run's car
-(``sim_plant.offline.excursion_yaw``): the paper's linear car against scipy's continuous
+(``sim_plant.judge.caused_yaw``): the paper's linear car against scipy's continuous
 response, the nonlinear car against the linear one where its tyres are linear and against its
 grip where they are not."""
 
@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from scipy import signal
 
 from sim_plant.car.nonlinear import NonlinearPlant
 from sim_plant.car.vehicle import VehicleParams, steering_tf
-from sim_plant.offline.excursion_yaw import excursion, excursion_yaw
+from sim_plant.judge.caused_yaw import STEADY_MOVE, excursion, excursion_yaw, kept, onset_step, steady
 
 TS = 0.002
 CAR = VehicleParams(v=20.0, mu=0.3)
@@ -141,3 +142,26 @@ def test_the_replayed_drivers_correction_stops_at_the_drivers_clamp() -> None:
         corrected = excursion_yaw(applied, TS, car, "nonlinear", angles, zeros, beta, r, driver_gain=gains)
         uncorrected = excursion_yaw(applied, TS, car, "nonlinear", angles, zeros, beta, r)
         assert (corrected == uncorrected) == clamped
+
+
+def test_kept_and_the_excursion_over_arrays_are_the_scalars_by_hand() -> None:
+    a = np.array([-0.03, -0.01, 0.005, 0.01, 0.03, 0.01, -0.01])
+    h = np.array([-0.02, -0.02, -0.02, 0.0, 0.02, 0.02, 0.02])
+    assert kept(a, h).tolist() == [-0.02, -0.01, 0.0, 0.0, 0.02, 0.01, 0.0]
+    assert excursion(a, h) == pytest.approx([-0.01, 0.0, 0.005, 0.01, 0.01, 0.0, -0.01])
+    assert kept(0.03, 0.02) == 0.02 and kept(-0.01, 0.02) == 0.0
+
+
+def test_the_held_angle_stands_for_the_healthy_one_only_when_steady() -> None:
+    assert steady([0.0, 0.5 * STEADY_MOVE, STEADY_MOVE])
+    assert not steady([0.0, 1.01 * STEADY_MOVE])
+    assert not steady([])
+
+
+def test_the_onset_step_is_the_first_at_or_after_the_onset() -> None:
+    t = [0.0, 0.002, 0.004]
+    assert onset_step(t, 0.002) == 1
+    assert onset_step(t, 0.002 + 1e-10) == 1  # (k ts may fall short of an onset on the grid)
+    assert onset_step(t, 0.003) == 2
+    assert onset_step(np.array(t), 0.0) == 0
+    assert onset_step(t, 0.01) is None
