@@ -12,21 +12,22 @@ void mrs_default_config(mrs_config_t *cfg)
 {
     /* firmware_py/calibration.py's ControllerConfig(): the shipped law and the nominal car, from
      * mrs_defaults.h (generated from it); the schedule's unused rows are zero. */
-    static const double v[MRS_MAX_SCHEDULE] = MRS_CONTROLLER_DEFAULT_SCHEDULE_SPEED;
-    static const double k[MRS_MAX_SCHEDULE] = MRS_CONTROLLER_DEFAULT_SCHEDULE_K;
-    static const double tau[MRS_MAX_SCHEDULE] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU;
-    static const double tau_n[MRS_MAX_SCHEDULE] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU_N;
+    static const double v[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_SPEED;
+    static const double k[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_K;
+    static const double tau[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU;
+    static const double tau_n[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU_N;
+    const int n = MRS_CONTROLLER_DEFAULT_N_SCHEDULE;
     int i;
     cfg->q_form = MRS_CONTROLLER_DEFAULT_Q_FORM;
     cfg->k = 0.0; /* unused: scheduled */
     cfg->tau = 0.0;
     cfg->tau_n = 0.0;
-    cfg->n_schedule = MRS_CONTROLLER_DEFAULT_N_SCHEDULE;
+    cfg->n_schedule = n;
     for (i = 0; i < MRS_MAX_SCHEDULE; ++i) {
-        cfg->schedule_speed[i] = v[i];
-        cfg->schedule_k[i] = k[i];
-        cfg->schedule_tau[i] = tau[i];
-        cfg->schedule_tau_n[i] = tau_n[i];
+        cfg->schedule_speed[i] = (i < n) ? v[i] : 0.0;
+        cfg->schedule_k[i] = (i < n) ? k[i] : 0.0;
+        cfg->schedule_tau[i] = (i < n) ? tau[i] : 0.0;
+        cfg->schedule_tau_n[i] = (i < n) ? tau_n[i] : 0.0;
     }
     cfg->model_actuator_tau = MRS_CONTROLLER_DEFAULT_MODEL_ACTUATOR_TAU;
     cfg->model_filter_hz = MRS_CONTROLLER_DEFAULT_MODEL_FILTER_HZ;
