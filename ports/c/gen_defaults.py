@@ -5,10 +5,11 @@
 ``firmware_py`` owns every default: the nominal car and the shipped law (``calibration.py``:
 ``ControllerConfig``), the plausibility monitor's thresholds (``plausibility.py``:
 ``PlausibilityConfig``) and the authority limiter's bounds (``authority.py``: ``AuthorityConfig``).
-The header holds them as macros that ``mrs_default_config``, ``mrs_monitor_default_config`` and
-``mrs_authority_default_config`` fill their structs from, so that no value is typed twice.  The
-header is committed, like a release's generated code; tests/test_c_defaults.py fails when it is
-not what this script writes from the Python of the same commit.
+The header holds them, and the sizes of the calibration's tables and the monitor's windows, as
+macros that ``mrs_default_config``, ``mrs_monitor_default_config`` and
+``mrs_authority_default_config`` fill their structs from, so that no value is typed twice. The
+header is committed, like a release's generated code; tests/test_c_defaults.py fails when it is not
+what this script writes from the Python of the same commit.
 
 A double is written as Python's ``repr``: the shortest decimal that reads back (in Python and
 in any C99 compiler's correctly rounded conversion) as the same double, so the C defaults equal
@@ -71,7 +72,13 @@ def header() -> str:
              "/* firmware_py.calibration: the paper's gains and the tau_n the node's --k, --tau, --tau-n complete */",
              f"#define MRS_PAPER_K {literal(calibration.PAPER_K)}",
              f"#define MRS_PAPER_TAU {literal(calibration.PAPER_TAU)}",
-             f"#define MRS_DEFAULT_TAU_N {literal(calibration.DEFAULT_TAU_N)}"]
+             f"#define MRS_DEFAULT_TAU_N {literal(calibration.DEFAULT_TAU_N)}", "",
+             "/* the sizes of the calibration's tables and of the monitor's windows */",
+             f"#define MRS_MAX_MODEL_DELAY {literal(calibration.MAX_MODEL_DELAY)}",
+             f"#define MRS_MAX_SCHEDULE {literal(calibration.MAX_SCHEDULE)}",
+             f"#define MRS_KIN_WINDOW {literal(plausibility.KIN_WINDOW)}",
+             f"#define MRS_YAW_PAIR_WINDOW {literal(plausibility.YAW_PAIR_WINDOW)}",
+             f"#define MRS_TURN_BLOCK {literal(plausibility.TURN_BLOCK)}"]
     for cls, prefix, function in CONFIGS:
         parts += ["", f"/* {cls.__module__}.{cls.__name__}(): {function}() */"]
         if cls is calibration.ControllerConfig:

@@ -8,6 +8,13 @@
 #define MRS_PAPER_TAU 0.006
 #define MRS_DEFAULT_TAU_N 0.02
 
+/* the sizes of the calibration's tables and of the monitor's windows */
+#define MRS_MAX_MODEL_DELAY 8
+#define MRS_MAX_SCHEDULE 8
+#define MRS_KIN_WINDOW 4
+#define MRS_YAW_PAIR_WINDOW 5
+#define MRS_TURN_BLOCK 10
+
 /* firmware_py.calibration.ControllerConfig(): mrs_default_config() */
 #define MRS_CONTROLLER_DEFAULT_N_SCHEDULE 6
 #define MRS_CONTROLLER_DEFAULT_Q_FORM MRS_Q_LIMITED
