@@ -12,7 +12,7 @@ from scipy import signal
 from firmware_py import model_regulator as mr
 from sim_plant.offline.closed_loop import discrete_loop_matrix
 from sim_plant.offline.sweep import sweep
-from sim_plant.car.vehicle import VehicleParams
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 
 M_Z = 4000.0
 DURATION = 3.0
@@ -25,7 +25,7 @@ def offline_sweep(quick: bool) -> dict[str, Any]:
     rng = np.random.default_rng(2026)
     v = rng.uniform(5.0, 50.0, n_points)
     mu = rng.uniform(0.1, 1.0, n_points)
-    mass = rng.uniform(1296.0, 1800.0, n_points)
+    mass = rng.uniform(PAPER_MASS, 1800.0, n_points)
 
     t0 = time.perf_counter()
     res = sweep(v, mu, mass, cfg, M_Z, DURATION, delay_steps=1)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from firmware_py.calibration import AUX_LIMIT, SHIPPED_TS
 from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT, check_positive, steps_of
 
 # Authority limiter flags (AuthorityState.flags): what bound the command this period.
@@ -26,8 +27,8 @@ AUTH_FAULT = 0x08  # plausibility fault or a non-finite request: faded
 class AuthorityConfig:
     """The independent bound on the command (issue 18, item 3), rad and s."""
 
-    ts: float = 0.002
-    u_max: float = math.radians(3.0)  # magnitude: the actuator's range
+    ts: float = SHIPPED_TS
+    u_max: float = AUX_LIMIT  # magnitude: the actuator's range
     rate_max: float = 10.0  # rad/s: a 6 deg reversal in >= 10.5 ms; above the law's needs (decision 0008)
     fade_rate: float = math.radians(6.0)  # rad/s toward 0 when the time is up: a hand-back to the driver
     fault_fade_rate: float = math.radians(30.0)  # rad/s toward 0 on a plausibility fault: a wrong command

@@ -36,6 +36,8 @@ DEFAULT_TAU_N = 0.02
 MAX_MODEL_DELAY = 8
 #: Most speed breakpoints a schedule can have (size of the coefficient tables).
 MAX_SCHEDULE = 8
+#: The control period of the shipped calibration, s: the law's, the monitor's and the limiter's step.
+SHIPPED_TS = 0.002
 #: The paper's continuous-time tuning of eq. (22), section 4.
 PAPER_K = 10.0
 PAPER_TAU = 0.006
@@ -74,7 +76,7 @@ class ControllerConfig:
     schedule_tau_n: tuple[float, ...] = SHIPPED_TAU_N
     model_actuator_tau: float = SHIPPED_MODEL_ACTUATOR_TAU  # nominal actuator lag, s (0: none)
     model_filter_hz: float = SHIPPED_MODEL_FILTER_HZ  # nominal yaw-rate low-pass, Hz (0: none)
-    ts: float = 0.002  # fixed step, s: 500 Hz keeps a 500 kbit/s bus under 40 % worst-case load
+    ts: float = SHIPPED_TS  # fixed step, s: 500 Hz keeps a 500 kbit/s bus under 40 % worst-case load
     method: str = METHOD_TUSTIN
     aux_limit: float = AUX_LIMIT  # actuator range, +- rad of wheel angle
     rate_limit: float = 0.0  # max |d u/dt| in rad/s; 0 disables

@@ -110,7 +110,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from firmware_py.calibration import NOMINAL_C_F, NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS
+from firmware_py.calibration import NOMINAL_C_F, NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS, SHIPPED_TS
 
 # CtrlStatus_Plausibility (mrsteer_dbc.names.PLAUS_*; equal by test, this module imports stdlib only).
 PLAUS_YAW = 0x01
@@ -181,7 +181,7 @@ class PlausibilityConfig:
     docs/controller.md's table of thresholds, so they are written here once."""
 
     # [s] the monitor's step: one yaw-rate sample (the control period by the DBC's MRS_ControlLoop)
-    ts: float = 0.002
+    ts: float = SHIPPED_TS
     # [m/s] below it every check but the speed step and the speed pair pauses: a_y / v and K_n(v) say
     # too little there
     speed_min: float = 5.0

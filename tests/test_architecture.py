@@ -40,6 +40,16 @@ def test_every_package_is_placed_in_a_layer() -> None:
             assert pkg in named, f"{pkg} is in no layers contract"
 
 
+def test_the_car_may_take_nothing_of_the_firmware_but_its_calibration() -> None:
+    """The car's contract forbids every firmware module but the calibration (decision 0010), so a
+    new firmware module is forbidden to the car until someone decides otherwise."""
+    (car,) = [c for c in PYPROJECT["tool"]["importlinter"]["contracts"] if c.get("source_modules") == ["sim_plant.car"]]
+    firmware = ROOT / "firmware_py"
+    modules = {f"firmware_py.{p.stem}" for p in firmware.glob("*.py") if p.stem != "__init__"}
+    modules |= {f"firmware_py.{p.parent.name}" for p in firmware.glob("*/__init__.py")}
+    assert modules - set(car["forbidden_modules"]) == {"firmware_py.calibration"}
+
+
 PORTING_REFERENCE = ("model_regulator", "calibration", "calibration_file", "plausibility", "authority", "cycle")
 
 

@@ -18,7 +18,8 @@ from cffi import FFI
 
 HERE = Path(__file__).resolve().parent
 SOURCES = ("mrs_controller.c", "mrs_monitor.c", "mrs_cycle.c", "mrs_config.c", "mrs_cycle_batch.c")
-HEADERS = ("mrs_controller.h", "mrs_monitor.h", "mrs_cycle.h", "mrs_config.h", "mrs_cycle_batch.h")
+HEADERS = ("mrs_controller.h", "mrs_monitor.h", "mrs_cycle.h", "mrs_config.h", "mrs_cycle_batch.h",
+           "mrs_defaults.h")
 MODULE = "sim_plant.campaign._c_cycle"
 
 

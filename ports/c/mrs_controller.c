@@ -5,44 +5,47 @@
 
 #include <math.h> /* exp(), tan(), sqrt() in mrs_configure only; isfinite and INFINITY are macros */
 
+#include "mrs_defaults.h"
 #include "mrs_monitor.h" /* MRS_PLAUS_* for mrs_reported_state */
 
 void mrs_default_config(mrs_config_t *cfg)
 {
-    /* The shipped schedule (firmware_py/calibration.py): v, K, tau = tau_Q (1 + K), tau_n. */
-    static const double v[6] = {5.0, 10.0, 20.0, 30.0, 40.0, 50.0};
-    static const double k[6] = {10.4, 27.0, 10.0, 10.0, 6.3, 4.5};
-    static const double tau[6] = {0.05472, 0.252, 0.0616, 0.1496, 0.09344, 0.07755};
-    static const double tau_n[6] = {0.034, 0.089, 0.12, 0.255, 0.275, 0.305};
+    /* firmware_py/calibration.py's ControllerConfig(): the shipped law and the nominal car, from
+     * mrs_defaults.h (generated from it); the schedule's unused rows are zero. */
+    static const double v[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_SPEED;
+    static const double k[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_K;
+    static const double tau[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU;
+    static const double tau_n[] = MRS_CONTROLLER_DEFAULT_SCHEDULE_TAU_N;
+    const int n = MRS_CONTROLLER_DEFAULT_N_SCHEDULE;
     int i;
-    cfg->q_form = MRS_Q_LIMITED;
+    cfg->q_form = MRS_CONTROLLER_DEFAULT_Q_FORM;
     cfg->k = 0.0; /* unused: scheduled */
     cfg->tau = 0.0;
     cfg->tau_n = 0.0;
-    cfg->n_schedule = 6;
+    cfg->n_schedule = n;
     for (i = 0; i < MRS_MAX_SCHEDULE; ++i) {
-        cfg->schedule_speed[i] = (i < 6) ? v[i] : 0.0;
-        cfg->schedule_k[i] = (i < 6) ? k[i] : 0.0;
-        cfg->schedule_tau[i] = (i < 6) ? tau[i] : 0.0;
-        cfg->schedule_tau_n[i] = (i < 6) ? tau_n[i] : 0.0;
+        cfg->schedule_speed[i] = (i < n) ? v[i] : 0.0;
+        cfg->schedule_k[i] = (i < n) ? k[i] : 0.0;
+        cfg->schedule_tau[i] = (i < n) ? tau[i] : 0.0;
+        cfg->schedule_tau_n[i] = (i < n) ? tau_n[i] : 0.0;
     }
-    cfg->model_actuator_tau = 0.02;
-    cfg->model_filter_hz = 30.0;
-    cfg->ts = 0.002;
-    cfg->method = MRS_TUSTIN;
-    cfg->aux_limit = 0.05235987755982989; /* 3 deg */
-    cfg->rate_limit = 0.0;
-    cfg->fade_rate = 0.10471975511965978; /* 6 deg/s */
-    cfg->model_delay_steps = 1;
-    cfg->speed_active_min = 3.0;
-    cfg->speed_max = 70.0;
-    cfg->driver_angle_max = 0.7;
-    cfg->yaw_rate_max = 3.0;
-    cfg->nominal_l_f = 1.25;
-    cfg->nominal_l_r = 1.32;
-    cfg->nominal_mass = 1296.0;
-    cfg->nominal_c_f = 84000.0;
-    cfg->nominal_c_r = 96000.0;
+    cfg->model_actuator_tau = MRS_CONTROLLER_DEFAULT_MODEL_ACTUATOR_TAU;
+    cfg->model_filter_hz = MRS_CONTROLLER_DEFAULT_MODEL_FILTER_HZ;
+    cfg->ts = MRS_CONTROLLER_DEFAULT_TS;
+    cfg->method = MRS_CONTROLLER_DEFAULT_METHOD;
+    cfg->aux_limit = MRS_CONTROLLER_DEFAULT_AUX_LIMIT;
+    cfg->rate_limit = MRS_CONTROLLER_DEFAULT_RATE_LIMIT;
+    cfg->fade_rate = MRS_CONTROLLER_DEFAULT_FADE_RATE;
+    cfg->model_delay_steps = MRS_CONTROLLER_DEFAULT_MODEL_DELAY_STEPS;
+    cfg->speed_active_min = MRS_CONTROLLER_DEFAULT_SPEED_ACTIVE_MIN;
+    cfg->speed_max = MRS_CONTROLLER_DEFAULT_SPEED_MAX;
+    cfg->driver_angle_max = MRS_CONTROLLER_DEFAULT_DRIVER_ANGLE_MAX;
+    cfg->yaw_rate_max = MRS_CONTROLLER_DEFAULT_YAW_RATE_MAX;
+    cfg->nominal_l_f = MRS_CONTROLLER_DEFAULT_NOMINAL_L_F;
+    cfg->nominal_l_r = MRS_CONTROLLER_DEFAULT_NOMINAL_L_R;
+    cfg->nominal_mass = MRS_CONTROLLER_DEFAULT_NOMINAL_MASS;
+    cfg->nominal_c_f = MRS_CONTROLLER_DEFAULT_NOMINAL_C_F;
+    cfg->nominal_c_r = MRS_CONTROLLER_DEFAULT_NOMINAL_C_R;
 }
 
 static int all_finite(const double *v, int n)

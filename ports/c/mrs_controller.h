@@ -20,8 +20,7 @@ typedef float mrs_real_t;
 typedef double mrs_real_t;
 #endif
 
-#define MRS_MAX_MODEL_DELAY 8
-#define MRS_MAX_SCHEDULE 8
+#include "mrs_defaults.h" /* MRS_MAX_MODEL_DELAY, MRS_MAX_SCHEDULE: the tables' sizes */
 
 /* Status as sent on the bus (AuxSteerCmd_State, CtrlStatus_State; model_regulator.STATUS_*):
  * mrs_step() gives the first four, the node reports mrs_reported_state() of it. */

@@ -5,51 +5,54 @@
 #include <math.h> /* exp() and floor() in the configure functions only; isfinite is a macro */
 #include <stddef.h>
 
+#include "mrs_defaults.h"
+
 void mrs_monitor_default_config(mrs_monitor_config_t *cfg)
 {
-    cfg->ts = 0.002;
-    cfg->speed_min = 5.0;
-    cfg->yaw_bound = 0.035;
-    cfg->yaw_rel = 0.1;
-    cfg->yaw_count = 1;
-    cfg->yaw_raw_fraction = 0.5;
-    cfg->steer_bound = 0.004;
-    cfg->steer_count = 1;
-    cfg->model_margin = 0.15;
-    cfg->model_rel = 1.0;
-    cfg->model_tau = 0.15;
-    cfg->model_time = 0.15;
-    cfg->frozen_time = 0.2;
-    cfg->frozen_move_yaw = 0.02;
-    cfg->frozen_move_steer = 0.003;
-    cfg->nominal_l_f = 1.25;
-    cfg->nominal_l_r = 1.32;
-    cfg->nominal_mass = 1296.0;
-    cfg->nominal_c_f = 84000.0;
-    cfg->nominal_c_r = 96000.0;
-    cfg->kin_gap = 0.15;
-    cfg->mu_min = 0.5;
-    cfg->actuator_tau = 0.025;
-    cfg->yaw_pair_bound = 0.03;
-    cfg->sensor_tau = 0.0075;
-    cfg->side_accel = 0.6;
-    cfg->speed_step = 1.5;
-    cfg->turn_yaw_min = 0.1;
-    cfg->turn_yaw_tol = 0.05;
-    cfg->turn_lat_tol = 0.1;
-    cfg->turn_lat_rel = 0.08;
-    cfg->turn_speed_rel = 0.02;
-    cfg->turn_yaw_bias = 0.011;
-    cfg->turn_lat_bias = 0.1;
-    cfg->yaw_pair_hold = 0.02;
-    cfg->speed_pair_bound = 1.0;
-    cfg->speed_pair_rel = 0.05;
-    cfg->speed_pair_time = 0.1;
-    cfg->steer_jump = 0.015;
-    cfg->mu_min_paired = 0.3;
-    cfg->speed_brake_decel = 0.5;
-    cfg->speed_brake_tau = 0.05;
-    cfg->speed_slip_rel = 0.25;
+    /* firmware_py/plausibility.py's PlausibilityConfig(), from mrs_defaults.h (generated from it) */
+    cfg->ts = MRS_MONITOR_DEFAULT_TS;
+    cfg->speed_min = MRS_MONITOR_DEFAULT_SPEED_MIN;
+    cfg->yaw_bound = MRS_MONITOR_DEFAULT_YAW_BOUND;
+    cfg->yaw_rel = MRS_MONITOR_DEFAULT_YAW_REL;
+    cfg->yaw_count = MRS_MONITOR_DEFAULT_YAW_COUNT;
+    cfg->yaw_raw_fraction = MRS_MONITOR_DEFAULT_YAW_RAW_FRACTION;
+    cfg->steer_bound = MRS_MONITOR_DEFAULT_STEER_BOUND;
+    cfg->steer_count = MRS_MONITOR_DEFAULT_STEER_COUNT;
+    cfg->model_margin = MRS_MONITOR_DEFAULT_MODEL_MARGIN;
+    cfg->model_rel = MRS_MONITOR_DEFAULT_MODEL_REL;
+    cfg->model_tau = MRS_MONITOR_DEFAULT_MODEL_TAU;
+    cfg->model_time = MRS_MONITOR_DEFAULT_MODEL_TIME;
+    cfg->frozen_time = MRS_MONITOR_DEFAULT_FROZEN_TIME;
+    cfg->frozen_move_yaw = MRS_MONITOR_DEFAULT_FROZEN_MOVE_YAW;
+    cfg->frozen_move_steer = MRS_MONITOR_DEFAULT_FROZEN_MOVE_STEER;
+    cfg->nominal_l_f = MRS_MONITOR_DEFAULT_NOMINAL_L_F;
+    cfg->nominal_l_r = MRS_MONITOR_DEFAULT_NOMINAL_L_R;
+    cfg->nominal_mass = MRS_MONITOR_DEFAULT_NOMINAL_MASS;
+    cfg->nominal_c_f = MRS_MONITOR_DEFAULT_NOMINAL_C_F;
+    cfg->nominal_c_r = MRS_MONITOR_DEFAULT_NOMINAL_C_R;
+    cfg->kin_gap = MRS_MONITOR_DEFAULT_KIN_GAP;
+    cfg->mu_min = MRS_MONITOR_DEFAULT_MU_MIN;
+    cfg->actuator_tau = MRS_MONITOR_DEFAULT_ACTUATOR_TAU;
+    cfg->yaw_pair_bound = MRS_MONITOR_DEFAULT_YAW_PAIR_BOUND;
+    cfg->sensor_tau = MRS_MONITOR_DEFAULT_SENSOR_TAU;
+    cfg->side_accel = MRS_MONITOR_DEFAULT_SIDE_ACCEL;
+    cfg->speed_step = MRS_MONITOR_DEFAULT_SPEED_STEP;
+    cfg->turn_yaw_min = MRS_MONITOR_DEFAULT_TURN_YAW_MIN;
+    cfg->turn_yaw_tol = MRS_MONITOR_DEFAULT_TURN_YAW_TOL;
+    cfg->turn_lat_tol = MRS_MONITOR_DEFAULT_TURN_LAT_TOL;
+    cfg->turn_lat_rel = MRS_MONITOR_DEFAULT_TURN_LAT_REL;
+    cfg->turn_speed_rel = MRS_MONITOR_DEFAULT_TURN_SPEED_REL;
+    cfg->turn_yaw_bias = MRS_MONITOR_DEFAULT_TURN_YAW_BIAS;
+    cfg->turn_lat_bias = MRS_MONITOR_DEFAULT_TURN_LAT_BIAS;
+    cfg->yaw_pair_hold = MRS_MONITOR_DEFAULT_YAW_PAIR_HOLD;
+    cfg->speed_pair_bound = MRS_MONITOR_DEFAULT_SPEED_PAIR_BOUND;
+    cfg->speed_pair_rel = MRS_MONITOR_DEFAULT_SPEED_PAIR_REL;
+    cfg->speed_pair_time = MRS_MONITOR_DEFAULT_SPEED_PAIR_TIME;
+    cfg->steer_jump = MRS_MONITOR_DEFAULT_STEER_JUMP;
+    cfg->mu_min_paired = MRS_MONITOR_DEFAULT_MU_MIN_PAIRED;
+    cfg->speed_brake_decel = MRS_MONITOR_DEFAULT_SPEED_BRAKE_DECEL;
+    cfg->speed_brake_tau = MRS_MONITOR_DEFAULT_SPEED_BRAKE_TAU;
+    cfg->speed_slip_rel = MRS_MONITOR_DEFAULT_SPEED_SLIP_REL;
 }
 
 static int positive(double x)
@@ -623,14 +626,15 @@ uint8_t mrs_monitor_step(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, 
 
 void mrs_authority_default_config(mrs_authority_config_t *cfg)
 {
-    cfg->ts = 0.002;
-    cfg->u_max = 0.05235987755982989; /* 3 deg */
-    cfg->rate_max = 10.0;
-    cfg->fade_rate = 0.10471975511965978;       /* 6 deg/s: a hand-back to the driver */
-    cfg->fault_fade_rate = 0.5235987755982988;  /* 30 deg/s: a wrong command */
-    cfg->panic_window = 2.0;
-    cfg->engage = 0.0017453292519943296; /* 0.1 deg */
-    cfg->rearm_time = 1.0;
+    /* firmware_py/authority.py's AuthorityConfig(), from mrs_defaults.h (generated from it) */
+    cfg->ts = MRS_AUTHORITY_DEFAULT_TS;
+    cfg->u_max = MRS_AUTHORITY_DEFAULT_U_MAX;
+    cfg->rate_max = MRS_AUTHORITY_DEFAULT_RATE_MAX;
+    cfg->fade_rate = MRS_AUTHORITY_DEFAULT_FADE_RATE;
+    cfg->fault_fade_rate = MRS_AUTHORITY_DEFAULT_FAULT_FADE_RATE;
+    cfg->panic_window = MRS_AUTHORITY_DEFAULT_PANIC_WINDOW;
+    cfg->engage = MRS_AUTHORITY_DEFAULT_ENGAGE;
+    cfg->rearm_time = MRS_AUTHORITY_DEFAULT_REARM_TIME;
 }
 
 int mrs_authority_configure(const mrs_authority_config_t *g, mrs_authority_coeffs_t *c)

@@ -13,6 +13,8 @@
 
 #include <stdint.h>
 
+#include "mrs_defaults.h"
+
 /* CtrlStatus_Plausibility bits (mrsteer.dbc). */
 #define MRS_PLAUS_YAW 0x01u
 #define MRS_PLAUS_STEER 0x02u
@@ -55,9 +57,8 @@
 /* The degraded states: a redundant input missing, or the car outside the model. */
 #define MRS_DEGRADED_CHECKS (MRS_MISSING | MRS_OUTSIDE_MODEL)
 
-#define MRS_KIN_WINDOW 4
-#define MRS_YAW_PAIR_WINDOW 5
-#define MRS_TURN_BLOCK 10 /* redundant samples in one block of the steady-turn speed check */
+/* MRS_KIN_WINDOW, MRS_YAW_PAIR_WINDOW, MRS_TURN_BLOCK (redundant samples in one block of the
+ * steady-turn speed check): the windows' sizes, in mrs_defaults.h */
 
 /* Authority limiter flags. */
 #define MRS_AUTH_MAGNITUDE 0x01u

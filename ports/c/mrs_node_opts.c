@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "mrs_config.h"
+#include "mrs_defaults.h" /* PAPER_K, PAPER_TAU, DEFAULT_TAU_N of firmware_py/calibration.py */
 
 #define DEFAULT_SYNC_OFFSET_US 50.0
 
@@ -214,12 +215,6 @@ static int choose(const char *flag, const char *v, const char *a, const char *b,
     return 0;
 }
 
-/* The paper's gains and the default tau_n that --k, --tau and --tau-n complete (PAPER_K,
- * PAPER_TAU and DEFAULT_TAU_N of firmware_py/calibration.py; tests/test_c_node.py runs both). */
-#define PAPER_K 10.0
-#define PAPER_TAU 0.006
-#define DEFAULT_TAU_N 0.02
-
 /* The law (firmware_py/controller/options.py, calibration_from_args): the calibration file or
  * the shipped one; --k, --tau, --tau-n switch to the paper's plain law with constant gains (no
  * actuator or filter in the nominal model, no modelled delay unless --model-delay says so);
@@ -237,9 +232,9 @@ static int controller_config(raw_args_t *a, mrs_config_t *c)
     }
     if (a->have_k || a->have_tau || a->have_tau_n) {
         c->n_schedule = 0;
-        c->k = a->have_k ? a->k : PAPER_K;
-        c->tau = a->have_tau ? a->tau : PAPER_TAU;
-        c->tau_n = a->have_tau_n ? a->tau_n : DEFAULT_TAU_N;
+        c->k = a->have_k ? a->k : MRS_PAPER_K;
+        c->tau = a->have_tau ? a->tau : MRS_PAPER_TAU;
+        c->tau_n = a->have_tau_n ? a->tau_n : MRS_DEFAULT_TAU_N;
         c->model_actuator_tau = 0.0;
         c->model_filter_hz = 0.0;
         c->model_delay_steps = a->model_delay >= 0 ? a->model_delay : 0;

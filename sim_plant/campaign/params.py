@@ -40,7 +40,7 @@ from sim_plant.car.actuator_dynamics import ActuatorModelConfig
 from sim_plant.car.scenario import DriverModel, Event, Scenario
 from sim_plant.car.sensor_faults import FAULT_SENSORS, SensorFault
 from sim_plant.car.sensors import MAX_SEED, SensorConfig, YawRateSensorConfig
-from sim_plant.car.vehicle import MAX_MU
+from sim_plant.car.vehicle import MAX_MU, PAPER_MASS
 
 KINDS = ("yaw_moment", "split_mu_braking", "side_wind", "blowout")
 WHEELS = dist.WHEELS  # blowout_wheel codes 0..3
@@ -70,7 +70,7 @@ class Parameter:
 PARAMETERS: dict[str, Parameter] = {
     "v": Parameter("m/s", 5.0, 60.0, 25.0, "speed at the start"),
     "mu": Parameter("", 0.05, MAX_MU, 1.0, "road friction (the left wheels' under split-mu braking)"),
-    "mass": Parameter("kg", 900.0, 2500.0, 1296.0, "vehicle mass"),
+    "mass": Parameter("kg", 900.0, 2500.0, PAPER_MASS, "vehicle mass"),
     "disturbance": Parameter("", 0, len(KINDS) - 1, 0, "disturbance kind", KINDS),
     "onset": Parameter("s", 0.0, 5.0, 0.5, "when the disturbance starts"),
     "yaw_moment": Parameter("Nm", -20000.0, 20000.0, 4000.0, "M_z step (yaw_moment)"),

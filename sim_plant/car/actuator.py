@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 
 from firmware_py import authority as au
-from firmware_py.model_regulator import AUX_LIMIT
+from firmware_py.calibration import AUX_LIMIT
 from firmware_py.plausibility import PLAUS_DEGRADED, PLAUS_FAULT
 
 CMD_TIMEOUT_S = 0.02  # s without a valid command before the actuator fades to zero

@@ -22,13 +22,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-# Section 3: "a mid-sized passenger car that is available in the literature".
-PAPER_L_F = 1.25  # m, front axle to CG
-PAPER_L_R = 1.32  # m, rear axle to CG
-PAPER_MASS = 1296.0  # kg
+from firmware_py.calibration import NOMINAL_C_F, NOMINAL_C_R, NOMINAL_L_F, NOMINAL_L_R, NOMINAL_MASS
+
+# Section 3: "a mid-sized passenger car that is available in the literature".  It is the nominal
+# car the shipped calibration is written for, so its data are the calibration's (decision 0010);
+# the yaw inertia, which the controller's model does not use, is the car's alone.
+PAPER_L_F = NOMINAL_L_F  # m, front axle to CG
+PAPER_L_R = NOMINAL_L_R  # m, rear axle to CG
+PAPER_MASS = NOMINAL_MASS  # kg
 PAPER_INERTIA = 1750.0  # kg m^2, yaw moment of inertia
-PAPER_C_F0 = 84000.0  # N/rad, front cornering stiffness at mu = 1
-PAPER_C_R0 = 96000.0  # N/rad, rear cornering stiffness at mu = 1
+PAPER_C_F0 = NOMINAL_C_F  # N/rad, front cornering stiffness at mu = 1
+PAPER_C_R0 = NOMINAL_C_R  # N/rad, rear cornering stiffness at mu = 1
 
 #: Lowest speed at which the model is evaluated: the single-track equations divide by v.
 MIN_SPEED = 0.5

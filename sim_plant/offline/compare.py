@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from firmware_py import model_regulator as mr
-from sim_plant.car.vehicle import VehicleParams
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 from sim_plant.offline import constraints as C
 from sim_plant.offline.discrete_loop import max_pole_radius
 from sim_plant.offline.loop_plant import LoopModels
@@ -34,7 +34,7 @@ FIG10 = VehicleParams().at(v=10.0, mu=1.0)
 #: The cloud's feasibility envelope: the breakpoints and points between them, the friction and
 #: mass extremes and two frictions between (64 points).
 CLOUD_ENVELOPE = Envelope(speeds=(5.0, 7.5, 10.0, 15.0, 20.0, 30.0, 40.0, 50.0), frictions=(0.1, 0.4, 0.7, 1.0),
-                          masses=(1296.0, 1800.0))
+                          masses=(PAPER_MASS, 1800.0))
 LOOPS = {"ideal": LoopModels.ideal(), "reference": LoopModels.reference()}
 #: What every figure of this module assumes (docs beside the table and the plot).
 ASSUMES = ("500 Hz, one sample of loop delay, the paper's linear single-track car (eq. 14, ZOH); ideal loop: "

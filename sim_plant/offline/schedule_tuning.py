@@ -35,7 +35,7 @@ from typing import Any, Callable
 import numpy as np
 
 from firmware_py import model_regulator as mr
-from sim_plant.car.vehicle import VehicleParams
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 from sim_plant.offline import constraints as C
 from sim_plant.offline.discrete_loop import max_pole_radius
 from sim_plant.offline.loop_plant import LoopModels
@@ -57,7 +57,7 @@ class Grids:
 
     speed_step: float = 2.5
     frictions: tuple[float, ...] = tuple(float(x) for x in np.linspace(0.1, 1.0, 10))
-    masses: tuple[float, ...] = (1296.0, 1548.0, 1800.0)
+    masses: tuple[float, ...] = (PAPER_MASS, 1548.0, 1800.0)
     steps: tuple[float, ...] = (0.08, 0.04, 0.02, 0.01)  # compass step sizes in log space
     active: int = 2  # tightest local points of each constraint kept in the active set
     max_trials: int = 80  # per breakpoint and round
@@ -65,7 +65,7 @@ class Grids:
 
 
 FULL = Grids()
-QUICK = Grids(speed_step=5.0, frictions=(0.1, 1.0), masses=(1296.0, 1800.0), steps=(0.08,), active=1,
+QUICK = Grids(speed_step=5.0, frictions=(0.1, 1.0), masses=(PAPER_MASS, 1800.0), steps=(0.08,), active=1,
               max_trials=4, rounds=1)
 
 

@@ -37,7 +37,7 @@ from firmware_py import model_regulator as mr
 from sim_plant.offline.closed_loop import Experiment, simulate_discrete
 from sim_plant.offline.margins import (Envelope, EnvelopeMargins, LoopResponse, Margins, envelope_margins, law_response,
                                point_margins)
-from sim_plant.car.vehicle import VehicleParams
+from sim_plant.car.vehicle import PAPER_MASS, VehicleParams
 from sim_plant.offline import constraints
 from sim_plant.offline.constraints import ConstraintReport
 from sim_plant.offline.discrete_loop import IDEAL, max_pole_radius
@@ -59,7 +59,7 @@ TAU_N_GRID = (0.005, 0.01, 0.02, 0.05, 0.1)
 COARSE_STRIDE = 3  # ``tune(coarse=True)``: every third K and tau of the grids (a smoke run, ~1/9 the work)
 
 SCREEN_ENVELOPE = Envelope(speeds=(5.0, 10.0, 20.0, 35.0, 50.0), frictions=(0.1, 0.3, 0.6, 1.0),
-                           masses=(1296.0, 1800.0))
+                           masses=(PAPER_MASS, 1800.0))
 
 Progress = Callable[[str, int, int], None]
 
