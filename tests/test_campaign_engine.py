@@ -201,7 +201,7 @@ def test_the_batch_tyre_curve_is_the_scalar_magic_formula_across_and_beyond_its_
     """The batch computes the sine as 2t/(1+t^2) of tan(x/2); the scalar with libm's sin.  Over
     slip angles from deep in the linear range to far past the peak (where the argument of the
     sine is largest), on the stiffnesses of light and heavy cars."""
-    from sim_plant.campaign.batch_car import shape_sine
+    from sim_plant.car.tyres import shape_sine
     from sim_plant.car.tyres import PACEJKA_CURVATURE, PACEJKA_SHAPE, magic_formula
 
     alpha = np.concatenate([np.linspace(-1.5, 1.5, 2001), [0.0, 1e-9, -1e-9, np.pi / 2]])
@@ -228,7 +228,7 @@ def test_batch_lateral_acceleration_and_redundant_channels_equal_the_scalar_mode
     """``BatchCar.lat_accel`` against ``Car.outputs``' a_y (with a side force), and
     ``BatchSensors``' lateral acceleration, second steering channel and yaw rate (both elements) against
     ``sensors.Sensors`` of the same seed, step by step while the cars move."""
-    from sim_plant.campaign.batch_car import BatchCar
+    from sim_plant.car.nonlinear import BatchCar
     from sim_plant.campaign.batch_sensors import BatchSensors
     from sim_plant.car.disturbances import Loads
     from sim_plant.car.plants import Car
@@ -323,7 +323,7 @@ def test_the_batch_readings_saturate_at_their_signals_ranges_as_the_scalar_senso
 
 
 def test_the_single_substep_bound_holds_where_it_claims_and_fails_for_slow_light_grippy_cars() -> None:
-    from sim_plant.campaign.batch_car import BatchCar
+    from sim_plant.car.nonlinear import BatchCar
 
     rng = np.random.default_rng(8)
     claimed = 0

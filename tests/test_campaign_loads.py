@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim_plant.campaign import sampling, spec
-from sim_plant.campaign.batch_car import BatchCar
+from sim_plant.car.nonlinear import BatchCar
 from sim_plant.campaign.loads import BLOCK, BLOWOUT, SPLIT, GripLoads, IntactLoads
 
 CAMPAIGN = """

@@ -3,8 +3,9 @@
 * ``params``: the sampled parameters, a ``SampleSet``, the scenario one sample is;
 * ``spec``: the campaign file (TOML): distributions, sample count, calibrations, criteria;
 * ``sampling``: Latin hypercube or random designs, every sample a function of its index;
-* ``batch_car``, ``batch_sensors``, ``loads``: the realistic car and actuator, the sensors, the
-  disturbances vectorised; ``noise``: the sensors' per-row noise streams, seeded and drawn as
+* ``batch_sensors``, ``loads``: the sensors and the disturbances vectorised (the car and the
+  actuator are ``sim_plant.car``'s array models: ``nonlinear.BatchCar``,
+  ``actuator_dynamics.BatchPositionActuator``); ``noise``: the sensors' per-row noise streams, seeded and drawn as
   the scalar sensors draw them;
 * ``c_cycle``: the C port's control cycle over a batch's rows (``ports/c/mrs_cycle_batch.c``,
   compiled with cffi at install), and the actuators' own authority limiters;

@@ -1,5 +1,5 @@
-"""The realistic car's sensors, vectorised over a batch of samples (the engine's ``batch_car``
-holds the car and the actuator).
+"""The realistic car's sensors, vectorised over a batch of samples (the car and the actuator are
+``sim_plant.car``'s array models).
 
 ``BatchSensors`` is ``sim_plant.car.sensors.Sensors`` for a batch of samples, repeating its
 arithmetic statement for statement: the yaw rate's and the lateral acceleration's noise (each

@@ -50,14 +50,16 @@ import numpy as np
 from firmware_py import model_regulator as mr
 from firmware_py import plausibility as pl
 from sim_plant.campaign.batch_faults import BatchFaults
-from sim_plant.campaign.batch_car import BASE, BatchCar, BatchPositionActuator, Tyres
 from sim_plant.campaign.batch_sensors import BatchSensors
 from sim_plant.campaign.c_cycle import AuthorityBatch, CycleBatch
 from sim_plant.campaign.batch_tally import Ends, Tally, end_traces, scatter
 from sim_plant.campaign.reference import authority_limit, status_cycle
 from sim_plant.campaign.loads import BLOCK, EVENT_SLACK, SPLIT, BLOWOUT, GripLoads, IntactLoads
 from sim_plant.campaign.params import NOISE_SEED, SampleSet
+from sim_plant.car.actuator_dynamics import BatchPositionActuator
+from sim_plant.car.nonlinear import BASE, BatchCar
 from sim_plant.car.scenario_play import DRIVER_LIMIT
+from sim_plant.car.tyres import Tyres
 from sim_plant.judge.caused_yaw import kept as kept_of
 from sim_plant.judge.detection import FaultFigures
 from sim_plant.offline.plausibility_runs import cycles

@@ -162,7 +162,7 @@ class GripLoads(_Settling):
         for w, rows in enumerate(self.blown_rows):  # fl, fr, rl, rr: the blown wheel's B and peak
             if rows.size == 0:
                 continue
-            # AxleTyre.wheel_force's B stiffness / peak and 0.5 peak mu F_z (before the onset,
+            # tyres.wheel_tyres' B stiffness / peak and 0.5 peak mu F_z (before the onset,
             # k = 0 makes both fractions exactly 1: the intact wheel's values)
             a, side = (0 if w <= 1 else 1), w % 2
             b_axle, f_z = (car.b_f, car.f_zf) if a == 0 else (car.b_r, car.f_zr)

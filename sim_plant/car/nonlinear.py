@@ -1,5 +1,7 @@
 """Nonlinear single-track model of the realistic car: the paper's section-3 model with
 magic-formula tyres (``tyres``), optional tyre relaxation, and a speed that braking lowers.
+``BatchCar`` steps N cars at once with the kinematic slip (the campaign engine's batch), one
+numpy operation per stage for all of them.
 
 State [beta, r] as in ``vehicle`` (side slip at the CG in rad, yaw rate in rad/s), plus the
 speed v and, with a relaxation length, the two axles' lagged slip angles.  With the
@@ -59,7 +61,7 @@ import math
 
 import numpy as np
 
-from sim_plant.car.tyres import G, INTACT, Grip, axle_tyres
+from sim_plant.car.tyres import G, INTACT, Grip, Tyres, axle_tyres, shape_sine, static_axle_loads, stiffness_factor
 from sim_plant.car.vehicle import MAX_SPEED, VehicleParams
 
 #: Braking ends here (m/s): the slip-angle model does not hold near standstill.
@@ -69,6 +71,8 @@ MAX_STEP_RATE = 0.25
 MAX_RELAXATION = 5.0  # m; passenger-car tyres are 0.2-1 m
 #: Beyond this side slip (rad) the car has spun: the model's validity ends (the module docstring).
 SPIN_SIDE_SLIP = math.radians(30.0)
+#: The car's data besides mass (inertia, axle positions, stiffnesses) of a batch that gives none.
+BASE = VehicleParams()
 
 
 def spun(beta: float | np.ndarray) -> bool | np.ndarray:
@@ -84,6 +88,193 @@ def wrap_angle(x: float | np.ndarray) -> float | np.ndarray:
         return x if -math.pi < x <= math.pi else math.pi - (math.pi - x) % math.tau
     x = np.asarray(x, dtype=float)
     return np.where((-np.pi < x) & (x <= np.pi), x, np.pi - np.mod(np.pi - x, 2.0 * np.pi))
+
+
+class BatchCar:
+    """N nonlinear single-track cars: state beta, r, v (arrays of N, advanced in place); the
+    car's data besides its mass (inertia, axle positions, stiffnesses) ``base``'s.
+
+    The hot path allocates nothing: every stage writes into scratch arrays made here."""
+
+    def __init__(self, v: np.ndarray, mu: np.ndarray, mass: np.ndarray, ts: float,
+                 base: VehicleParams = BASE) -> None:
+        p = self.base = base
+        self.ts, self.mu, self.mass = ts, mu, mass
+        self.l_f, self.l_r, self.inertia = p.l_f, p.l_r, p.inertia
+        self.f_zf, self.f_zr = static_axle_loads(mass, p.l_f, p.l_r)
+        self.b_f = stiffness_factor(p.c_f0, self.f_zf)
+        self.b_r = stiffness_factor(p.c_r0, self.f_zr)
+        self.peak_f = mu * self.f_zf  # an axle's peak: D = mu F_z
+        self.peak_r = mu * self.f_zr
+        #: the intact axles on the road's mu (rows of the yaw-moment step and the side wind)
+        self.intact = Tyres(np.stack([self.b_f, self.b_r])[:, None], np.stack([self.peak_f, self.peak_r])[:, None])
+        n = v.size
+        self.x = np.zeros((3, n))  # beta, r, v: one array, so that RK4 combines them in one operation
+        self.beta, self.r, self.v = self.x
+        self.v[:] = v
+        self._fixed_substeps: np.ndarray | None = None
+        # scratch arrays of the right-hand side and RK4 (no temporaries in the step)
+        self._alpha = np.empty((2, 1, n))
+        self._s = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._s_tmp = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._f = {1: np.empty((2, 1, n)), 2: np.empty((2, 2, n))}
+        self._axle = np.empty((2, n))
+        self._k = np.empty((4, 3, n))  # k1..k4 of (beta, r, v)
+        self._stage = np.empty((3, n))
+        self._t1, self._t2 = np.empty(n), np.empty(n)
+        self._arms = np.array([[p.l_f], [p.l_r]])  # the axles' distances from the centre of mass
+        self._lr = np.empty((2, n))
+        self._mv: np.ndarray | None = None  # m v while the speed is constant
+        self._mass_min = float(mass.min()) if n else 1.0
+        # lat_accel's rear axle force for advance's first stage, and the tyres it was of (False: none)
+        self._rear, self._rear_of = np.empty(n), False
+        self._acc_tmp = np.empty((3, n))
+
+    def substeps(self, mu_max: np.ndarray) -> np.ndarray:
+        """RK4 sub-steps of the next ``advance`` per row (the module docstring), with ``mu_max``
+        the largest mu on any wheel."""
+        p, v, m = self.base, self.v, self.mass
+        c_f, c_r = mu_max * p.c_f0, mu_max * p.c_r0
+        moment = np.abs(c_r * p.l_r - c_f * p.l_f)
+        row1 = (c_f + c_r) / (m * v) + np.abs(moment / (m * v * v) - 1.0)
+        row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
+        return np.maximum(1, np.ceil(self.ts * np.maximum(row1, row2) / MAX_STEP_RATE)).astype(np.int64)
+
+    def one_substep(self, mu_max: np.ndarray) -> bool:
+        """``substeps`` is 1 in every row: its rates bounded above with the largest mu, the
+        smallest mass and speed (and |x - 1| <= x + 1), a margin far beyond rounding."""
+        p, mu, v, m = self.base, float(mu_max.max()), float(self.v.min()), self._mass_min
+        if not (v > 0.0 and 0.0 <= mu < math.inf):  # (False for a NaN)
+            return False
+        c_f, c_r = mu * p.c_f0, mu * p.c_r0
+        moment = abs(c_r * p.l_r - c_f * p.l_f)
+        row1 = (c_f + c_r) / (m * v) + moment / (m * v * v) + 1.0
+        row2 = moment / p.inertia + (c_f * p.l_f**2 + c_r * p.l_r**2) / (p.inertia * v)
+        return self.ts * max(row1, row2) / MAX_STEP_RATE * (1.0 + 1e-9) <= 1.0
+
+    def lat_accel(self, delta: np.ndarray, f_y: np.ndarray | None, tyres: Tyres | None) -> np.ndarray:
+        """a_y = sum F_y / m at the current state, with the front-wheel
+        angle ``delta`` and this step's side force and tyres (None: none, the intact axles).
+
+        The rear axle's force does not depend on the steering angle: ``advance`` with the same
+        tyres, from this state, reuses it for its first stage."""
+        f_front, f_rear = self._forces(self.beta, self.r, self.v, delta, tyres or self.intact)
+        np.copyto(self._rear, f_rear)
+        self._rear_of = tyres
+        a_y = f_front + f_rear
+        if f_y is not None:
+            a_y += f_y
+        a_y /= self.mass
+        return a_y
+
+    def _forces(self, beta, r, v, delta, tyres: Tyres, rear: np.ndarray | None = None) -> np.ndarray:
+        """(F_yf, F_yr) as one (2, N) array at the kinematic slip angles: a view of scratch arrays, valid until the next call.  ``rear``: the
+        rear axle's force, known (only the front is evaluated)."""
+        alpha = self._alpha
+        axles = 2 if rear is None else 1
+        if rear is None:
+            lr = self._lr
+            np.multiply(self._arms, r, out=lr)  # l_f r / v and l_r r / v, both axles in one operation
+            lr /= v
+            np.subtract(lr[1], beta, out=alpha[1, 0])  # alpha_r = -beta + l_r r / v
+            lf = lr[0]
+        else:
+            lf = np.multiply(self.l_f, r, out=self._t1)
+            lf /= v
+        np.subtract(delta, beta, out=alpha[0, 0])  # alpha_f = delta - beta - l_f r / v
+        alpha[0, 0] -= lf
+        nb, nd = tyres.b.shape[1], tyres.d.shape[1]
+        s = shape_sine(alpha[:axles], tyres.b[:axles], self._s[nb][:axles], self._s_tmp[nb][:axles])
+        f = np.multiply(tyres.d[:axles], s, out=self._f[nd][:axles])
+        if nd == 2:
+            out = self._axle
+            np.add(f[:, 0], f[:, 1], out=out[:axles])
+        else:
+            out = self._f[nd][:, 0]
+        if rear is not None:
+            np.copyto(out[1], rear)
+        return out
+
+    def _derivative(self, beta, r, v, delta, m_z, f_y, a_x, tyres: Tyres, k: np.ndarray,
+                    rear: np.ndarray | None = None) -> None:
+        """The model's right-hand side into k (3, N): d beta, d r, d v (the last only with a_x)."""
+        forces = self._forces(beta, r, v, delta, tyres, rear)  # (F_yf, F_yr) as one (2, N) array
+        t1, lr = self._t1, self._lr
+        np.add(forces[0], forces[1], out=t1)
+        if f_y is not None:
+            t1 += f_y
+        if v is self.v and a_x is None:  # the speed constant: m v too
+            if self._mv is None:
+                self._mv = self.mass * v
+            mv = self._mv
+        else:
+            mv = np.multiply(self.mass, v, out=self._t2)
+        np.divide(t1, mv, out=k[0])
+        k[0] -= r
+        np.multiply(self._arms, forces, out=lr)  # l_f F_yf and l_r F_yr
+        np.subtract(lr[0], lr[1], out=k[1])
+        k[1] += m_z
+        k[1] /= self.inertia
+        if a_x is not None:  # -a_x, but no braking below STOP_SPEED
+            if v.min() > STOP_SPEED:
+                np.negative(a_x, out=k[2])
+            else:
+                np.copyto(k[2], np.where((a_x < 0.0) | (v > STOP_SPEED), -a_x, 0.0))
+
+    def advance(self, delta: np.ndarray, m_z: np.ndarray, f_y: np.ndarray | None, a_x: np.ndarray | None,
+                tyres: Tyres | None, mu_max: np.ndarray) -> None:
+        """One step, inputs held (a zero-order hold).  ``f_y`` None: no side force;
+        ``a_x`` None: the speed stays; ``tyres`` None: the intact axles (``self.intact``)."""
+        if a_x is None and tyres is None:  # speed and grip constant: so is the sub-step count
+            if self._fixed_substeps is None:
+                self._fixed_substeps = self.substeps(mu_max)
+            n = self._fixed_substeps
+        else:
+            self._fixed_substeps = None  # (the speed or the grip may change: counted anew when constant)
+            if a_x is not None:
+                self._mv = None
+            n = None if self.one_substep(mu_max) else self.substeps(mu_max)
+        n_max = 1 if n is None else int(n.max())
+        h = self.ts / n if n_max > 1 else self.ts
+        braking = (self.v > STOP_SPEED) & (a_x > 0.0) if a_x is not None else None
+        if braking is not None and not braking.any():
+            braking = None
+        rear = self._rear if self._rear_of is tyres else None  # (lat_accel's, at this state and tyres)
+        self._rear_of = False
+        for j in range(n_max):
+            self._rk4(delta, m_z, f_y, a_x, tyres or self.intact, h, braking, None if n_max == 1 else j < n,
+                      rear if j == 0 else None)
+        if a_x is not None:
+            np.minimum(self.v, MAX_SPEED, out=self.v)
+
+    def _rk4(self, delta, m_z, f_y, a_x, tyres: Tyres, h, braking, active, rear=None) -> None:
+        """One classical RK4 step of (beta, r[, v]) in place; ``rear``: the
+        rear axle's force at the state, known."""
+        dims = 3 if a_x is not None else 2
+        x, k, stage = self.x[:dims], self._k[:, :dims], self._stage[:dims]
+        half = 0.5 * h
+        self._derivative(self.beta, self.r, self.v, delta, m_z, f_y, a_x, tyres, self._k[0], rear)
+        for i, step in ((1, half), (2, half), (3, h)):
+            np.multiply(step, k[i - 1], out=stage)  # the stage's state x + step k_(i-1)
+            np.add(x, stage, out=stage)
+            v = stage[2] if dims == 3 else self.v
+            self._derivative(stage[0], stage[1], v, delta, m_z, f_y, a_x, tyres, self._k[i])
+        acc, tmp = stage, self._acc_tmp[:dims]  # x + h/6 (k1 + 2 k2 + 2 k3 + k4)
+        np.multiply(2.0, k[1], out=acc)
+        np.add(k[0], acc, out=acc)
+        np.multiply(2.0, k[2], out=tmp)
+        acc += tmp
+        acc += k[3]
+        acc *= h / 6.0
+        if active is None:
+            np.add(acc, x, out=x)
+            if braking is not None:
+                np.copyto(x[2], np.maximum(x[2], STOP_SPEED), where=braking)
+            return
+        acc += x
+        if braking is not None:
+            np.copyto(acc[2], np.maximum(acc[2], STOP_SPEED), where=braking)
+        np.copyto(x, acc, where=active)  # rows with fewer sub-steps than the most are done
 
 
 class NonlinearPlant:

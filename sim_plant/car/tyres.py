@@ -26,7 +26,12 @@ wheel (blow-out) keeps a fraction ``stiffness`` of its slope and ``peak`` of its
 which moves its B to (stiffness / peak) B.  The sum of an axle's two healthy wheels on roads
 of friction mu_l and mu_r equals one axle at (mu_l + mu_r) / 2.
 
-Every function takes numpy scalars or arrays (it is evaluated element-wise).
+Every function is evaluated element-wise over numpy arrays: a batch of cars (the campaign
+engine's) or a batch of one (the plant node's and the offline tools', ``nonlinear.NonlinearPlant``).
+
+The sine is taken as 2 t / (1 + t^2) with t = tan(x / 2) (``shape_sine``): numpy's float64
+``tan`` is vectorised and its ``sin`` is not (about 7x slower), and |x| < C pi / 2 keeps t
+finite.  The identity costs a few ulp against libm's ``sin``.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sim_plant.car.vehicle import MAX_MU, VehicleParams
+from sim_plant.car.vehicle import MAX_MU
 
 #: Standard gravity, m/s^2.
 G = 9.81
@@ -46,6 +51,8 @@ G = 9.81
 PACEJKA_SHAPE = 1.3507
 #: CommonRoad parameters_vehicle2 (ADAMS handbook) lateral curvature factor p_ey1.
 PACEJKA_CURVATURE = -0.00747
+#: tan's argument in ``shape_sine``: half the shape factor (sin x = 2 t / (1 + t^2), t = tan(x/2)).
+HALF_SHAPE = 0.5 * PACEJKA_SHAPE
 
 
 def magic_formula(alpha: ArrayLike, stiffness: ArrayLike, shape: float, peak: ArrayLike,
@@ -61,10 +68,42 @@ def magic_formula(alpha: ArrayLike, stiffness: ArrayLike, shape: float, peak: Ar
     return np.multiply(peak, np.sin(shape * np.arctan(ba - curvature * (ba - np.arctan(ba)))))
 
 
-def static_axle_loads(mass: float, l_f: float, l_r: float, g: float = G) -> tuple[float, float]:
+def static_axle_loads(mass: ArrayLike, l_f: float, l_r: float, g: float = G) -> tuple[ArrayLike, ArrayLike]:
     """(F_zf, F_zr) in N: the car's weight shared by the lever rule, F_zf = m g l_r / (l_f + l_r)."""
     wheelbase = l_f + l_r
-    return mass * g * l_r / wheelbase, mass * g * l_f / wheelbase
+    return mass * g * l_r / wheelbase, mass * g * l_f / wheelbase  # type: ignore[operator]
+
+
+def stiffness_factor(c0: ArrayLike, f_z: ArrayLike) -> ArrayLike:
+    """B = c_0 / (C F_z), so that the slope at zero slip is mu c_0 (for the peak mu F_z)."""
+    return c0 / (PACEJKA_SHAPE * f_z)  # type: ignore[operator]
+
+
+def shape_sine(alpha: ArrayLike, b: ArrayLike, out: np.ndarray | None = None,
+               tmp: np.ndarray | None = None) -> np.ndarray:
+    """sin(C atan(B alpha - E (B alpha - atan(B alpha)))): the magic formula over its peak D,
+    written into ``out`` (``tmp`` a scratch array of its shape; both made when not given)."""
+    if out is None or tmp is None:
+        shape = np.broadcast_shapes(np.shape(alpha), np.shape(b))
+        out, tmp = np.empty(shape), np.empty(shape)
+    ba = np.multiply(b, alpha, out=tmp)
+    np.arctan(ba, out=out)
+    np.subtract(ba, out, out=out)
+    out *= PACEJKA_CURVATURE
+    np.subtract(ba, out, out=out)
+    np.arctan(out, out=out)
+    out *= HALF_SHAPE
+    np.tan(out, out=out)
+    np.multiply(out, out, out=tmp)
+    tmp += 1.0
+    out += out
+    out /= tmp
+    return out
+
+
+def lateral_force(alpha: ArrayLike, b: ArrayLike, peak: ArrayLike) -> np.ndarray:
+    """F_y = D sin(C atan(B alpha - E (B alpha - atan(B alpha)))) with B = ``b``, D = ``peak``."""
+    return np.multiply(peak, shape_sine(alpha, b))
 
 
 @dataclass(frozen=True)
@@ -110,6 +149,32 @@ class Grip:
 HEALTHY = WheelGrip()
 #: All four wheels intact on the car's road.
 INTACT = Grip()
+
+
+class Tyres:
+    """The tyres of a batch for one step: ``b`` (2, nb, N) and ``d`` (2, nd, N), axis 0 the axle
+    (front, rear), axis 1 its wheels.  nb = nd = 1: each axle as one tyre of peak mu F_z; nb = 1,
+    nd = 2: the axle's two wheels share B and differ in their peak (split mu); nb = nd = 2: every
+    wheel its own (a wheel: half the axle's c_0 and F_z, its B times stiffness / peak, its peak
+    0.5 peak mu F_z).  With intact wheels on the road's mu the two-wheel sum is bitwise the
+    axle's value (the halving and doubling are exact in binary floating point)."""
+
+    def __init__(self, b: np.ndarray, d: np.ndarray) -> None:
+        self.b, self.d = b, d
+
+
+def wheel_tyres(b: tuple[float, float], f_z: tuple[float, float], mu: float, grip: Grip) -> Tyres:
+    """One car's four wheels (a batch of one) with ``grip`` on the road of friction ``mu``:
+    the axles' B ``b`` and static loads ``f_z`` (front, rear)."""
+    wheels = ((grip.fl, grip.fr), (grip.rl, grip.rr))
+    return Tyres(np.array([[[b[a] * w.stiffness / w.peak] for w in pair] for a, pair in enumerate(wheels)]),
+                 np.array([[[0.5 * w.peak * (mu if w.mu is None else w.mu) * f_z[a]] for w in pair]
+                           for a, pair in enumerate(wheels)]))
+
+
+def max_mu(mu: float, grip: Grip) -> float:
+    """The largest friction under any wheel (the road's ``mu`` where a wheel sets none)."""
+    return max([mu] + [w.mu for w in (grip.fl, grip.fr, grip.rl, grip.rr) if w.mu is not None])
 
 
 @dataclass(frozen=True)
