@@ -221,8 +221,10 @@ def test_phase_lock_moves_cycle_starts_toward_the_frame_arrival_and_converges() 
 
 def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str) -> None:
     """Lockstep end of run: with no yaw-rate frame the sensors-triggered loop still runs its
-    watchdog cycle after SENSORS_WATCHDOG_S, and a stop while it waits for frames ends it within
-    a receive slice, with nothing sent after the stop but the final zero command."""
+    watchdog cycle, not before SENSORS_WATCHDOG_S, and a stop while it waits for frames ends it
+    at once: nothing sent after the stop but the final zero command (a loop that finished its
+    wait first would send the next watchdog cycle's command before it).  No upper time bound:
+    a loaded machine delays every wake-up."""
     import threading
     import time
 
@@ -232,19 +234,18 @@ def test_the_sensors_trigger_keeps_its_watchdog_and_stops_promptly(channel: str)
         loop = threading.Thread(target=node.run)
         loop.start()
         try:
-            first = ear.recv(3.0)  # the watchdog cycle's command
+            first = ear.recv(30.0)  # the watchdog cycle's command
             waited = time.monotonic() - start
             assert first is not None and first.arbitration_id == C.frame_id(names.MSG_CMD)
-            assert timing.SENSORS_WATCHDOG_S - 0.05 <= waited <= timing.SENSORS_WATCHDOG_S + 0.5
-            time.sleep(0.3)  # well inside the next watchdog wait
-            stopped = time.monotonic()
+            assert waited >= timing.SENSORS_WATCHDOG_S - 0.05
+            time.sleep(0.3)  # inside the next watchdog wait (on a quiet machine)
+            stopped = time.time()  # the virtual bus stamps frames with time.time()
             node.stop()
-            loop.join(2.0)
-            assert not loop.is_alive() and time.monotonic() - stopped <= 0.2
+            loop.join(30.0)
+            assert not loop.is_alive()
         finally:
             node.stop()
-            loop.join(2.0)
-        after = list(iter(lambda: ear.recv(0.05), None))
+        after = [m for m in iter(lambda: ear.recv(0.05), None) if m.timestamp >= stopped]
     assert len(after) == 1
     d = C.decode(after[0].arbitration_id, bytes(after[0].data))
     assert d.name == names.MSG_CMD and d.signals["AuxSteerCmd_Angle"] == 0.0

@@ -10,9 +10,11 @@ a realtime one.  A frame's scenario time (s from the plant's first frame) is:
   plant sends them before the step's yaw rate): the step after the newest yaw-rate frame's;
 * a controller frame (command, status): the newest yaw-rate frame's step, the measurement it
   answers or followed; before the plant's first yaw-rate frame, its bus time less the plant's
-  first frame's (negative: a realtime controller runs before the plant starts), and more than a
-  period after the plant's last frame, the last step's time plus the bus time since (the
-  plant has stopped: the final zero command).
+  first frame's (negative: a realtime controller runs before the plant starts).  After the
+  plant's last frame, the first command (and the status of its cycle) answers the last step,
+  however late a loaded machine sent it; a later frame more than a period after the plant's
+  last is at the last step's time plus the bus time since (the plant has stopped: the final zero
+  command).
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ def scenario_times(frames: Sequence[tuple[int, bytes, float]], period: float,
     t0, last = frames[plant[0]][2], plant[-1]
     step: int | None = None
     counter = 0
+    commands_after = 0  # commands since the plant's last frame
+    cmd_id = c.frame_id(MSG_CMD)
     out = []
     for i, (fid, data, t) in enumerate(frames):
         if fid == yaw_id:
@@ -53,6 +57,9 @@ def scenario_times(frames: Sequence[tuple[int, bytes, float]], period: float,
         elif step is None:
             out.append(t - t0)
         else:
-            since = t - frames[last][2] if i > last else 0.0
+            if i > last and fid == cmd_id:
+                commands_after += 1
+            answer = commands_after <= 1  # the last step's answer, or its cycle's status
+            since = t - frames[last][2] if i > last and not answer else 0.0
             out.append(step * period + (since if since > period else 0.0))
     return out
