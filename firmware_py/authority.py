@@ -3,7 +3,8 @@
 An independent limit on how far and how long the auxiliary command may act, whatever computed
 it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
 ``authority_step(c, s, u_request, plaus_bits, cut, fade)`` once per control period (scalar arithmetic, no
-allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
+allocation; its units ``fade_cause``, ``magnitude_bound``, ``rate_bound``, ``intervention_window``
+are the C port's), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
 bit (float64) in ``ports/c/mrs_monitor.c``; docs/controller.md, "Bounded
 authority", says what it does, docs/decisions/0008-authority-fades-rate-bound-and-re-arm.md why.  Meant to run where the command leaves the controller and again at the actuator.
 """
