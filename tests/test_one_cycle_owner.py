@@ -46,7 +46,9 @@ PY_MONITOR_UNITS = ("speed_step_check", "speed_pair_check", "input_flags", "redu
                     "turn_block_start", "turn_check", "frozen_checks", "frozen_yaw_check", "frozen_lat_check",
                     "frozen_steer_check", "frozen_steer2_check", "monitor_finish")
 # PlausibilityMonitor is monitor_step in an object: constructing one is running the monitor.
-PY_PIECES = ("monitor_step", "authority_step", "PlausibilityMonitor", *PY_MONITOR_UNITS)
+# The limiter's units (firmware_py/authority.py), likewise parts of authority_step.
+PY_AUTHORITY_UNITS = ("fade_cause", "magnitude_bound", "rate_bound", "intervention_window")
+PY_PIECES = ("monitor_step", "authority_step", "PlausibilityMonitor", *PY_MONITOR_UNITS, *PY_AUTHORITY_UNITS)
 PY_OWNERS = {
     "firmware_py/cycle.py": "the cycle",
     "firmware_py/plausibility.py": "the monitor's own module",
@@ -120,9 +122,12 @@ def test_only_firmware_py_cycle_calls_the_monitor_and_the_limiter_in_python() ->
 
 
 def test_the_monitor_units_are_the_monitors_functions() -> None:
+    import firmware_py.authority as au
     import firmware_py.plausibility as pl
     for name in PY_MONITOR_UNITS:
         assert callable(getattr(pl, name, None)), name
+    for name in PY_AUTHORITY_UNITS:
+        assert callable(getattr(au, name, None)), name
     assert "speed_pair_check" in py_calls((ROOT / "firmware_py" / "plausibility.py").read_text())
 
 
