@@ -41,13 +41,13 @@ PY_ROOTS = ("firmware_py", "sim_plant", "tools", "bench")
 # monitor_step, which is the only one to call them in order.  (Their C twins are static in
 # mrs_monitor.c: nothing else can call them.)
 PY_MONITOR_UNITS = ("speed_step_check", "speed_pair_check", "input_flags", "redundant_frame_lost", "monitor_pause",
-                    "monitor_start",                    "model_check", "yaw_pair_check", "yaw_pair_suspicion", "steer_jump_check", "redundant_checks",
-                    "kinematic_sample", "kinematic_residual", "kinematic_check", "steer_pair_check",
+                    "monitor_start", "model_check", "yaw_pair_check", "yaw_pair_suspicion", "steer_jump_check",
+                    "redundant_checks", "kinematic_sample", "kinematic_residual", "kinematic_check", "steer_pair_check",
                     "turn_block_start", "turn_check", "frozen_checks", "frozen_yaw_check", "frozen_lat_check",
                     "frozen_steer_check", "frozen_steer2_check", "monitor_finish")
-# PlausibilityMonitor is monitor_step in an object: constructing one is running the monitor.
 # The limiter's units (firmware_py/authority.py), likewise parts of authority_step.
 PY_AUTHORITY_UNITS = ("fade_cause", "magnitude_bound", "rate_bound", "intervention_window")
+# PlausibilityMonitor is monitor_step in an object: constructing one is running the monitor.
 PY_PIECES = ("monitor_step", "authority_step", "PlausibilityMonitor", *PY_MONITOR_UNITS, *PY_AUTHORITY_UNITS)
 PY_OWNERS = {
     "firmware_py/cycle.py": "the cycle",
