@@ -1,7 +1,8 @@
 """The firmware's functions stay short and simple: no function in ``firmware_py/`` or
 ``ports/c/`` longer than 60 lines or of a cyclomatic complexity over 15, as ``lizard`` measures
 them (the porting rules; issue 52).  Generated code (the DBC codec and the node contract glue,
-written into ``ports/c/build/``) is not ours to shape and is not measured.
+written into ``ports/c/build/``, and ``mrs_defaults.h`` from the calibration) is not ours to
+shape and is not measured.
 
 The functions over the limits when the limits came in are listed with their figures: the list
 may only shrink.  The test fails on a function over the limits that is not listed, on a listed
@@ -17,7 +18,7 @@ lizard = pytest.importorskip("lizard", reason="lizard is not installed (pip inst
 
 ROOT = Path(__file__).resolve().parents[1]
 ROOTS = ("firmware_py", "ports/c")
-GENERATED = ("ports/c/build",)
+GENERATED = ("ports/c/build", "ports/c/mrs_defaults.h")
 MAX_LENGTH = 60  # lines, lizard's "length"
 MAX_CCN = 15
 
