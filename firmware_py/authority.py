@@ -3,7 +3,8 @@
 An independent limit on how far and how long the auxiliary command may act, whatever computed
 it: ``AuthorityConfig`` -> ``configure_authority()`` -> ``AuthorityState`` ->
 ``authority_step(c, s, u_request, plaus_bits, cut, fade)`` once per control period (scalar arithmetic, no
-allocation, no calls), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
+allocation; its units ``fade_cause``, ``magnitude_bound``, ``rate_bound``, ``intervention_window``
+are the C port's), with the bits of ``firmware_py.plausibility.monitor_step``.  Ported bit for
 bit (float64) in ``ports/c/mrs_monitor.c``; docs/controller.md, "Bounded
 authority", says what it does, docs/decisions/0008-authority-fades-rate-bound-and-re-arm.md why.  Meant to run where the command leaves the controller and again at the actuator.
 """
@@ -84,32 +85,59 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
     at ``rate_max``, not faded.  ``fade`` nonzero (the node passes the monitor's ``flags &
     FADE_CHECKS``: the car outside the model the checks and the law assume) fades the command
     as a fault does, though the bits say DEGRADED.  ``s.flags`` says which bound acted."""
-    flags = 0
-    du = c.du_max
-    if (plaus_bits & PLAUS_FAULT) != 0 or fade != 0 or not (-1e3 < u_request < 1e3):
+    why = fade_cause(c, s, u_request, plaus_bits, fade)
+    s.flags = why
+    if why == AUTH_FAULT:
         target = 0.0
         du = c.du_max if cut != 0 and (plaus_bits & PLAUS_FAULT) != 0 else c.fault_fade_step
-        flags |= AUTH_FAULT
-    elif s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
+    elif why == AUTH_TIME:
         target = 0.0
         du = c.fade_step
-        flags |= AUTH_TIME
     else:
-        target = u_request
-        if target > c.u_max:
-            target = c.u_max
-            flags |= AUTH_MAGNITUDE
-        elif target < -c.u_max:
-            target = -c.u_max
-            flags |= AUTH_MAGNITUDE
-    d = target - s.u
+        target = magnitude_bound(c, s, u_request)
+        du = c.du_max
+    u = s.u + rate_bound(c, s, target - s.u, du)
+    intervention_window(c, s, u, u_request)
+    s.u = u
+    return u
+
+
+def fade_cause(c: AuthorityCoefficients, s: AuthorityState, u_request: float, plaus_bits: int, fade: int) -> int:
+    """Why the command goes to zero this period: ``AUTH_FAULT`` (a plausibility fault, ``fade``
+    or a non-finite request), ``AUTH_TIME`` (the panic window over while DEGRADED), else 0."""
+    if (plaus_bits & PLAUS_FAULT) != 0 or fade != 0 or not (-1e3 < u_request < 1e3):
+        return AUTH_FAULT
+    if s.engaged >= c.window_steps and (plaus_bits & PLAUS_DEGRADED) != 0:
+        return AUTH_TIME
+    return 0
+
+
+def magnitude_bound(c: AuthorityCoefficients, s: AuthorityState, u_request: float) -> float:
+    """The request within +-u_max (``AUTH_MAGNITUDE`` into ``s.flags`` when it bounds)."""
+    if u_request > c.u_max:
+        s.flags |= AUTH_MAGNITUDE
+        return c.u_max
+    if u_request < -c.u_max:
+        s.flags |= AUTH_MAGNITUDE
+        return -c.u_max
+    return u_request
+
+
+def rate_bound(c: AuthorityCoefficients, s: AuthorityState, d: float, du: float) -> float:
+    """The step ``d`` within +-du (``AUTH_RATE`` into ``s.flags`` when ``rate_max`` bounds it)."""
     if d > du:
         d = du
-        flags |= AUTH_RATE if du == c.du_max else 0
+        s.flags |= AUTH_RATE if du == c.du_max else 0
     elif d < -du:
         d = -du
-        flags |= AUTH_RATE if du == c.du_max else 0
-    u = s.u + d
+        s.flags |= AUTH_RATE if du == c.du_max else 0
+    return d
+
+
+def intervention_window(c: AuthorityCoefficients, s: AuthorityState, u: float, u_request: float) -> None:
+    """The panic window's count: periods the command or the request intervened (the request too:
+    a request the time rule faded does not re-arm the window by resting the command), restarted
+    after ``rearm_steps`` at rest in a row."""
     if u > c.engage or u < -c.engage or u_request > c.engage or u_request < -c.engage:
         if s.engaged < c.window_steps:
             s.engaged += 1
@@ -119,6 +147,3 @@ def authority_step(c: AuthorityCoefficients, s: AuthorityState, u_request: float
             s.quiet += 1
         if s.quiet >= c.rearm_steps:
             s.engaged = 0
-    s.u = u
-    s.flags = flags
-    return u

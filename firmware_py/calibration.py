@@ -181,6 +181,18 @@ def validate(cfg: ControllerConfig) -> None:
         raise ValueError(f"q_form must be '{Q_LIMITED}' or '{Q_STANDARD}', got {cfg.q_form!r}")
     if cfg.method not in (METHOD_TUSTIN, METHOD_ZOH):
         raise ValueError(f"method must be '{METHOD_TUSTIN}' or '{METHOD_ZOH}', got {cfg.method!r}")
+    _validate_numbers(cfg)
+    for name in _POSITIVE:
+        if getattr(cfg, name) <= 0.0:
+            raise ValueError(f"{name} must be positive, got {getattr(cfg, name)}")
+    _validate_gains(cfg)
+    _validate_model(cfg)
+    if cfg.speed_active_min >= cfg.speed_max:
+        raise ValueError("speed_active_min must be below speed_max")
+
+
+def _validate_numbers(cfg: ControllerConfig) -> None:
+    """Every field a finite number (or a string or None where the field is one)."""
     for name, value in vars(cfg).items():
         values = value if isinstance(value, tuple) else (value,)
         for x in values:
@@ -188,10 +200,10 @@ def validate(cfg: ControllerConfig) -> None:
                 raise ValueError(f"{name} must be a number, got {x!r}")
             if isinstance(x, float | int) and not math.isfinite(x):
                 raise ValueError(f"{name} must be finite, got {value!r}")
-    for name in _POSITIVE:
-        if getattr(cfg, name) <= 0.0:
-            raise ValueError(f"{name} must be positive, got {getattr(cfg, name)}")
-    _validate_gains(cfg)
+
+
+def _validate_model(cfg: ControllerConfig) -> None:
+    """The law's internal model: its delay, actuator lag, sensor filter and rate limit."""
     if not (isinstance(cfg.model_delay_steps, int) and 0 <= cfg.model_delay_steps <= MAX_MODEL_DELAY):
         raise ValueError(f"model_delay_steps must be a whole number in 0..{MAX_MODEL_DELAY}, "
                          f"got {cfg.model_delay_steps!r}")
@@ -206,8 +218,6 @@ def validate(cfg: ControllerConfig) -> None:
         # w must depend on past commands only: with M = 0 these would close an algebraic loop
         # that step() does not solve.
         raise ValueError("a gain schedule, model_actuator_tau or model_filter_hz needs model_delay_steps >= 1")
-    if cfg.speed_active_min >= cfg.speed_max:
-        raise ValueError("speed_active_min must be below speed_max")
 
 
 def _validate_gains(cfg: ControllerConfig) -> None:
@@ -216,15 +226,7 @@ def _validate_gains(cfg: ControllerConfig) -> None:
         if any(x is not None for x in constant):
             raise ValueError("give either a gain schedule or constant k, tau, tau_n, not both "
                              "(constant_gains() removes the schedule)")
-        n = len(cfg.schedule_speed)
-        if n > MAX_SCHEDULE:
-            raise ValueError(f"schedule_speed has {n} breakpoints, at most {MAX_SCHEDULE}")
-        for name in ("schedule_k", "schedule_tau", "schedule_tau_n"):
-            if len(getattr(cfg, name)) != n:
-                raise ValueError(f"{name} must have one value per breakpoint ({n}), got {len(getattr(cfg, name))}")
-        v = cfg.schedule_speed
-        if any(b <= a for a, b in zip(v, v[1:])) or v[0] <= 0.0:
-            raise ValueError(f"schedule_speed must be positive and strictly ascending, got {v}")
+        _validate_schedule(cfg)
     else:
         if any(x is None for x in constant):
             raise ValueError("without a gain schedule, k, tau and tau_n must all be given")
@@ -234,3 +236,17 @@ def _validate_gains(cfg: ControllerConfig) -> None:
         for name, x in (("k", k), ("tau", tau), ("tau_n", tau_n)):
             if x <= 0.0:
                 raise ValueError(f"{name} must be positive, got {x}")
+
+
+def _validate_schedule(cfg: ControllerConfig) -> None:
+    """A gain schedule: at most MAX_SCHEDULE breakpoints, one gain of each per breakpoint, the
+    speeds positive and strictly ascending."""
+    n = len(cfg.schedule_speed)
+    if n > MAX_SCHEDULE:
+        raise ValueError(f"schedule_speed has {n} breakpoints, at most {MAX_SCHEDULE}")
+    for name in ("schedule_k", "schedule_tau", "schedule_tau_n"):
+        if len(getattr(cfg, name)) != n:
+            raise ValueError(f"{name} must have one value per breakpoint ({n}), got {len(getattr(cfg, name))}")
+    v = cfg.schedule_speed
+    if any(b <= a for a, b in zip(v, v[1:])) or v[0] <= 0.0:
+        raise ValueError(f"schedule_speed must be positive and strictly ascending, got {v}")

@@ -228,23 +228,12 @@ def configure(cfg: ControllerConfig) -> Coefficients:
 
 
 def law_at(c: Coefficients, speed: float) -> LawPoint:
-    """The coefficient set step() uses at ``speed``, with step()'s own arithmetic (for analysis).
-
-    The breakpoint search repeats step()'s lines on purpose: step() calls nothing, and
-    tests/test_scheduled_law.py holds the two equal."""
-    j, j1, f = 0, 0, 0.0
-    n = c.n_sched
-    if n > 1 and speed > c.sched_v[0]:
-        if speed >= c.sched_v[n - 1]:
-            j = j1 = n - 1
-        else:
-            for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
-                if speed >= c.sched_v[i]:
-                    j = i
-            j1 = j + 1
-            f = (speed - c.sched_v[j]) * c.sched_inv_dv[j]
-    return LawPoint(*(t[j] + f * (t[j1] - t[j]) for t in (c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0,
-                                                          c.sched_g_r1, c.sched_q0)))
+    """The coefficient set step() uses at ``speed``, by step()'s own units (for analysis)."""
+    j = schedule_index(c, speed)
+    j1 = schedule_upper(c, speed, j)
+    f = schedule_fraction(c, speed, j)
+    return LawPoint(*(interpolate(t, j, j1, f) for t in (c.sched_a, c.sched_g_w0, c.sched_g_w1, c.sched_g_r0,
+                                                         c.sched_g_r1, c.sched_q0)))
 
 
 def reset(s: State) -> None:
@@ -263,8 +252,163 @@ def reset(s: State) -> None:
     s.fault_flags = 0
 
 
-# One function on purpose (about 120 lines): it is the body that ports/c/mrs_controller.c's
-# mrs_step() transcribes statement for statement, and a port's mrs_step makes no calls.
+# The law's units, in the order step() runs them; mrs_controller.c's mrs_step() has the same
+# units under the same names, statement for statement.
+def input_faults(c: Coefficients, delta_driver: float, yaw_rate: float, speed: float) -> int:
+    """The FAULT_* flags of the inputs out of range.  A NaN fails every range comparison, so
+    non-finite inputs are caught by the same checks."""
+    flags = 0
+    if not (-c.driver_angle_max <= delta_driver <= c.driver_angle_max):
+        flags |= FAULT_DRIVER_ANGLE
+    if not (-c.yaw_rate_max <= yaw_rate <= c.yaw_rate_max):
+        flags |= FAULT_YAW_RATE
+    if not (0.0 <= speed <= c.speed_max):
+        flags |= FAULT_SPEED
+    return flags
+
+
+def fade_out(c: Coefficients, s: State, flags: int) -> float:
+    """Invalid input or too slow to schedule K_n(v): the state is not touched by the inputs, the
+    command fades to zero, and the next valid step re-initialises."""
+    u = s.u_prev
+    if u > c.fade_step:
+        u -= c.fade_step
+    elif u < -c.fade_step:
+        u += c.fade_step
+    else:
+        u = 0.0
+    s.u_prev = u
+    s.status = STATUS_FAULT if flags != 0 else STATUS_INACTIVE
+    s.needs_init = True
+    return u
+
+
+def schedule_interior(c: Coefficients, speed: float) -> bool:
+    """The speed strictly between the first and the last breakpoint: the gains interpolate."""
+    n = c.n_sched
+    return n > 1 and c.sched_v[0] < speed < c.sched_v[n - 1]
+
+
+def schedule_index(c: Coefficients, speed: float) -> int:
+    """The last breakpoint at or below the speed (ascending); 0 below the first."""
+    j = 0
+    n = c.n_sched
+    if n > 1 and speed > c.sched_v[0]:
+        if speed >= c.sched_v[n - 1]:
+            j = n - 1
+        else:
+            for i in range(1, n - 1):
+                if speed >= c.sched_v[i]:
+                    j = i
+    return j
+
+
+def schedule_upper(c: Coefficients, speed: float, j: int) -> int:
+    """The breakpoint the gains interpolate toward: the next one inside the schedule, else ``j``."""
+    return j + 1 if schedule_interior(c, speed) else j
+
+
+def schedule_fraction(c: Coefficients, speed: float, j: int) -> float:
+    """How far the speed is from breakpoint ``j`` toward the next one: 0 outside the schedule."""
+    return (speed - c.sched_v[j]) * c.sched_inv_dv[j] if schedule_interior(c, speed) else 0.0
+
+
+def interpolate(table: tuple[float, ...], j: int, j1: int, f: float) -> float:
+    """The coefficient of ``table`` a fraction ``f`` of the way from breakpoint ``j`` to ``j1``."""
+    return table[j] + f * (table[j1] - table[j])
+
+
+def restart(c: Coefficients, s: State, delta_driver: float, rho: float, q0: float, g_w0: float,
+            g_r0: float) -> None:
+    """Start every filter at its steady state for the present inputs with the command held, so
+    a restart does not excite the large high-frequency gain on rho."""
+    w0 = delta_driver + s.u_prev
+    s.z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho)
+    for i in range(c.model_delay):
+        s.u_hist[i] = s.u_prev
+    s.hist_idx = 0
+    s.p_n = s.u_prev
+    s.f_s1 = (1.0 - c.flt_b0) * w0
+    s.f_s2 = (c.flt_b2 - c.flt_a2) * w0
+    s.needs_init = False
+    s.recovering = True
+
+
+def slew_step(c: Coefficients, s: State) -> float:
+    """The most the command may move this period: the rate limit, the fade step while it
+    recovers."""
+    du = c.du_max
+    if s.recovering and c.fade_step < du:
+        du = c.fade_step
+    return du
+
+
+def window_low(c: Coefficients, s: State, lo_slew: float, hold: bool) -> float:
+    """The admissible window's lower end: the actuator's range intersected with the slew window;
+    on ``hold`` (lo <= u_prev already) it keeps u_prev and 0's side of it."""
+    lo = lo_slew
+    if lo < -c.u_max:
+        lo = -c.u_max
+    if hold:
+        if s.u_prev > 0.0:
+            lo = lo if lo > 0.0 else 0.0
+        else:
+            lo = s.u_prev if s.u_prev > lo else lo
+    return lo
+
+
+def window_high(c: Coefficients, s: State, hi_slew: float, hold: bool) -> float:
+    """The admissible window's upper end (as ``window_low``)."""
+    hi = hi_slew
+    if hi > c.u_max:
+        hi = c.u_max
+    if hold:
+        if s.u_prev > 0.0:
+            hi = s.u_prev if s.u_prev < hi else hi
+        else:
+            hi = hi if hi < 0.0 else 0.0
+    return hi
+
+
+def clamp(u: float, lo: float, hi: float) -> float:
+    """u within [lo, hi]."""
+    return lo if u < lo else (hi if u > hi else u)
+
+
+def constant_law(c: Coefficients, s: State, delta_driver: float, rho: float, a: float, g_w0: float, g_w1: float,
+                 g_r0: float, g_r1: float, lo: float, hi: float) -> float:
+    """Constant law only (configure() checks it). y = p + g_w0 * u_a with u_a = clamp(y, lo, hi):
+    since 0 <= g_w0 < 1 the unique solution is u_a = clamp(p / (1 - g_w0), lo, hi)."""
+    p = g_w0 * delta_driver - g_r0 * rho + s.z
+    u = clamp(p * c.inv_one_minus_g_w0, lo, hi)
+    y = p + g_w0 * u
+    w = delta_driver + u
+    s.z = g_w1 * w - g_r1 * rho + a * y
+    return u
+
+
+def delayed_law(c: Coefficients, s: State, delta_driver: float, rho: float, a: float, g_w0: float, g_w1: float,
+                g_r0: float, g_r1: float, lo: float, hi: float) -> float:
+    """The yaw rate measured now answers the command issued M steps ago, through the actuator and
+    the sensor filter: compare it with the nominal model's answer to that command (past commands
+    only, so no algebraic loop)."""
+    i = s.hist_idx
+    s.p_n = c.act_a * s.p_n + c.act_b * s.u_hist[i]
+    x = delta_driver + s.p_n
+    w = c.flt_b0 * x + s.f_s1
+    s.f_s1 = c.flt_b1 * x - c.flt_a1 * w + s.f_s2
+    s.f_s2 = c.flt_b2 * x - c.flt_a2 * w
+    y = g_w0 * w - g_r0 * rho + s.z
+    u = clamp(y, lo, hi)
+    s.u_hist[i] = u
+    i += 1
+    if i >= c.model_delay:
+        i = 0
+    s.hist_idx = i
+    s.z = g_w1 * w - g_r1 * rho + a * y
+    return u
+
+
 def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed: float,
          hold: bool = False) -> float:
     """One control period. Returns the auxiliary front-wheel angle command in rad.
@@ -274,128 +418,35 @@ def step(c: Coefficients, s: State, delta_driver: float, yaw_rate: float, speed:
     move toward zero but no further from it than it is, inside the law's own clamp, so that
     the state follows the command it held: no windup, so the release does not jump to a request
     that grew meanwhile (and a calibrated rate limit still bounds it).
-    ``s.status`` and ``s.fault_flags`` tell what happened.  A NaN fails every range
-    comparison below, so non-finite inputs are caught by the same checks.
+    ``s.status`` and ``s.fault_flags`` tell what happened.
     """
-    flags = 0
-    if not (-c.driver_angle_max <= delta_driver <= c.driver_angle_max):
-        flags |= FAULT_DRIVER_ANGLE
-    if not (-c.yaw_rate_max <= yaw_rate <= c.yaw_rate_max):
-        flags |= FAULT_YAW_RATE
-    if not (0.0 <= speed <= c.speed_max):
-        flags |= FAULT_SPEED
+    flags = input_faults(c, delta_driver, yaw_rate, speed)
     s.fault_flags = flags
-
     if flags != 0 or speed < c.speed_active_min:
-        # Invalid input or too slow to schedule K_n(v): the state is not touched by the
-        # inputs, the command fades to zero, and the next valid step re-initialises.
-        u = s.u_prev
-        if u > c.fade_step:
-            u -= c.fade_step
-        elif u < -c.fade_step:
-            u += c.fade_step
-        else:
-            u = 0.0
-        s.u_prev = u
-        s.status = STATUS_FAULT if flags != 0 else STATUS_INACTIVE
-        s.needs_init = True
-        return u
-
+        return fade_out(c, s, flags)
     inv_kn = c.wheelbase / speed + c.k_us * speed
     rho = inv_kn * yaw_rate  # yaw rate expressed as the wheel angle the nominal car needs for it
-
     # The coefficient set at this speed: linear between breakpoints, held outside them.
-    j = 0
-    j1 = 0
-    f = 0.0
-    n = c.n_sched
-    if n > 1 and speed > c.sched_v[0]:
-        if speed >= c.sched_v[n - 1]:
-            j = n - 1
-            j1 = n - 1
-        else:
-            for i in range(1, n - 1):  # the last breakpoint at or below the speed (ascending)
-                if speed >= c.sched_v[i]:
-                    j = i
-            j1 = j + 1
-            f = (speed - c.sched_v[j]) * c.sched_inv_dv[j]
-    a = c.sched_a[j] + f * (c.sched_a[j1] - c.sched_a[j])
-    g_w0 = c.sched_g_w0[j] + f * (c.sched_g_w0[j1] - c.sched_g_w0[j])
-    g_w1 = c.sched_g_w1[j] + f * (c.sched_g_w1[j1] - c.sched_g_w1[j])
-    g_r0 = c.sched_g_r0[j] + f * (c.sched_g_r0[j1] - c.sched_g_r0[j])
-    g_r1 = c.sched_g_r1[j] + f * (c.sched_g_r1[j1] - c.sched_g_r1[j])
-
+    j = schedule_index(c, speed)
+    j1 = schedule_upper(c, speed, j)
+    f = schedule_fraction(c, speed, j)
+    a = interpolate(c.sched_a, j, j1, f)
+    g_w0 = interpolate(c.sched_g_w0, j, j1, f)
+    g_w1 = interpolate(c.sched_g_w1, j, j1, f)
+    g_r0 = interpolate(c.sched_g_r0, j, j1, f)
+    g_r1 = interpolate(c.sched_g_r1, j, j1, f)
     if s.needs_init:
-        # Start every filter at its steady state for the present inputs with the command
-        # held, so a restart does not excite the large high-frequency gain on rho.
-        q0 = c.sched_q0[j] + f * (c.sched_q0[j1] - c.sched_q0[j])
-        w0 = delta_driver + s.u_prev
-        s.z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho)
-        for i in range(c.model_delay):
-            s.u_hist[i] = s.u_prev
-        s.hist_idx = 0
-        s.p_n = s.u_prev
-        s.f_s1 = (1.0 - c.flt_b0) * w0
-        s.f_s2 = (c.flt_b2 - c.flt_a2) * w0
-        s.needs_init = False
-        s.recovering = True
-
+        restart(c, s, delta_driver, rho, interpolate(c.sched_q0, j, j1, f), g_w0, g_r0)
     # Admissible command window: actuator range, intersected with the slew window.
-    du = c.du_max
-    if s.recovering and c.fade_step < du:
-        du = c.fade_step
+    du = slew_step(c, s)
     lo_slew = s.u_prev - du
     hi_slew = s.u_prev + du
-    lo = lo_slew
-    hi = hi_slew
-    if lo < -c.u_max:
-        lo = -c.u_max
-    if hi > c.u_max:
-        hi = c.u_max
-    if hold:
-        # lo <= u_prev <= hi already, so the window keeps u_prev and 0's side of it
-        if s.u_prev > 0.0:
-            lo = lo if lo > 0.0 else 0.0
-            hi = s.u_prev if s.u_prev < hi else hi
-        else:
-            hi = hi if hi < 0.0 else 0.0
-            lo = s.u_prev if s.u_prev > lo else lo
-
+    lo = window_low(c, s, lo_slew, hold)
+    hi = window_high(c, s, hi_slew, hold)
     if c.model_delay == 0:
-        # Constant law only (configure() checks it). y = p + g_w0 * u_a with
-        # u_a = clamp(y, lo, hi): since 0 <= g_w0 < 1 the unique solution is
-        # u_a = clamp(p / (1 - g_w0), lo, hi).
-        p = g_w0 * delta_driver - g_r0 * rho + s.z
-        u = p * c.inv_one_minus_g_w0
-        if u < lo:
-            u = lo
-        elif u > hi:
-            u = hi
-        y = p + g_w0 * u
-        w = delta_driver + u
+        u = constant_law(c, s, delta_driver, rho, a, g_w0, g_w1, g_r0, g_r1, lo, hi)
     else:
-        # The yaw rate measured now answers the command issued M steps ago, through the
-        # actuator and the sensor filter: compare it with the nominal model's answer to
-        # that command (past commands only, so no algebraic loop).
-        i = s.hist_idx
-        s.p_n = c.act_a * s.p_n + c.act_b * s.u_hist[i]
-        x = delta_driver + s.p_n
-        w = c.flt_b0 * x + s.f_s1
-        s.f_s1 = c.flt_b1 * x - c.flt_a1 * w + s.f_s2
-        s.f_s2 = c.flt_b2 * x - c.flt_a2 * w
-        y = g_w0 * w - g_r0 * rho + s.z
-        u = y
-        if u < lo:
-            u = lo
-        elif u > hi:
-            u = hi
-        s.u_hist[i] = u
-        i += 1
-        if i >= c.model_delay:
-            i = 0
-        s.hist_idx = i
-
-    s.z = g_w1 * w - g_r1 * rho + a * y
+        u = delayed_law(c, s, delta_driver, rho, a, g_w0, g_w1, g_r0, g_r1, lo, hi)
     if s.recovering and not hold and lo_slew < u < hi_slew:
         s.recovering = False  # the slew no longer binds: caught up with the control law
     s.u_prev = u

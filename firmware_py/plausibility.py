@@ -9,7 +9,10 @@ Structure (as ``model_regulator``): ``PlausibilityConfig`` (calibration) -> ``co
 ``MonitorState`` (preallocated) -> ``monitor_step(c, s, ...)`` once per yaw-rate sample (the
 controller node counts them by the frames' alive counter, so ``ts`` is the sensor's sample
 time, equal to the control period by the DBC's ``MRS_ControlLoop``): scalar arithmetic on ``c``
-and ``s`` only, no allocation, no calls.  The bounded authority that acts on
+and ``s`` only, no allocation.  ``monitor_step`` runs one unit per check family below (its
+function, the coefficients and the state slots its docstring names), in the order and under the
+names ``mrs_monitor_step`` has them in C, and ``plausibility_bits`` (``PLAUS_TABLE``) turns the
+flags into bits.  The bounded authority that acts on
 its bits is ``firmware_py.authority``.  Both are ported bit for bit (float64) to
 ``ports/c/mrs_monitor.c``.
 
@@ -488,23 +491,30 @@ def check_positive(cfg: object, names: tuple[str, ...]) -> None:
             raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# One control period; long because it is the eight checks inline, in the order the C port has
-# them (no calls, by the porting rules), each a few lines.
-def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
-                 yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float,
-                 yaw_rate_redundant: float = math.nan, speed_redundant: float = math.nan) -> int:
-    """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
-    detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
-    monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
-    a missing input: a missing primary input pauses every check but the two on the speed (step()
-    faults on it), a missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
-    yaw-rate sensor's second element, pauses its pair check when NaN; DEGRADED too once the
-    element has been received since ``reset_monitor`` while the first element is valid (a lost
-    element).  A sender without it (SNA from the start, or the default NaN) never sets it:
-    every result is then as without the check.  ``speed_redundant``, the second speed, likewise
-    for the speed pair."""
-    # --- 6. speed: a jump no car makes.  Before the pause below, which a speed stuck under
-    #     speed_min would otherwise bring on: K_n(v) follows the wrong speed whatever it is.
+# One control period is the checks below in this order (the C port's mrs_monitor_step has the
+# same units under the same names).  Each unit is one check family: its coefficients are the
+# ``MonitorCoefficients`` fields its comment names, its state the ``MonitorState`` slots it
+# names, its step the function; it latches its fault into ``s.latched`` and returns what the
+# period's other units read (a suspicion flag, a vote).  ``plausibility_bits`` is the combiner.
+
+#: The combiner's table: a detailed flag in the mask sets the CtrlStatus_Plausibility bit.
+PLAUS_TABLE = ((YAW_CHECKS, PLAUS_YAW), (STEER_CHECKS, PLAUS_STEER), (DEGRADED_CHECKS, PLAUS_DEGRADED))
+
+
+def plausibility_bits(flags: int) -> int:
+    """The combiner: the CtrlStatus_Plausibility bits of the detailed ``flags`` (PLAUS_TABLE)."""
+    bits = 0
+    for mask, bit in PLAUS_TABLE:
+        if flags & mask:
+            bits |= bit
+    return bits
+
+
+def speed_step_check(c: MonitorCoefficients, s: MonitorState, speed: float) -> None:
+    """6. Speed step: a jump no car makes.  Before the pause below, which a speed stuck under
+    speed_min would otherwise bring on: K_n(v) follows the wrong speed whatever it is.
+    Coefficients speed_step, speed_brake_alpha; state speed_seen, speed_last, speed_lag (the
+    lagged speed is the speed pair's braking test)."""
     if 0.0 <= speed < 1e3:
         if s.speed_seen and speed != s.speed_last:
             e = speed - s.speed_last
@@ -519,109 +529,99 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
         s.speed_seen = True
     else:
         s.speed_seen = False  # missing (the node's freshness): the next valid value starts afresh
-    flags = s.latched
-    # --- 8. speed pair: before the pause too, since a drifting speed carries the reading under
-    #     speed_min while the car is still fast.
-    speed_vouched = False  # the second speed there and agreeing (it out-votes check 7)
-    if 0.0 <= speed_redundant < 1e3:
-        s.speed2_seen = True
-        if 0.0 <= speed < 1e3:
-            e = speed - speed_redundant
-            e = -e if e < 0.0 else e
-            x = speed if speed < speed_redundant else speed_redundant
-            bound = c.speed_pair_bound + c.speed_pair_rel * x
-            # it vouches for the speed (out-votes check 7) only within the plain bound: the slip
-            # it allows while braking would hide a speed reading that much high from check 7 too
-            within = e <= bound
-            if speed_redundant < speed and s.speed_lag - speed > c.speed_brake_lag:
-                bound += c.speed_slip_rel * x  # braking: the wheels the second speed is read from slip
-            s.speed_pair_err = e / bound
-            if e > bound:
-                s.speed_pair_count += 1
-                if s.speed_pair_count >= c.speed_pair_steps:
-                    s.speed_pair_count = c.speed_pair_steps
-                    s.latched |= CHECK_SPEED_PAIR
-            elif s.speed_pair_count > 0:
-                s.speed_pair_count -= 1
-            speed_vouched = s.speed_pair_count == 0 and within
-        else:
-            s.speed_pair_count = 0
-    else:
-        s.speed_pair_count = 0
-        if s.speed2_seen and 0.0 <= speed < 1e3:
-            flags |= MISSING  # the car has the second speed and it is gone: the pair pauses
-    flags |= s.latched
-    # A NaN fails every comparison: these are False for NaN and +-inf.
-    primary_ok = (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
-        -1e3 < aux_cmd_applied < 1e3)
-    lat_ok = -1e3 < lat_accel < 1e3
-    st2_ok = -1e3 < delta_driver_redundant < 1e3
-    if -1e3 < yaw_rate_redundant < 1e3:
-        s.yaw2_seen = True
-    elif s.yaw2_seen and -1e3 < yaw_rate < 1e3:
-        # The car has the element and it is gone while the first is there: the pair check
-        # pauses, which leaves a stuck first element to the slower checks.
-        flags |= MISSING
-    if not (lat_ok and st2_ok):
-        flags |= MISSING
-        s.turn_n = 0  # the steady-turn check starts afresh when the frame is back
-        s.turn_settled = False
-        if s.since >= c.kin_gap_steps:
-            # A long gap: no difference across it, and the kinematic window restarts when the
-            # frame is back.  A shorter one (a sample withheld) is bridged as a lost frame is:
-            # the next sample's interval spans it.
-            s.have_sample = False
-            s.kin_n = 0
-    if not primary_ok:
-        # Paused (too slow, or step() faults on the input): restart the windows, keep the latch.
-        s.kin_count = s.pair_count = s.model_count = 0
-        s.yaw_pair_n = 0
-        s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
-        s.jump_ok = False
-        s.steer_hold_n = 0
-        s.kin_n = 0
-        s.turn_n = 0
-        s.turn_settled = False
-        s.started = False
-        bits = 0
-        if flags & YAW_CHECKS:
-            bits |= PLAUS_YAW
-        if flags & STEER_CHECKS:
-            bits |= PLAUS_STEER
-        if flags & DEGRADED_CHECKS:
-            bits |= PLAUS_DEGRADED
-        s.flags = flags
-        s.bits = bits
-        return bits
 
-    inv_v = 1.0 / speed
-    r_kin = lat_accel * inv_v if lat_ok else 0.0
-    if not s.started:
-        s.aux_lag = aux_cmd_applied
-    # The angle on the car: the command sent the period before, through the actuator's lag.
-    # Taking the command itself for it made the nominal car's beta' (below) jump by half the
-    # command's rate while the law slews: 0.09 rad/s, a false alarm on every strong yaw moment.
-    s.aux_lag += c.aux_alpha * (aux_cmd_applied - s.aux_lag)
-    delta = delta_driver + s.aux_lag
-    # --- 2. model: the nominal car's steady-state yaw rate, lagged
-    r_ss = delta * speed / (c.wheelbase + c.k_us * speed * speed)
-    if not s.started:
-        s.r_model = r_ss
-        s.kin_n = 0
-        s.kin_idx = 0
-        s.since = 0
+
+def speed_pair_check(c: MonitorCoefficients, s: MonitorState, speed: float, speed_redundant: float) -> bool:
+    """8. Speed pair: before the pause too, since a drifting speed carries the reading under
+    speed_min while the car is still fast.  Coefficients speed_pair_bound, speed_pair_rel,
+    speed_brake_lag, speed_slip_rel, speed_pair_steps; state speed2_seen, speed_pair_count,
+    speed_pair_err.  Returns the vote: the second speed there and agreeing (it out-votes check
+    7).  Its loss is ``input_flags``'s."""
+    if not 0.0 <= speed_redundant < 1e3:
+        s.speed_pair_count = 0
+        return False
+    s.speed2_seen = True
+    if not 0.0 <= speed < 1e3:
+        s.speed_pair_count = 0
+        return False
+    e = speed - speed_redundant
+    e = -e if e < 0.0 else e
+    x = speed if speed < speed_redundant else speed_redundant
+    bound = c.speed_pair_bound + c.speed_pair_rel * x
+    # it vouches for the speed (out-votes check 7) only within the plain bound: the slip
+    # it allows while braking would hide a speed reading that much high from check 7 too
+    within = e <= bound
+    if speed_redundant < speed and s.speed_lag - speed > c.speed_brake_lag:
+        bound += c.speed_slip_rel * x  # braking: the wheels the second speed is read from slip
+    s.speed_pair_err = e / bound
+    if e > bound:
+        s.speed_pair_count += 1
+        if s.speed_pair_count >= c.speed_pair_steps:
+            s.speed_pair_count = c.speed_pair_steps
+            s.latched |= CHECK_SPEED_PAIR
+    elif s.speed_pair_count > 0:
+        s.speed_pair_count -= 1
+    return s.speed_pair_count == 0 and within
+
+
+def redundant_frame_lost(c: MonitorCoefficients, s: MonitorState) -> None:
+    """The redundant frame missing this period (a_y or the second steering channel): the
+    steady-turn check starts afresh when it is back, and after a long gap the kinematic window
+    too.  Coefficient kin_gap_steps; state turn_n, turn_settled, since, have_sample, kin_n."""
+    s.turn_n = 0
+    s.turn_settled = False
+    if s.since >= c.kin_gap_steps:
+        # A long gap: no difference across it, and the kinematic window restarts when the
+        # frame is back.  A shorter one (a sample withheld) is bridged as a lost frame is:
+        # the next sample's interval spans it.
         s.have_sample = False
-        s.lat_prev = lat_accel
-        s.steer2_prev = delta_driver_redundant
-        s.yaw_last, s.lat_last, s.st_last, s.st2_last = yaw_rate, lat_accel, delta_driver, delta_driver_redundant
-        s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
-        s.yaw_ref_ok = s.st_ref_ok = False
-        s.delta_lag = delta
-        s.turn_n = 0
-        s.turn_settled = False
-        s.started = True
-    # The wheel angle as filtered a_y and yaw rate show its effect (the kinematic check's family).
-    s.delta_lag += c.delta_alpha * (delta - s.delta_lag)
+        s.kin_n = 0
+
+
+def monitor_pause(s: MonitorState) -> None:
+    """Paused (too slow, or step() faults on the input): restart the windows, keep the latch."""
+    s.kin_count = s.pair_count = s.model_count = 0
+    s.yaw_pair_n = 0
+    s.yaw_same = s.lat_same = s.st_same = s.st2_same = 0
+    s.jump_ok = False
+    s.steer_hold_n = 0
+    s.kin_n = 0
+    s.turn_n = 0
+    s.turn_settled = False
+    s.started = False
+
+
+def monitor_start(s: MonitorState, delta_driver: float, delta_driver_redundant: float, yaw_rate: float,
+                  lat_accel: float, r_kin: float, r_ss: float, delta: float) -> None:
+    """The first period after a pause: the lags and the previous samples start at this one."""
+    s.r_model = r_ss
+    s.kin_n = 0
+    s.kin_idx = 0
+    s.since = 0
+    s.have_sample = False
+    s.lat_prev = lat_accel
+    s.steer2_prev = delta_driver_redundant
+    s.yaw_last, s.lat_last, s.st_last, s.st2_last = yaw_rate, lat_accel, delta_driver, delta_driver_redundant
+    s.yaw_ref, s.lat_ref, s.st_ref, s.st2_ref = r_kin, yaw_rate, delta_driver_redundant, delta_driver
+    s.yaw_ref_ok = s.st_ref_ok = False
+    s.delta_lag = delta
+    s.turn_n = 0
+    s.turn_settled = False
+    s.started = True
+
+
+def yaw_confirmed(s: MonitorState, yaw_rate_redundant: float) -> bool:
+    """The yaw rate confirmed by its second element: valid, the pair's window full and its last
+    samples each within yaw_pair_hold (no suspicion)."""
+    return (-1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW
+            and s.yaw_clear_n >= YAW_PAIR_WINDOW)
+
+
+def model_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, r_ss: float, lat_ok: bool,
+                yaw_rate_redundant: float) -> None:
+    """2. Model: the nominal car's steady-state yaw rate, lagged, against the yaw rate.
+    Coefficients model_alpha, model_margin, model_rel, model_steps; state r_model, model_err,
+    model_count (and the yaw-rate pair's and the kinematic window's, for the vote)."""
     s.r_model += c.model_alpha * (r_ss - s.r_model)
     e = yaw_rate - s.r_model
     e = -e if e < 0.0 else e
@@ -635,10 +635,7 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     # cannot fully counter (the paper's 4000 Nm on mu 0.3), not a sensor error.  Not "its last
     # sample recent": a steady a_y on exact sensors repeats its value, which the monitor cannot
     # tell from no sample, and a frozen a_y is the frozen check's.
-    # the yaw rate confirmed by its second element: valid, the pair's window full and its last
-    # samples each within yaw_pair_hold (no suspicion)
-    confirmed = (-1e3 < yaw_rate_redundant < 1e3 and s.yaw_pair_n >= YAW_PAIR_WINDOW
-                 and s.yaw_clear_n >= YAW_PAIR_WINDOW)
+    confirmed = yaw_confirmed(s, yaw_rate_redundant)
     vouched = confirmed and lat_ok and s.kin_n >= KIN_WINDOW and s.kin_count == 0
     if e > bound and not vouched:
         s.model_count += 1
@@ -649,46 +646,58 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
     elif s.model_count > 0:
         s.model_count -= 1
 
-    # --- 4. yaw-rate pair: the mean of r - r_2 over the last YAW_PAIR_WINDOW samples
-    if -1e3 < yaw_rate_redundant < 1e3:
-        i = s.yaw_pair_idx
-        s.yaw_pair[i] = yaw_rate - yaw_rate_redundant
-        i += 1
-        if i >= YAW_PAIR_WINDOW:
-            i = 0
-        s.yaw_pair_idx = i
-        # The suspicion, capped: an offset between hold and bound is no fault the window confirms,
-        # and must not keep the law's command from growing for as long as it lasts
-        e = yaw_rate - yaw_rate_redundant
-        if e > c.yaw_pair_hold or e < -c.yaw_pair_hold:
-            s.yaw_clear_n = 0
-            if s.yaw_hold_n < YAW_PAIR_WINDOW:
-                s.yaw_hold_n += 1
-                flags |= SUSPECT_YAW_PAIR
-        else:
-            if s.yaw_clear_n < YAW_PAIR_WINDOW:
-                s.yaw_clear_n += 1
-            if s.yaw_clear_n >= YAW_PAIR_WINDOW:
-                s.yaw_hold_n = 0
-        if s.yaw_pair_n < YAW_PAIR_WINDOW:
-            s.yaw_pair_n += 1
-        if s.yaw_pair_n >= YAW_PAIR_WINDOW:
-            e = (s.yaw_pair[0] + s.yaw_pair[1] + s.yaw_pair[2] + s.yaw_pair[3] + s.yaw_pair[4]) * (
-                1.0 / YAW_PAIR_WINDOW)
-            e = -e if e < 0.0 else e
-            s.yaw_pair_err = e * c.inv_yaw_pair_bound
-            if e > c.yaw_pair_bound:
-                s.latched |= CHECK_YAW_PAIR
-    else:
+
+def yaw_pair_suspicion(c: MonitorCoefficients, s: MonitorState, e: float) -> int:
+    """4'. The yaw-rate pair's suspicion on one sample's r - r_2, capped: an offset between hold
+    and bound is no fault the window confirms, and must not keep the law's command from growing
+    for as long as it lasts.  Coefficient yaw_pair_hold; state yaw_hold_n, yaw_clear_n.
+    Returns SUSPECT_YAW_PAIR or 0."""
+    if e > c.yaw_pair_hold or e < -c.yaw_pair_hold:
+        s.yaw_clear_n = 0
+        if s.yaw_hold_n < YAW_PAIR_WINDOW:
+            s.yaw_hold_n += 1
+            return SUSPECT_YAW_PAIR
+        return 0
+    if s.yaw_clear_n < YAW_PAIR_WINDOW:
+        s.yaw_clear_n += 1
+    if s.yaw_clear_n >= YAW_PAIR_WINDOW:
+        s.yaw_hold_n = 0
+    return 0
+
+
+def yaw_pair_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, yaw_rate_redundant: float) -> int:
+    """4. Yaw-rate pair: the mean of r - r_2 over the last YAW_PAIR_WINDOW samples.
+    Coefficients yaw_pair_bound, inv_yaw_pair_bound; state yaw_pair, yaw_pair_idx, yaw_pair_n,
+    yaw_pair_err.  Returns the suspicion's flag (``yaw_pair_suspicion``)."""
+    if not -1e3 < yaw_rate_redundant < 1e3:
         s.yaw_pair_n = 0  # the window restarts when the second element is back
+        return 0
+    i = s.yaw_pair_idx
+    s.yaw_pair[i] = yaw_rate - yaw_rate_redundant
+    i += 1
+    if i >= YAW_PAIR_WINDOW:
+        i = 0
+    s.yaw_pair_idx = i
+    suspect = yaw_pair_suspicion(c, s, yaw_rate - yaw_rate_redundant)
+    if s.yaw_pair_n < YAW_PAIR_WINDOW:
+        s.yaw_pair_n += 1
+    if s.yaw_pair_n >= YAW_PAIR_WINDOW:
+        e = (s.yaw_pair[0] + s.yaw_pair[1] + s.yaw_pair[2] + s.yaw_pair[3] + s.yaw_pair[4]) * (
+            1.0 / YAW_PAIR_WINDOW)
+        e = -e if e < 0.0 else e
+        s.yaw_pair_err = e * c.inv_yaw_pair_bound
+        if e > c.yaw_pair_bound:
+            s.latched |= CHECK_YAW_PAIR
+    return suspect
 
-    if s.since < 1000000:
-        s.since += 1
 
-    # --- 1. and 3. at each new redundant sample (either of its values changed)
-    new_sample = lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev)
-    # --- 3'. the steering pair's suspicion: a jump of the driver's angle no hand makes between
-    #     two redundant samples holds the command until the next one, where the pair judges it
+def steer_jump_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float, new_sample: bool,
+                     st2_ok: bool) -> int:
+    """3'. The steering pair's suspicion: a jump of the driver's angle no hand makes between two
+    redundant samples holds the command until the next one, where the pair judges it.
+    Coefficients steer_jump, kin_gap_steps; state jump_prev, jump_ok, steer_hold_n.  Returns
+    SUSPECT_STEER_JUMP or 0."""
+    suspect = 0
     if new_sample or not st2_ok:
         s.steer_hold_n = 0  # the pair judges now, or cannot
     else:
@@ -697,159 +706,192 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
             s.steer_hold_n = c.kin_gap_steps
         if s.steer_hold_n > 0:
             s.steer_hold_n -= 1
-            flags |= SUSPECT_STEER_JUMP
+            suspect = SUSPECT_STEER_JUMP
     s.jump_prev = delta_driver
     s.jump_ok = True
-    if new_sample:
-        # a_y / v - r = beta', midway between this sample and the last, as measured ("raw") and
-        # less the nominal car's beta' (the difference of its beta over the interval: "comp");
-        # each averaged over KIN_WINDOW intervals.  A yaw-rate or a_y error moves both alike; a
-        # transient the nominal car explains (a steering step, a yaw moment) moves only raw; one
-        # it does not (a side force, low mu, where its beta is 1/mu too large) moves comp more.
-        # The check trips when comp exceeds the bound and raw yaw_raw_fraction of it: raw alone
-        # would be slow, because the controller's answer to a yaw-rate error is itself a
-        # transient that hides the error from raw for a few hundred ms.
-        raw = r_kin - yaw_rate
-        # The nominal car's side-slip angle from a_y, delta and r (eq. 14, mu = 1, solved for beta:
-        # a_y = -(c_f + c_r) / m beta + moment_m r / v + c_f / m delta), nearly insensitive to r
-        # (moment_m / v is the small understeer term), so a yaw-rate error hardly moves it.
-        beta = (c.moment_m * inv_v * inv_v * yaw_rate + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * speed
-        lat_beta = lat_accel * c.inv_cs_m  # the a_y term of beta (with the minus sign: beta = ... - lat_beta)
-        # The nominal car's beta with the wheel angle through the sensors' lag, less beta: a
-        # steering step reaches beta at once but the filtered a_y only after the lag, so on
-        # filtered sensors beta' jumped a sample early (a false alarm on a brisk turn of the
-        # wheel at 10 m/s), and on unfiltered ones the lagged beta' would.
-        lag_beta = c.cf_m * inv_v * (s.delta_lag - delta) * c.inv_cs_m * speed
-        if s.have_sample:
-            mid = 0.5 * (raw + s.raw_prev)
-            i = s.kin_idx
-            s.kin_raw[i] = mid
-            s.kin_comp[i] = mid - (beta - s.beta_prev) / (s.since * c.ts)
-            s.kin_lat[i] = (lat_beta - s.lat_beta_prev) / (s.since * c.ts)
-            s.kin_sensor[i] = (s.lag_beta_prev - lag_beta) / (s.since * c.ts)
-            i += 1
-            if i >= KIN_WINDOW:
-                i = 0
-            s.kin_idx = i
-            if s.kin_n < KIN_WINDOW:
-                s.kin_n += 1
-        s.have_sample = True
-        s.raw_prev = raw
-        s.beta_prev = beta
-        s.lat_beta_prev = lat_beta
-        s.lag_beta_prev = lag_beta
-        s.since = 0
-        raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
-        comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
-        # The family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the yaw-rate pair
-        # runs: it finds yaw-rate errors itself) and sensor lags in [0, sensor_tau]: the
-        # car on mu has the a_y term of beta 1 / mu times mu = 1's, so its residual is
-        # comp + (1 / mu - 1) lat, linear in 1 / mu, and the lagged car's is comp + sens (taken
-        # as linear between the two lags).  The smallest |residual| of the family is 0 if its
-        # four corners differ in sign, else the smallest corner's.
-        span = c.lat_span_paired if s.yaw_pair_n >= YAW_PAIR_WINDOW else c.lat_span
-        far = span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
-        sens = (s.kin_sensor[0] + s.kin_sensor[1] + s.kin_sensor[2] + s.kin_sensor[3]) * (1.0 / KIN_WINDOW)
-        raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
-        lo = hi = comp
-        x = comp + sens
-        lo = x if x < lo else lo
-        hi = x if x > hi else hi
-        x = comp + far
-        lo = x if x < lo else lo
-        hi = x if x > hi else hi
-        x = comp + far + sens
-        lo = x if x < lo else lo
-        hi = x if x > hi else hi
-        if lo <= 0.0 <= hi:
-            comp = 0.0
-        elif lo > 0.0:
-            comp = lo
-        else:
-            comp = -hi
-        e = comp if comp < raw else raw
+    return suspect
+
+
+def kinematic_sample(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_accel: float, speed: float,
+                     inv_v: float, r_kin: float, delta: float) -> None:
+    """1, at a new redundant sample: a_y / v - r = beta', midway between this sample and the
+    last, as measured ("raw") and less the nominal car's beta' (the difference of its beta over
+    the interval: "comp"), into the window of KIN_WINDOW intervals.  A yaw-rate or a_y error
+    moves both alike; a transient the nominal car explains (a steering step, a yaw moment) moves
+    only raw; one it does not (a side force, low mu, where its beta is 1/mu too large) moves comp
+    more.  Coefficients moment_m, cf_m, inv_cs_m, ts; state kin_raw, kin_comp, kin_lat,
+    kin_sensor, kin_idx, kin_n, have_sample, raw_prev, beta_prev, lat_beta_prev, lag_beta_prev,
+    since."""
+    raw = r_kin - yaw_rate
+    # The nominal car's side-slip angle from a_y, delta and r (eq. 14, mu = 1, solved for beta:
+    # a_y = -(c_f + c_r) / m beta + moment_m r / v + c_f / m delta), nearly insensitive to r
+    # (moment_m / v is the small understeer term), so a yaw-rate error hardly moves it.
+    beta = (c.moment_m * inv_v * inv_v * yaw_rate + c.cf_m * inv_v * delta - r_kin) * c.inv_cs_m * speed
+    lat_beta = lat_accel * c.inv_cs_m  # the a_y term of beta (with the minus sign: beta = ... - lat_beta)
+    # The nominal car's beta with the wheel angle through the sensors' lag, less beta: a
+    # steering step reaches beta at once but the filtered a_y only after the lag, so on
+    # filtered sensors beta' jumped a sample early (a false alarm on a brisk turn of the
+    # wheel at 10 m/s), and on unfiltered ones the lagged beta' would.
+    lag_beta = c.cf_m * inv_v * (s.delta_lag - delta) * c.inv_cs_m * speed
+    if s.have_sample:
+        mid = 0.5 * (raw + s.raw_prev)
+        i = s.kin_idx
+        s.kin_raw[i] = mid
+        s.kin_comp[i] = mid - (beta - s.beta_prev) / (s.since * c.ts)
+        s.kin_lat[i] = (lat_beta - s.lat_beta_prev) / (s.since * c.ts)
+        s.kin_sensor[i] = (s.lag_beta_prev - lag_beta) / (s.since * c.ts)
+        i += 1
+        if i >= KIN_WINDOW:
+            i = 0
+        s.kin_idx = i
         if s.kin_n < KIN_WINDOW:
-            e = 0.0  # the window is not full yet
-        # The relative allowance on the smaller of the turn's two measures, a_y / v and r: a
-        # wrong one cannot widen its own bound (an a_y drift was found 0.3-0.7 s late).
-        turn = -r_kin if r_kin < 0.0 else r_kin
-        x = -yaw_rate if yaw_rate < 0.0 else yaw_rate
-        turn = x if x < turn else turn
-        bound = c.yaw_bound + c.yaw_rel * turn
-        if s.yaw_pair_n >= YAW_PAIR_WINDOW:
-            bound += c.side_accel * inv_v
-        s.kin_err = e / bound
-        if e > bound:
-            s.kin_count += 1
-            if s.kin_count >= c.yaw_count:
-                s.kin_count = c.yaw_count
-                # the yaw rate confirmed by its second element (this sample in the pair's
-                # window and within its hold): not the yaw rate's error
-                confirmed = s.yaw_pair_n >= YAW_PAIR_WINDOW and s.yaw_clear_n >= YAW_PAIR_WINDOW
-                s.latched |= OUTSIDE_MODEL if confirmed else CHECK_KINEMATIC
-        elif s.kin_count > 0:
-            s.kin_count -= 1
-        e = delta_driver - delta_driver_redundant
+            s.kin_n += 1
+    s.have_sample = True
+    s.raw_prev = raw
+    s.beta_prev = beta
+    s.lat_beta_prev = lat_beta
+    s.lag_beta_prev = lag_beta
+    s.since = 0
+
+
+def kinematic_residual(c: MonitorCoefficients, s: MonitorState) -> float:
+    """1. The window's residual: the smaller of |raw| / yaw_raw_fraction and the smallest
+    |comp| of the family of nominal cars on mu in [mu_min, 1] (mu_min_paired while the yaw-rate
+    pair runs: it finds yaw-rate errors itself) and sensor lags in [0, sensor_tau].  The car on
+    mu has the a_y term of beta 1 / mu times mu = 1's, so its residual is comp + (1 / mu - 1)
+    lat, linear in 1 / mu, and the lagged car's is comp + sens (taken as linear between the two
+    lags).  The smallest |residual| of the family is 0 if its four corners differ in sign, else
+    the smallest corner's.  Raw alone would be slow, because the controller's answer to a
+    yaw-rate error is itself a transient that hides the error from raw for a few hundred ms.
+    Coefficients lat_span, lat_span_paired, inv_yaw_raw_fraction."""
+    raw = (s.kin_raw[0] + s.kin_raw[1] + s.kin_raw[2] + s.kin_raw[3]) * (1.0 / KIN_WINDOW)
+    comp = (s.kin_comp[0] + s.kin_comp[1] + s.kin_comp[2] + s.kin_comp[3]) * (1.0 / KIN_WINDOW)
+    span = c.lat_span_paired if s.yaw_pair_n >= YAW_PAIR_WINDOW else c.lat_span
+    far = span * ((s.kin_lat[0] + s.kin_lat[1] + s.kin_lat[2] + s.kin_lat[3]) * (1.0 / KIN_WINDOW))
+    sens = (s.kin_sensor[0] + s.kin_sensor[1] + s.kin_sensor[2] + s.kin_sensor[3]) * (1.0 / KIN_WINDOW)
+    raw = (-raw if raw < 0.0 else raw) * c.inv_yaw_raw_fraction
+    lo = hi = comp
+    x = comp + sens
+    lo = x if x < lo else lo
+    hi = x if x > hi else hi
+    x = comp + far
+    lo = x if x < lo else lo
+    hi = x if x > hi else hi
+    x = comp + far + sens
+    lo = x if x < lo else lo
+    hi = x if x > hi else hi
+    if lo <= 0.0 <= hi:
+        comp = 0.0
+    elif lo > 0.0:
+        comp = lo
+    else:
+        comp = -hi
+    return comp if comp < raw else raw
+
+
+def kinematic_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, inv_v: float, r_kin: float) -> None:
+    """1. Kinematic, at a new redundant sample: the window's residual against its bound.
+    Coefficients yaw_bound, yaw_rel, side_accel, yaw_count; state kin_err, kin_count."""
+    e = kinematic_residual(c, s)
+    if s.kin_n < KIN_WINDOW:
+        e = 0.0  # the window is not full yet
+    # The relative allowance on the smaller of the turn's two measures, a_y / v and r: a
+    # wrong one cannot widen its own bound (an a_y drift was found 0.3-0.7 s late).
+    turn = -r_kin if r_kin < 0.0 else r_kin
+    x = -yaw_rate if yaw_rate < 0.0 else yaw_rate
+    turn = x if x < turn else turn
+    bound = c.yaw_bound + c.yaw_rel * turn
+    if s.yaw_pair_n >= YAW_PAIR_WINDOW:
+        bound += c.side_accel * inv_v
+    s.kin_err = e / bound
+    if e > bound:
+        s.kin_count += 1
+        if s.kin_count >= c.yaw_count:
+            s.kin_count = c.yaw_count
+            # the yaw rate confirmed by its second element (this sample in the pair's
+            # window and within its hold): not the yaw rate's error
+            confirmed = s.yaw_pair_n >= YAW_PAIR_WINDOW and s.yaw_clear_n >= YAW_PAIR_WINDOW
+            s.latched |= OUTSIDE_MODEL if confirmed else CHECK_KINEMATIC
+    elif s.kin_count > 0:
+        s.kin_count -= 1
+
+
+def steer_pair_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float,
+                     delta_driver_redundant: float) -> None:
+    """3. Steering pair, at a new redundant sample.  Coefficients steer_bound, inv_steer_bound,
+    steer_count; state pair_err, pair_count."""
+    e = delta_driver - delta_driver_redundant
+    e = -e if e < 0.0 else e
+    s.pair_err = e * c.inv_steer_bound
+    if e > c.steer_bound:
+        s.pair_count += 1
+        if s.pair_count >= c.steer_count:
+            s.pair_count = c.steer_count
+            s.latched |= CHECK_STEER_PAIR
+    elif s.pair_count > 0:
+        s.pair_count -= 1
+
+
+def turn_block_start(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_accel: float) -> None:
+    """7'. A steady-turn block goes on while r and a_y stay near its first sample's (r then on
+    the same side: configure keeps turn_yaw_tol below 2 turn_yaw_min); else, and at its start,
+    it starts at this sample.  Coefficients turn_yaw_tol, turn_lat_tol, turn_lat_rel; state
+    turn_n, turn_settled, turn_r0, turn_a0, turn_res, turn_r."""
+    if s.turn_n > 0:
+        e = yaw_rate - s.turn_r0
         e = -e if e < 0.0 else e
-        s.pair_err = e * c.inv_steer_bound
-        if e > c.steer_bound:
-            s.pair_count += 1
-            if s.pair_count >= c.steer_count:
-                s.pair_count = c.steer_count
-                s.latched |= CHECK_STEER_PAIR
-        elif s.pair_count > 0:
-            s.pair_count -= 1
-        # --- 7. the speed against a_y / r in a steady turn (blocks of TURN_BLOCK samples)
-        e = -yaw_rate if yaw_rate < 0.0 else yaw_rate
-        if e < c.turn_yaw_min:
+        x = lat_accel - s.turn_a0
+        x = -x if x < 0.0 else x
+        am = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
+        if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * am:
             s.turn_n = 0
             s.turn_settled = False
-        else:
-            if s.turn_n > 0:
-                # still the block's turn: r and a_y near its first sample's (r then on the same
-                # side: configure keeps turn_yaw_tol below 2 turn_yaw_min)
-                e = yaw_rate - s.turn_r0
-                e = -e if e < 0.0 else e
-                x = lat_accel - s.turn_a0
-                x = -x if x < 0.0 else x
-                am = -s.turn_a0 if s.turn_a0 < 0.0 else s.turn_a0
-                if e > c.turn_yaw_tol or x > c.turn_lat_tol + c.turn_lat_rel * am:
-                    s.turn_n = 0
-                    s.turn_settled = False
-            if s.turn_n == 0:
-                s.turn_r0 = yaw_rate
-                s.turn_a0 = lat_accel
-                s.turn_res = 0.0
-                s.turn_r = 0.0
-            s.turn_res += yaw_rate * speed - lat_accel
-            s.turn_r += yaw_rate
-            s.turn_n += 1
-            if s.turn_n >= TURN_BLOCK:
-                # the speed less a_y / r over the block (r-weighted), against what the sensors'
-                # offsets and the rest of the side slip can make of it at the block's mean |r|
-                e = s.turn_res / s.turn_r
-                e = -e if e < 0.0 else e
-                rm = s.turn_r * (1.0 / TURN_BLOCK)
-                rm = -rm if rm < 0.0 else rm
-                bound = c.turn_speed_rel * speed + (c.turn_yaw_bias * speed + c.turn_lat_bias) / rm
-                if s.turn_settled:
-                    s.turn_err = e / bound
-                    # Out-voted by the second speed when it is there and agrees: the speed is then
-                    # measured twice, and a_y / r off it is a side slip still settling (a slide
-                    # on low mu), not a speed error
-                    if e > bound and not speed_vouched:
-                        s.latched |= CHECK_TURN
-                s.turn_settled = True
-                s.turn_n = 0
-    if lat_ok:
-        s.lat_prev = lat_accel
-    if st2_ok:
-        s.steer2_prev = delta_driver_redundant
+    if s.turn_n == 0:
+        s.turn_r0 = yaw_rate
+        s.turn_a0 = lat_accel
+        s.turn_res = 0.0
+        s.turn_r = 0.0
 
-    # --- 5. frozen: unchanged for frozen_steps counted while the partner is away from where it
-    #     was at this value's last change.  A partner from the 50 ms frame (a_y / v for the yaw
-    #     rate, the second channel for the driver's angle) is taken at its first sample after
-    #     that change: the sample held then may be up to a frame old.
+
+def turn_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_accel: float, speed: float,
+               speed_vouched: bool) -> None:
+    """7. The speed against a_y / r in a steady turn (blocks of TURN_BLOCK samples), at a new
+    redundant sample.  Coefficients turn_yaw_min, turn_speed_rel, turn_yaw_bias, turn_lat_bias;
+    state turn_n, turn_settled, turn_res, turn_r, turn_err (and the speed pair's vote)."""
+    e = -yaw_rate if yaw_rate < 0.0 else yaw_rate
+    if e < c.turn_yaw_min:
+        s.turn_n = 0
+        s.turn_settled = False
+        return
+    turn_block_start(c, s, yaw_rate, lat_accel)
+    s.turn_res += yaw_rate * speed - lat_accel
+    s.turn_r += yaw_rate
+    s.turn_n += 1
+    if s.turn_n < TURN_BLOCK:
+        return
+    # the speed less a_y / r over the block (r-weighted), against what the sensors' offsets and
+    # the rest of the side slip can make of it at the block's mean |r|
+    e = s.turn_res / s.turn_r
+    e = -e if e < 0.0 else e
+    rm = s.turn_r * (1.0 / TURN_BLOCK)
+    rm = -rm if rm < 0.0 else rm
+    bound = c.turn_speed_rel * speed + (c.turn_yaw_bias * speed + c.turn_lat_bias) / rm
+    if s.turn_settled:
+        s.turn_err = e / bound
+        # Out-voted by the second speed when it is there and agrees: the speed is then measured
+        # twice, and a_y / r off it is a side slip still settling (a slide on low mu), not a
+        # speed error
+        if e > bound and not speed_vouched:
+            s.latched |= CHECK_TURN
+    s.turn_settled = True
+    s.turn_n = 0
+
+
+def frozen_yaw_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, r_kin: float, lat_ok: bool,
+                     new_sample: bool) -> None:
+    """5. Frozen yaw rate against a_y / v, taken at its first sample after the yaw rate's last
+    change.  Coefficients frozen_move_yaw, frozen_steps; state yaw_last, yaw_same, yaw_ref,
+    yaw_ref_ok."""
     if yaw_rate != s.yaw_last:
         s.yaw_last, s.yaw_same, s.yaw_ref_ok = yaw_rate, 0, False
     elif new_sample and not s.yaw_ref_ok:
@@ -862,51 +904,172 @@ def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, d
                 s.yaw_same += 1
             if s.yaw_same >= c.frozen_steps:
                 s.latched |= FROZEN_YAW
+
+
+def frozen_lat_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_accel: float) -> None:
+    """5. Frozen a_y against the yaw rate.  Coefficients frozen_move_yaw, frozen_steps; state
+    lat_last, lat_same, lat_ref."""
+    if lat_accel != s.lat_last:
+        s.lat_last, s.lat_same, s.lat_ref = lat_accel, 0, yaw_rate
+    else:
+        e = yaw_rate - s.lat_ref
+        e = -e if e < 0.0 else e
+        if e > c.frozen_move_yaw:
+            if s.lat_same < c.frozen_steps:
+                s.lat_same += 1
+            if s.lat_same >= c.frozen_steps:
+                s.latched |= FROZEN_LAT
+
+
+def frozen_steer_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
+                       new_sample: bool) -> None:
+    """5. Frozen driver's angle against the second channel, taken at its first sample after the
+    angle's last change.  Coefficients frozen_move_steer, frozen_steps; state st_last, st_same,
+    st_ref, st_ref_ok."""
+    if delta_driver != s.st_last:
+        s.st_last, s.st_same, s.st_ref_ok = delta_driver, 0, False
+    elif new_sample and not s.st_ref_ok:
+        s.st_ref, s.st_ref_ok = delta_driver_redundant, True
+    elif s.st_ref_ok:
+        e = delta_driver_redundant - s.st_ref
+        e = -e if e < 0.0 else e
+        if e > c.frozen_move_steer:
+            if s.st_same < c.frozen_steps:
+                s.st_same += 1
+            if s.st_same >= c.frozen_steps:
+                s.latched |= FROZEN_STEER
+
+
+def frozen_steer2_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float,
+                        delta_driver_redundant: float) -> None:
+    """5. Frozen second steering channel against the driver's angle.  Coefficients
+    frozen_move_steer, frozen_steps; state st2_last, st2_same, st2_ref."""
+    if delta_driver_redundant != s.st2_last:
+        s.st2_last, s.st2_same, s.st2_ref = delta_driver_redundant, 0, delta_driver
+    else:
+        e = delta_driver - s.st2_ref
+        e = -e if e < 0.0 else e
+        if e > c.frozen_move_steer:
+            if s.st2_same < c.frozen_steps:
+                s.st2_same += 1
+            if s.st2_same >= c.frozen_steps:
+                s.latched |= FROZEN_STEER_2
+
+
+def frozen_checks(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
+                  yaw_rate: float, lat_accel: float, r_kin: float, lat_ok: bool, st2_ok: bool,
+                  new_sample: bool) -> None:
+    """5. Frozen: unchanged for frozen_steps counted while the partner is away from where it was
+    at this value's last change.  A partner from the 50 ms frame (a_y / v for the yaw rate, the
+    second channel for the driver's angle) is taken at its first sample after that change: the
+    sample held then may be up to a frame old."""
+    frozen_yaw_check(c, s, yaw_rate, r_kin, lat_ok, new_sample)
     if lat_ok:
-        if lat_accel != s.lat_last:
-            s.lat_last, s.lat_same, s.lat_ref = lat_accel, 0, yaw_rate
-        else:
-            e = yaw_rate - s.lat_ref
-            e = -e if e < 0.0 else e
-            if e > c.frozen_move_yaw:
-                if s.lat_same < c.frozen_steps:
-                    s.lat_same += 1
-                if s.lat_same >= c.frozen_steps:
-                    s.latched |= FROZEN_LAT
+        frozen_lat_check(c, s, yaw_rate, lat_accel)
     if st2_ok:
-        if delta_driver != s.st_last:
-            s.st_last, s.st_same, s.st_ref_ok = delta_driver, 0, False
-        elif new_sample and not s.st_ref_ok:
-            s.st_ref, s.st_ref_ok = delta_driver_redundant, True
-        elif s.st_ref_ok:
-            e = delta_driver_redundant - s.st_ref
-            e = -e if e < 0.0 else e
-            if e > c.frozen_move_steer:
-                if s.st_same < c.frozen_steps:
-                    s.st_same += 1
-                if s.st_same >= c.frozen_steps:
-                    s.latched |= FROZEN_STEER
-        if delta_driver_redundant != s.st2_last:
-            s.st2_last, s.st2_same, s.st2_ref = delta_driver_redundant, 0, delta_driver
-        else:
-            e = delta_driver - s.st2_ref
-            e = -e if e < 0.0 else e
-            if e > c.frozen_move_steer:
-                if s.st2_same < c.frozen_steps:
-                    s.st2_same += 1
-                if s.st2_same >= c.frozen_steps:
-                    s.latched |= FROZEN_STEER_2
+        frozen_steer_check(c, s, delta_driver, delta_driver_redundant, new_sample)
+        frozen_steer2_check(c, s, delta_driver, delta_driver_redundant)
+
+
+def redundant_checks(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
+                     yaw_rate: float, lat_accel: float, speed: float, inv_v: float, r_kin: float,
+                     delta: float, speed_vouched: bool) -> None:
+    """1, 3 and 7 at a new redundant sample (either of its values changed)."""
+    kinematic_sample(c, s, yaw_rate, lat_accel, speed, inv_v, r_kin, delta)
+    kinematic_check(c, s, yaw_rate, inv_v, r_kin)
+    steer_pair_check(c, s, delta_driver, delta_driver_redundant)
+    turn_check(c, s, yaw_rate, lat_accel, speed, speed_vouched)
+
+
+def monitor_finish(s: MonitorState, flags: int) -> int:
+    """The period's flags (the latched ones with this period's) and bits into the state."""
     flags |= s.latched
-    bits = 0
-    if flags & YAW_CHECKS:
-        bits |= PLAUS_YAW
-    if flags & STEER_CHECKS:
-        bits |= PLAUS_STEER
-    if flags & DEGRADED_CHECKS:
-        bits |= PLAUS_DEGRADED
+    bits = plausibility_bits(flags)
     s.flags = flags
     s.bits = bits
     return bits
+
+
+def input_flags(s: MonitorState, yaw_rate: float, yaw_rate_redundant: float, speed: float, speed_redundant: float,
+                lat_ok: bool, st2_ok: bool) -> int:
+    """MISSING when a redundant input the car has is gone: the second speed (once received,
+    while the speed is valid: the speed pair pauses), the yaw rate's second element (likewise:
+    the pair check pauses, which leaves a stuck first element to the slower checks), a_y or the
+    second steering channel."""
+    flags = 0
+    if s.speed2_seen and not 0.0 <= speed_redundant < 1e3 and 0.0 <= speed < 1e3:
+        flags |= MISSING
+    if -1e3 < yaw_rate_redundant < 1e3:
+        s.yaw2_seen = True
+    elif s.yaw2_seen and -1e3 < yaw_rate < 1e3:
+        flags |= MISSING
+    if not (lat_ok and st2_ok):
+        flags |= MISSING
+    return flags
+
+
+def primary_valid(c: MonitorCoefficients, delta_driver: float, yaw_rate: float, speed: float,
+                  aux_cmd_applied: float) -> bool:
+    """The inputs every check but the speed's needs: valid (False for NaN and +-inf), and the
+    car at speed_min or faster."""
+    return (-1e3 < delta_driver < 1e3) and (-1e3 < yaw_rate < 1e3) and (c.speed_min <= speed < 1e3) and (
+        -1e3 < aux_cmd_applied < 1e3)
+
+
+def monitor_step(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
+                 yaw_rate: float, lat_accel: float, speed: float, aux_cmd_applied: float,
+                 yaw_rate_redundant: float = math.nan, speed_redundant: float = math.nan) -> int:
+    """Check this period's inputs; returns the CtrlStatus_Plausibility bits (``s.flags``: the
+    detailed checks).  ``aux_cmd_applied``: the auxiliary command sent the period before (the
+    monitor lags it by the actuator's ``actuator_tau`` to the angle on the car).  NaN for
+    a missing input: a missing primary input pauses every check but the two on the speed (step()
+    faults on it), a missing redundant one the checks that need it (DEGRADED).  ``yaw_rate_redundant``, the
+    yaw-rate sensor's second element, pauses its pair check when NaN; DEGRADED too once the
+    element has been received since ``reset_monitor`` while the first element is valid (a lost
+    element).  A sender without it (SNA from the start, or the default NaN) never sets it:
+    every result is then as without the check.  ``speed_redundant``, the second speed, likewise
+    for the speed pair."""
+    speed_step_check(c, s, speed)
+    speed_vouched = speed_pair_check(c, s, speed, speed_redundant)
+    # A NaN fails every comparison: these are False for NaN and +-inf.
+    primary_ok = primary_valid(c, delta_driver, yaw_rate, speed, aux_cmd_applied)
+    lat_ok = -1e3 < lat_accel < 1e3
+    st2_ok = -1e3 < delta_driver_redundant < 1e3
+    flags = input_flags(s, yaw_rate, yaw_rate_redundant, speed, speed_redundant, lat_ok, st2_ok)
+    if not (lat_ok and st2_ok):
+        redundant_frame_lost(c, s)
+    if not primary_ok:
+        monitor_pause(s)
+        return monitor_finish(s, flags)
+    inv_v = 1.0 / speed
+    r_kin = lat_accel * inv_v if lat_ok else 0.0
+    if not s.started:
+        s.aux_lag = aux_cmd_applied
+    # The angle on the car: the command sent the period before, through the actuator's lag.
+    # Taking the command itself for it made the nominal car's beta' (below) jump by half the
+    # command's rate while the law slews: 0.09 rad/s, a false alarm on every strong yaw moment.
+    s.aux_lag += c.aux_alpha * (aux_cmd_applied - s.aux_lag)
+    delta = delta_driver + s.aux_lag
+    r_ss = delta * speed / (c.wheelbase + c.k_us * speed * speed)  # the nominal car's steady-state yaw rate
+    if not s.started:
+        monitor_start(s, delta_driver, delta_driver_redundant, yaw_rate, lat_accel, r_kin, r_ss, delta)
+    # The wheel angle as filtered a_y and yaw rate show its effect (the kinematic check's family).
+    s.delta_lag += c.delta_alpha * (delta - s.delta_lag)
+    model_check(c, s, yaw_rate, r_ss, lat_ok, yaw_rate_redundant)
+    flags |= yaw_pair_check(c, s, yaw_rate, yaw_rate_redundant)
+    if s.since < 1000000:
+        s.since += 1
+    new_sample = lat_ok and st2_ok and (lat_accel != s.lat_prev or delta_driver_redundant != s.steer2_prev)
+    flags |= steer_jump_check(c, s, delta_driver, new_sample, st2_ok)
+    if new_sample:
+        redundant_checks(c, s, delta_driver, delta_driver_redundant, yaw_rate, lat_accel, speed, inv_v, r_kin, delta,
+                         speed_vouched)
+    if lat_ok:
+        s.lat_prev = lat_accel
+    if st2_ok:
+        s.steer2_prev = delta_driver_redundant
+    frozen_checks(c, s, delta_driver, delta_driver_redundant, yaw_rate, lat_accel, r_kin, lat_ok, st2_ok, new_sample)
+    return monitor_finish(s, flags)
 
 
 class PlausibilityMonitor:

@@ -37,8 +37,18 @@ C_NOT_A_CYCLE = {
 # ----------------------------------------------------------------------------------- Python
 
 PY_ROOTS = ("firmware_py", "sim_plant", "tools", "bench")
+# The monitor's units (one per check family, firmware_py/plausibility.py): each is a part of
+# monitor_step, which is the only one to call them in order.  (Their C twins are static in
+# mrs_monitor.c: nothing else can call them.)
+PY_MONITOR_UNITS = ("speed_step_check", "speed_pair_check", "input_flags", "redundant_frame_lost", "monitor_pause",
+                    "monitor_start", "model_check", "yaw_pair_check", "yaw_pair_suspicion", "steer_jump_check",
+                    "redundant_checks", "kinematic_sample", "kinematic_residual", "kinematic_check", "steer_pair_check",
+                    "turn_block_start", "turn_check", "frozen_checks", "frozen_yaw_check", "frozen_lat_check",
+                    "frozen_steer_check", "frozen_steer2_check", "monitor_finish")
+# The limiter's units (firmware_py/authority.py), likewise parts of authority_step.
+PY_AUTHORITY_UNITS = ("fade_cause", "magnitude_bound", "rate_bound", "intervention_window")
 # PlausibilityMonitor is monitor_step in an object: constructing one is running the monitor.
-PY_PIECES = ("monitor_step", "authority_step", "PlausibilityMonitor")
+PY_PIECES = ("monitor_step", "authority_step", "PlausibilityMonitor", *PY_MONITOR_UNITS, *PY_AUTHORITY_UNITS)
 PY_OWNERS = {
     "firmware_py/cycle.py": "the cycle",
     "firmware_py/plausibility.py": "the monitor's own module",
@@ -50,6 +60,9 @@ PY_OWNERS = {
 PY_NOT_A_CYCLE = {
     "sim_plant/car/actuator.py": {"authority_step"},
 }
+# Not a control cycle: the monitor's behaviour-identity check records the monitor's whole state
+# and the limiter's answer on its own inputs, as monitor_vectors.c does in C.
+PY_NOT_A_CYCLE["tools/monitor_identity.py"] = {"monitor_step", "authority_step"}
 def _strip_c_comments(text: str) -> str:
     return re.sub(r"//[^\n]*", "", re.sub(r"/\*.*?\*/", " ", text, flags=re.S))
 
@@ -106,6 +119,16 @@ def test_only_firmware_py_cycle_calls_the_monitor_and_the_limiter_in_python() ->
         if pieces - allowed:
             offenders[module] = pieces - allowed
     assert offenders == {}, "run a control period with firmware_py.cycle (step, or Cycle)"
+
+
+def test_the_monitor_units_are_the_monitors_functions() -> None:
+    import firmware_py.authority as au
+    import firmware_py.plausibility as pl
+    for name in PY_MONITOR_UNITS:
+        assert callable(getattr(pl, name, None)), name
+    for name in PY_AUTHORITY_UNITS:
+        assert callable(getattr(au, name, None)), name
+    assert "speed_pair_check" in py_calls((ROOT / "firmware_py" / "plausibility.py").read_text())
 
 
 def test_the_allowlists_name_files_that_exist() -> None:

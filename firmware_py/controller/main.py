@@ -59,9 +59,8 @@ def build_parser(prog: str = "mrsteer controller") -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
-    parser = build_parser(prog)
-    args = parser.parse_args(argv)
+def _check_loop_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """The loop's options in range, else the parser's one-line error."""
     if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and 1.0 <= args.rate_hz <= 10000.0):
         parser.error(f"--rate-hz must be in [1, 10000], got {args.rate_hz}")
     if args.timeout_cycles < 1:
@@ -73,14 +72,27 @@ def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") ->
         parser.error(f"--rt-priority must be in 0..99, got {args.rt_priority}")
     if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
         parser.error(f"--cpu must be in 0..{(os.cpu_count() or 1) - 1}, got {args.cpu}")
+
+
+def _law_config(args: argparse.Namespace) -> mr.ControllerConfig:
+    """The law's calibration at the loop's rate with the options' overrides (``args.rate_hz`` set
+    from it when not given); ValueError (RateError among them) when there is none or it is invalid."""
+    ctrl = calibration_at_rate(args, args.rate_hz)  # RateError: no calibration for this rate
+    if args.rate_hz is None:
+        args.rate_hz = 1.0 / ctrl.ts
+    ctrl = replace(ctrl, q_form=args.controller or ctrl.q_form, method=args.method or ctrl.method,
+                   rate_limit=args.rate_limit if args.rate_limit is not None else ctrl.rate_limit,
+                   ts=1.0 / args.rate_hz)
+    mr.configure(ctrl)
+    return ctrl
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "mrsteer controller") -> int:
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    _check_loop_options(parser, args)
     try:
-        ctrl = calibration_at_rate(args, args.rate_hz)  # RateError: no calibration for this rate
-        if args.rate_hz is None:
-            args.rate_hz = 1.0 / ctrl.ts
-        ctrl = replace(ctrl, q_form=args.controller or ctrl.q_form, method=args.method or ctrl.method,
-                       rate_limit=args.rate_limit if args.rate_limit is not None else ctrl.rate_limit,
-                       ts=1.0 / args.rate_hz)
-        mr.configure(ctrl)
+        ctrl = _law_config(args)
     except ValueError as exc:
         parser.error(str(exc))
     if not (math.isfinite(args.sync_offset_us) and 0.0 <= args.sync_offset_us * 1e-6 < 1.0 / args.rate_hz):

@@ -132,33 +132,12 @@ class ControllerNode:
                                          au.AuthorityConfig(ts=period, u_max=ctrl.aux_limit))
         self.cycle_state = cy.CycleState()
         self._cycle_in = cy.CycleInputs()
-
-        def limit(name: str, cycles: int = config.timeout_cycles) -> int:
-            """``cycles`` of the message's own cycle time, in controller periods (rounded up; the
-            1e-9 keeps 3 * 0.1 / 1e-3 = 300.00000000000006 at 300)."""
-            cycle = c.cycle_time_s(name, period) or period
-            return max(1, int(math.ceil(cycles * cycle / period - 1e-9)))
-
-        self.inputs = {  # by frame ID
-            c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, limit(MSG_STEER)),
-            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, limit(MSG_YAW),
-                                       (SIG_YAW_RATE_2,)),
-            c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, limit(MSG_SPEED)),
-            # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
-            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, limit(MSG_REDUNDANT),
-                                             (SIG_STEER_ANGLE_2, SIG_SPEED_2)),
-        }
-        self._by_name = {inp.name: inp for inp in self.inputs.values()}
-        self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
-        self.redundant_id = c.frame_id(MSG_REDUNDANT)
-        # The monitor's clock: yaw-rate samples (one per period by MRS_ControlLoop) per redundant one.
-        self.clock = SampleClock((c.cycle_time_s(MSG_REDUNDANT, period) or period) / period, self._yaw.limit)
-        self.yaw_id = c.frame_id(MSG_YAW)
+        self._init_inputs()
         keyed = config.secoc_key is not None
         self.signer = secoc.CommandSigner(c, config.secoc_key) if keyed else None
         self.sensor_verifier = secoc.SensorVerifier(c, config.secoc_key) if keyed else None
         self.sync_id = c.frame_id(MSG_SYNC) if keyed else None
-        self.sync_limit = limit(MSG_SYNC, SYNC_STALE_CYCLES)
+        self.sync_limit = self._limit(MSG_SYNC, SYNC_STALE_CYCLES)
         self.start_limit = max(1, int(math.ceil(START_TIMEOUT_S / period - 1e-9)))  # cycles
         self.starting = True  # the start state (``_still_starting``)
         self._since_first = -1  # cycles since the one that drained the first sensor frame; -1: none yet
@@ -169,12 +148,7 @@ class ControllerNode:
         self.rx = RxLink(c, [*self._by_name, *([MSG_SYNC] if keyed else [])], verifiers, config.max_counter_delta)
         bus.set_filters(self.rx.filters())
         self.tx = TxLink(c, (MSG_CMD, MSG_STATUS), self.signer)
-        status_cycle = c.cycle_time_s(MSG_STATUS) or 0.1
-        # The status's counters wrap at their DBC widths; its lateness saturates at the DBC maximum.
-        self._rejected_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_REJECTED)[1]) + 1
-        self._overruns_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_OVERRUNS)[1]) + 1
-        self._lateness_max = c.signal_range(MSG_STATUS, SIG_STATUS_LATENESS)[1]
-        self.status_every = max(1, int(round(status_cycle / period)))
+        self._init_status()
         self.stats = LoopStats()
         self.cause = 0
         self._max_lateness = 0.0
@@ -186,6 +160,42 @@ class ControllerNode:
         # the same step), and whether the monitor has yet to step over that redundant sample.
         self._steer_at_redundant = math.nan
         self._redundant_unstepped = False
+
+    def _limit(self, name: str, cycles: int | None = None) -> int:
+        """``cycles`` (the configured timeout's by default) of the message's own cycle time, in
+        controller periods (rounded up; the 1e-9 keeps 3 * 0.1 / 1e-3 = 300.00000000000006 at 300)."""
+        cycles = self.cfg.timeout_cycles if cycles is None else cycles
+        cycle = self.contract.cycle_time_s(name, self.period) or self.period
+        return max(1, int(math.ceil(cycles * cycle / self.period - 1e-9)))
+
+    def _init_inputs(self) -> None:
+        """The four sensor frames' inputs, their timeouts, and the monitor's sample clock."""
+        c, period = self.contract, self.period
+        self.inputs = {  # by frame ID
+            c.frame_id(MSG_STEER): Input(MSG_STEER, SIG_STEER_ANGLE, CAUSE_STEER_MISSING, self._limit(MSG_STEER)),
+            c.frame_id(MSG_YAW): Input(MSG_YAW, SIG_YAW_RATE, CAUSE_YAW_MISSING, self._limit(MSG_YAW),
+                                       (SIG_YAW_RATE_2,)),
+            c.frame_id(MSG_SPEED): Input(MSG_SPEED, SIG_SPEED, CAUSE_SPEED_MISSING, self._limit(MSG_SPEED)),
+            # Missing, it is no cause: the monitor reports DEGRADED and the authority limit tightens.
+            c.frame_id(MSG_REDUNDANT): Input(MSG_REDUNDANT, SIG_LAT_ACCEL, 0, self._limit(MSG_REDUNDANT),
+                                             (SIG_STEER_ANGLE_2, SIG_SPEED_2)),
+        }
+        self._by_name = {inp.name: inp for inp in self.inputs.values()}
+        self._steer, self._yaw, self._speed, self._redundant = self.inputs.values()
+        self.redundant_id = c.frame_id(MSG_REDUNDANT)
+        # The monitor's clock: yaw-rate samples (one per period by MRS_ControlLoop) per redundant one.
+        self.clock = SampleClock((c.cycle_time_s(MSG_REDUNDANT, period) or period) / period, self._yaw.limit)
+        self.yaw_id = c.frame_id(MSG_YAW)
+
+    def _init_status(self) -> None:
+        """The status frame's rate and its counters' ranges (the DBC's)."""
+        c = self.contract
+        status_cycle = c.cycle_time_s(MSG_STATUS) or 0.1
+        # The status's counters wrap at their DBC widths; its lateness saturates at the DBC maximum.
+        self._rejected_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_REJECTED)[1]) + 1
+        self._overruns_wrap = int(c.signal_range(MSG_STATUS, SIG_STATUS_OVERRUNS)[1]) + 1
+        self._lateness_max = c.signal_range(MSG_STATUS, SIG_STATUS_LATENESS)[1]
+        self.status_every = max(1, int(round(status_cycle / self.period)))
 
     # The cycle's pieces and what it leaves, by the names the node's readers use.
     @property
@@ -342,20 +352,12 @@ class ControllerNode:
         """Steps 2-5 of the cycle, after the receive queue has been drained."""
         if self.starting:
             self.starting = self._still_starting()
-        cause = 0
-        values = []
-        fail_max = self.cfg.e2e_fail_max
-        red = self._redundant
         lat, steer_2, speed_2 = self.redundant_inputs()  # before the ages move on
         steps = self.monitor_steps()
-        red.age += 1
+        self._redundant.age += 1
         self.clock.tick()
-        for inp in (self._steer, self._yaw, self._speed):
-            ok = inp.age <= inp.limit and inp.rejects < fail_max
-            if not ok:
-                cause |= inp.missing_cause if inp.rejects < fail_max else inp.bad_cause
-            values.append(inp.value if ok else math.nan)
-            inp.age += 1
+        values: list[float] = []
+        cause = self._primary_values(values)
         # Which measurement this command answers; NONE when no valid yaw rate went into it.
         self._answers = MEAS_NONE if math.isnan(values[1]) else self._yaw.last_counter
         i = self._cycle_in
@@ -368,6 +370,34 @@ class ControllerNode:
         if steps:
             self._redundant_unstepped = False
         u = cy.step(self.cycle_coeffs, self.cycle_state, i)
+        cause = self._cycle_cause(cause)
+        state = self.reported_state
+        fault = state == mr.STATUS_FAULT
+        if fault and not self._was_fault:
+            self.stats.faults_entered += 1
+        self._was_fault = fault
+        self.cause = cause
+        self._send_command(u, state)
+        self.stats.cycles += 1
+        if self.stats.cycles % self.status_every == 0:
+            self._send_status()
+
+    def _primary_values(self, values: list[float]) -> int:
+        """The driver's angle, the yaw rate and the speed appended to ``values`` (NaN where stale or
+        rejected too often), each one period older after; returns the causes of those missing."""
+        cause = 0
+        fail_max = self.cfg.e2e_fail_max
+        for inp in (self._steer, self._yaw, self._speed):
+            ok = inp.age <= inp.limit and inp.rejects < fail_max
+            if not ok:
+                cause |= inp.missing_cause if inp.rejects < fail_max else inp.bad_cause
+            values.append(inp.value if ok else math.nan)
+            inp.age += 1
+        return cause
+
+    def _cycle_cause(self, cause: int) -> int:
+        """``cause`` with what the cycle found: the law's range fault or low speed (when no input
+        is to blame), a stale SecOC sync, a plausibility fault."""
         law = self.cycle_state.law
         if law.fault_flags and not cause:
             cause |= CAUSE_RANGE
@@ -379,16 +409,7 @@ class ControllerNode:
                 cause |= CAUSE_AUTH
         if self.plausibility & pl.PLAUS_FAULT:
             cause |= CAUSE_PLAUSIBILITY
-        state = self.reported_state
-        fault = state == mr.STATUS_FAULT
-        if fault and not self._was_fault:
-            self.stats.faults_entered += 1
-        self._was_fault = fault
-        self.cause = cause
-        self._send_command(u, state)
-        self.stats.cycles += 1
-        if self.stats.cycles % self.status_every == 0:
-            self._send_status()
+        return cause
 
     def _send_command(self, u: float, state: int) -> None:
         if self.signer is not None and (not self.signer.synced or self._sync_age > self.sync_limit):

@@ -55,6 +55,106 @@ static void print_defaults(void)
            a.fault_fade_rate, a.panic_window, a.engage, a.rearm_time);
 }
 
+/* The 43 numbers of the "monitor" line into the configuration, in struct order. */
+static void monitor_config_of(const double *v, mrs_monitor_config_t *mg)
+{
+    mg->ts = v[0];
+    mg->speed_min = v[1];
+    mg->yaw_bound = v[2];
+    mg->yaw_rel = v[3];
+    mg->yaw_count = (int)v[4];
+    mg->yaw_raw_fraction = v[5];
+    mg->steer_bound = v[6];
+    mg->steer_count = (int)v[7];
+    mg->model_margin = v[8];
+    mg->model_rel = v[9];
+    mg->model_tau = v[10];
+    mg->model_time = v[11];
+    mg->frozen_time = v[12];
+    mg->frozen_move_yaw = v[13];
+    mg->frozen_move_steer = v[14];
+    mg->nominal_l_f = v[15];
+    mg->nominal_l_r = v[16];
+    mg->nominal_mass = v[17];
+    mg->nominal_c_f = v[18];
+    mg->nominal_c_r = v[19];
+    mg->kin_gap = v[20];
+    mg->mu_min = v[21];
+    mg->actuator_tau = v[22];
+    mg->yaw_pair_bound = v[23];
+    mg->sensor_tau = v[24];
+    mg->side_accel = v[25];
+    mg->speed_step = v[26];
+    mg->turn_yaw_min = v[27];
+    mg->turn_yaw_tol = v[28];
+    mg->turn_lat_tol = v[29];
+    mg->turn_lat_rel = v[30];
+    mg->turn_speed_rel = v[31];
+    mg->turn_yaw_bias = v[32];
+    mg->turn_lat_bias = v[33];
+    mg->yaw_pair_hold = v[34];
+    mg->speed_pair_bound = v[35];
+    mg->speed_pair_rel = v[36];
+    mg->speed_pair_time = v[37];
+    mg->steer_jump = v[38];
+    mg->mu_min_paired = v[39];
+    mg->speed_brake_decel = v[40];
+    mg->speed_brake_tau = v[41];
+    mg->speed_slip_rel = v[42];
+}
+
+/* The 8 numbers of the "authority" line into the configuration. */
+static void authority_config_of(const double *v, mrs_authority_config_t *ag)
+{
+    ag->ts = v[0];
+    ag->u_max = v[1];
+    ag->rate_max = v[2];
+    ag->fade_rate = v[3];
+    ag->fault_fade_rate = v[4];
+    ag->panic_window = v[5];
+    ag->engage = v[6];
+    ag->rearm_time = v[7];
+}
+
+static void print_coeffs(const mrs_monitor_coeffs_t *m, const mrs_authority_coeffs_t *a)
+{
+    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
+           "%.17g %.17g %d %.17g %.17g %.17g %.17g %.17g\n",
+           m->model_alpha, m->k_us, (int)m->model_steps, (int)m->frozen_steps, (int)m->yaw_count, m->inv_cs_m,
+           m->moment_m, m->cf_m, a->du_max, a->fade_step, a->fault_fade_step, a->engage, (int)a->window_steps,
+           (int)a->rearm_steps, (int)m->kin_gap_steps, m->lat_span, m->aux_alpha, m->inv_yaw_pair_bound, m->delta_alpha, m->side_accel, m->speed_step,
+           m->turn_yaw_min, m->turn_yaw_tol, m->turn_lat_tol, m->turn_lat_rel, m->turn_speed_rel, m->turn_yaw_bias,
+           m->turn_lat_bias, m->yaw_pair_hold, m->speed_pair_bound, m->speed_pair_rel, (int)m->speed_pair_steps,
+           m->steer_jump, m->lat_span_paired, m->speed_brake_alpha, m->speed_brake_lag, m->speed_slip_rel);
+}
+
+/* One output line per input line from a reset monitor and limiter: 0, or 2 on an unreadable line. */
+static int replay(const mrs_monitor_coeffs_t *mc, const mrs_authority_coeffs_t *ac)
+{
+    char line[LINE_MAX_LEN];
+    double v[9];
+    mrs_monitor_state_t ms;
+    mrs_authority_state_t as;
+    mrs_monitor_reset(&ms);
+    mrs_authority_reset(&as);
+    while (fgets(line, sizeof line, stdin) != NULL) {
+        uint8_t bits;
+        double u;
+        if (read_numbers(line, v, 9) != 0) {
+            return 2;
+        }
+        bits = mrs_monitor_step(mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5], v[7], v[8]);
+        u = mrs_authority_step(ac, &as, v[6], bits, (uint8_t)((ms.flags & MRS_CUT_CHECKS) != 0u),
+                               (uint8_t)((ms.flags & MRS_FADE_CHECKS) != 0u));
+        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g %d %u %d %d %.17g %d %u %d %.17g\n", (unsigned)bits,
+               (unsigned)ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err,
+               ms.turn_err, (int)ms.turn_n, (unsigned)ms.turn_settled, (int)ms.yaw_hold_n, (int)ms.yaw_clear_n,
+               ms.speed_pair_err, (int)ms.speed_pair_count, (unsigned)ms.speed2_seen, (int)ms.steer_hold_n,
+               ms.speed_lag);
+    }
+    return 0;
+}
+
 int main(void)
 {
     char line[LINE_MAX_LEN];
@@ -63,8 +163,6 @@ int main(void)
     mrs_authority_config_t ag;
     mrs_monitor_coeffs_t mc;
     mrs_authority_coeffs_t ac;
-    mrs_monitor_state_t ms;
-    mrs_authority_state_t as;
 
     if (fgets(line, sizeof line, stdin) == NULL) {
         return 2;
@@ -76,88 +174,15 @@ int main(void)
     if (strncmp(line, "monitor", 7) != 0 || read_numbers(line + 7, v, 43) != 0) {
         return 2;
     }
-    mg.ts = v[0];
-    mg.speed_min = v[1];
-    mg.yaw_bound = v[2];
-    mg.yaw_rel = v[3];
-    mg.yaw_count = (int)v[4];
-    mg.yaw_raw_fraction = v[5];
-    mg.steer_bound = v[6];
-    mg.steer_count = (int)v[7];
-    mg.model_margin = v[8];
-    mg.model_rel = v[9];
-    mg.model_tau = v[10];
-    mg.model_time = v[11];
-    mg.frozen_time = v[12];
-    mg.frozen_move_yaw = v[13];
-    mg.frozen_move_steer = v[14];
-    mg.nominal_l_f = v[15];
-    mg.nominal_l_r = v[16];
-    mg.nominal_mass = v[17];
-    mg.nominal_c_f = v[18];
-    mg.nominal_c_r = v[19];
-    mg.kin_gap = v[20];
-    mg.mu_min = v[21];
-    mg.actuator_tau = v[22];
-    mg.yaw_pair_bound = v[23];
-    mg.sensor_tau = v[24];
-    mg.side_accel = v[25];
-    mg.speed_step = v[26];
-    mg.turn_yaw_min = v[27];
-    mg.turn_yaw_tol = v[28];
-    mg.turn_lat_tol = v[29];
-    mg.turn_lat_rel = v[30];
-    mg.turn_speed_rel = v[31];
-    mg.turn_yaw_bias = v[32];
-    mg.turn_lat_bias = v[33];
-    mg.yaw_pair_hold = v[34];
-    mg.speed_pair_bound = v[35];
-    mg.speed_pair_rel = v[36];
-    mg.speed_pair_time = v[37];
-    mg.steer_jump = v[38];
-    mg.mu_min_paired = v[39];
-    mg.speed_brake_decel = v[40];
-    mg.speed_brake_tau = v[41];
-    mg.speed_slip_rel = v[42];
+    monitor_config_of(v, &mg);
     if (fgets(line, sizeof line, stdin) == NULL || strncmp(line, "authority", 9) != 0 ||
         read_numbers(line + 9, v, 8) != 0) {
         return 2;
     }
-    ag.ts = v[0];
-    ag.u_max = v[1];
-    ag.rate_max = v[2];
-    ag.fade_rate = v[3];
-    ag.fault_fade_rate = v[4];
-    ag.panic_window = v[5];
-    ag.engage = v[6];
-    ag.rearm_time = v[7];
+    authority_config_of(v, &ag);
     if (mrs_monitor_configure(&mg, &mc) != 0 || mrs_authority_configure(&ag, &ac) != 0) {
         return 3;
     }
-    printf("coeffs %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %d %d %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g "
-           "%.17g %.17g %d %.17g %.17g %.17g %.17g %.17g\n",
-           mc.model_alpha, mc.k_us, (int)mc.model_steps, (int)mc.frozen_steps, (int)mc.yaw_count, mc.inv_cs_m,
-           mc.moment_m, mc.cf_m, ac.du_max, ac.fade_step, ac.fault_fade_step, ac.engage, (int)ac.window_steps,
-           (int)ac.rearm_steps, (int)mc.kin_gap_steps, mc.lat_span, mc.aux_alpha, mc.inv_yaw_pair_bound, mc.delta_alpha, mc.side_accel, mc.speed_step,
-           mc.turn_yaw_min, mc.turn_yaw_tol, mc.turn_lat_tol, mc.turn_lat_rel, mc.turn_speed_rel, mc.turn_yaw_bias,
-           mc.turn_lat_bias, mc.yaw_pair_hold, mc.speed_pair_bound, mc.speed_pair_rel, (int)mc.speed_pair_steps,
-           mc.steer_jump, mc.lat_span_paired, mc.speed_brake_alpha, mc.speed_brake_lag, mc.speed_slip_rel);
-    mrs_monitor_reset(&ms);
-    mrs_authority_reset(&as);
-    while (fgets(line, sizeof line, stdin) != NULL) {
-        uint8_t bits;
-        double u;
-        if (read_numbers(line, v, 9) != 0) {
-            return 2;
-        }
-        bits = mrs_monitor_step(&mc, &ms, v[0], v[1], v[2], v[3], v[4], v[5], v[7], v[8]);
-        u = mrs_authority_step(&ac, &as, v[6], bits, (uint8_t)((ms.flags & MRS_CUT_CHECKS) != 0u),
-                               (uint8_t)((ms.flags & MRS_FADE_CHECKS) != 0u));
-        printf("%u %u %.17g %.17g %.17g %.17g %u %.17g %.17g %d %u %d %d %.17g %d %u %d %.17g\n", (unsigned)bits,
-               (unsigned)ms.flags, ms.kin_err, ms.pair_err, ms.model_err, u, (unsigned)as.flags, ms.yaw_pair_err,
-               ms.turn_err, (int)ms.turn_n, (unsigned)ms.turn_settled, (int)ms.yaw_hold_n, (int)ms.yaw_clear_n,
-               ms.speed_pair_err, (int)ms.speed_pair_count, (unsigned)ms.speed2_seen, (int)ms.steer_hold_n,
-               ms.speed_lag);
-    }
-    return 0;
+    print_coeffs(&mc, &ac);
+    return replay(&mc, &ac);
 }

@@ -59,6 +59,50 @@ static int all_finite(const double *v, int n)
     return 1;
 }
 
+/* Breakpoint i of the schedule: speed and gains finite and positive, the speed above the last. */
+static int valid_breakpoint(const mrs_config_t *g, int i)
+{
+    const double p[4] = {g->schedule_speed[i], g->schedule_k[i], g->schedule_tau[i], g->schedule_tau_n[i]};
+    return all_finite(p, 4) && p[0] > 0.0 && p[1] > 0.0 && p[2] > 0.0 && p[3] > 0.0 &&
+           !(i > 0 && !(p[0] > g->schedule_speed[i - 1]));
+}
+
+/* The gains (calibration.py _validate_gains): constant K, tau, tau_n finite and positive, or
+ * every breakpoint's, the speeds ascending. */
+static int valid_gains(const mrs_config_t *g)
+{
+    const int n = g->n_schedule;
+    int i;
+    if (n == 0 && !(isfinite(g->k) && isfinite(g->tau) && isfinite(g->tau_n) && g->k > 0.0 && g->tau > 0.0 &&
+                    g->tau_n > 0.0)) {
+        return 0;
+    }
+    for (i = 0; i < n; ++i) {
+        if (!valid_breakpoint(g, i)) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The positive fields (calibration.py _POSITIVE). */
+static int valid_positive(const mrs_config_t *g)
+{
+    return g->ts > 0.0 && g->aux_limit > 0.0 && g->fade_rate > 0.0 && g->speed_active_min > 0.0 &&
+           g->speed_max > 0.0 && g->driver_angle_max > 0.0 && g->yaw_rate_max > 0.0 && g->nominal_l_f > 0.0 &&
+           g->nominal_l_r > 0.0 && g->nominal_mass > 0.0 && g->nominal_c_f > 0.0 && g->nominal_c_r > 0.0;
+}
+
+/* The law's internal model (calibration.py _validate_model): its delay, actuator lag, sensor
+ * filter and rate limit. */
+static int valid_model(const mrs_config_t *g)
+{
+    const int extended = (g->n_schedule > 0) || (g->model_actuator_tau > 0.0) || (g->model_filter_hz > 0.0);
+    return !(g->rate_limit < 0.0 || g->model_actuator_tau < 0.0 || g->model_filter_hz < 0.0 ||
+             g->model_filter_hz >= 0.5 / g->ts || g->model_delay_steps < 0 ||
+             g->model_delay_steps > MRS_MAX_MODEL_DELAY || (extended && g->model_delay_steps == 0));
+}
+
 /* The calibration's checks, as firmware_py/calibration.py validate() makes them. */
 static int valid(const mrs_config_t *g)
 {
@@ -66,37 +110,12 @@ static int valid(const mrs_config_t *g)
                         g->model_filter_hz, g->speed_active_min, g->speed_max, g->driver_angle_max,
                         g->yaw_rate_max, g->nominal_l_f, g->nominal_l_r, g->nominal_mass, g->nominal_c_f,
                         g->nominal_c_r};
-    const int n = g->n_schedule;
-    int i, extended;
     if ((g->q_form != MRS_Q_LIMITED && g->q_form != MRS_Q_STANDARD) ||
         (g->method != MRS_TUSTIN && g->method != MRS_ZOH) || !all_finite(v, (int)(sizeof v / sizeof v[0])) ||
-        n < 0 || n > MRS_MAX_SCHEDULE) {
+        g->n_schedule < 0 || g->n_schedule > MRS_MAX_SCHEDULE) {
         return 0;
     }
-    if (n == 0) {
-        if (!(isfinite(g->k) && isfinite(g->tau) && isfinite(g->tau_n) && g->k > 0.0 && g->tau > 0.0 &&
-              g->tau_n > 0.0)) {
-            return 0;
-        }
-    }
-    for (i = 0; i < n; ++i) {
-        const double p[4] = {g->schedule_speed[i], g->schedule_k[i], g->schedule_tau[i], g->schedule_tau_n[i]};
-        if (!all_finite(p, 4) || !(p[0] > 0.0 && p[1] > 0.0 && p[2] > 0.0 && p[3] > 0.0) ||
-            (i > 0 && !(p[0] > g->schedule_speed[i - 1]))) {
-            return 0;
-        }
-    }
-    extended = (n > 0) || (g->model_actuator_tau > 0.0) || (g->model_filter_hz > 0.0);
-    if (!(g->ts > 0.0 && g->aux_limit > 0.0 && g->fade_rate > 0.0 && g->speed_active_min > 0.0 &&
-          g->speed_max > 0.0 && g->driver_angle_max > 0.0 && g->yaw_rate_max > 0.0 && g->nominal_l_f > 0.0 &&
-          g->nominal_l_r > 0.0 && g->nominal_mass > 0.0 && g->nominal_c_f > 0.0 && g->nominal_c_r > 0.0) ||
-        g->rate_limit < 0.0 || g->model_actuator_tau < 0.0 || g->model_filter_hz < 0.0 ||
-        g->model_filter_hz >= 0.5 / g->ts || g->model_delay_steps < 0 ||
-        g->model_delay_steps > MRS_MAX_MODEL_DELAY || (extended && g->model_delay_steps == 0) ||
-        g->speed_active_min >= g->speed_max) {
-        return 0;
-    }
-    return 1;
+    return valid_gains(g) && valid_positive(g) && valid_model(g) && g->speed_active_min < g->speed_max;
 }
 
 /* One breakpoint's coefficient set (a, g_w0, g_w1, g_r0, g_r1, q0) from K, tau, tau_n. */
@@ -129,13 +148,28 @@ static void law_coefficients(const mrs_config_t *g, double k, double tau, double
     out[5] = q0;
 }
 
+/* The nominal sensor filter: 2nd-order Butterworth, Tustin with the cut-off pre-warped
+ * (scipy.signal.butter): b0, b1, b2, a1, a2; a pass-through without model_filter_hz. */
+static void nominal_filter(const mrs_config_t *g, double flt[5])
+{
+    if (g->model_filter_hz > 0.0) {
+        const double w = tan(3.141592653589793 * g->model_filter_hz * g->ts);
+        const double nn = 1.0 / (1.0 + sqrt(2.0) * w + w * w);
+        const double b0 = w * w * nn;
+        flt[0] = b0;
+        flt[1] = 2.0 * b0;
+        flt[2] = b0;
+        flt[3] = 2.0 * (w * w - 1.0) * nn;
+        flt[4] = (1.0 - sqrt(2.0) * w + w * w) * nn;
+    }
+}
+
 int mrs_configure(const mrs_config_t *g, mrs_coeffs_t *c)
 {
     double wheelbase, k_us, act_a, g_w0_first = 0.0;
     double flt[5] = {1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     const int n = (g->n_schedule > 0) ? g->n_schedule : 1;
-
     if (!valid(g)) {
         return -1;
     }
@@ -162,19 +196,9 @@ int mrs_configure(const mrs_config_t *g, mrs_coeffs_t *c)
         }
     }
     c->n_sched = n;
-    /* Nominal actuator: ZOH of 1/(tau_an s + 1); nominal filter: 2nd-order Butterworth, Tustin
-     * with the cut-off pre-warped (scipy.signal.butter). */
+    /* Nominal actuator: ZOH of 1/(tau_an s + 1) */
     act_a = (g->model_actuator_tau > 0.0) ? exp(-g->ts / g->model_actuator_tau) : 0.0;
-    if (g->model_filter_hz > 0.0) {
-        const double w = tan(3.141592653589793 * g->model_filter_hz * g->ts);
-        const double nn = 1.0 / (1.0 + sqrt(2.0) * w + w * w);
-        const double b0 = w * w * nn;
-        flt[0] = b0;
-        flt[1] = 2.0 * b0;
-        flt[2] = b0;
-        flt[3] = 2.0 * (w * w - 1.0) * nn;
-        flt[4] = (1.0 - sqrt(2.0) * w + w * w) * nn;
-    }
+    nominal_filter(g, flt);
     wheelbase = g->nominal_l_f + g->nominal_l_r;
     /* 1/K_n(v) = L/v + k_us v: eq. (15) inverted, nominal car at mu = 1 */
     k_us = (g->nominal_c_r * g->nominal_l_r - g->nominal_c_f * g->nominal_l_f) * g->nominal_mass /
@@ -219,15 +243,13 @@ void mrs_init_state(mrs_state_t *s)
     s->fault_flags = 0u;
 }
 
-mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
-                    mrs_real_t speed, uint8_t hold)
+/* The law's units, in the order mrs_step() runs them, with model_regulator.py's names. */
+
+/* The MRS_FAULT_* flags of the inputs out of range; written so that a NaN fails every
+ * comparison: non-finite inputs are faults. */
+static uint8_t input_faults(const mrs_coeffs_t *c, mrs_real_t delta_driver, mrs_real_t yaw_rate, mrs_real_t speed)
 {
     uint8_t flags = 0u;
-    mrs_real_t u, inv_kn, rho, du, lo_slew, hi_slew, lo, hi, w, y, f, a, g_w0, g_w1, g_r0, g_r1;
-    int j, j1;
-    const int n = c->n_sched;
-
-    /* Written so that a NaN fails every comparison: non-finite inputs are faults. */
     if (!(-c->driver_angle_max <= delta_driver && delta_driver <= c->driver_angle_max)) {
         flags |= MRS_FAULT_DRIVER_ANGLE;
     }
@@ -237,132 +259,213 @@ mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driv
     if (!((mrs_real_t)0 <= speed && speed <= c->speed_max)) {
         flags |= MRS_FAULT_SPEED;
     }
-    s->fault_flags = flags;
+    return flags;
+}
 
-    if (flags != 0u || speed < c->speed_active_min) {
-        /* Fault or too slow: inputs do not touch the state; fade to 0; re-initialise later. */
-        u = s->u_prev;
-        if (u > c->fade_step) {
-            u -= c->fade_step;
-        } else if (u < -c->fade_step) {
-            u += c->fade_step;
-        } else {
-            u = 0;
-        }
-        s->u_prev = u;
-        s->status = (flags != 0u) ? MRS_STATUS_FAULT : MRS_STATUS_INACTIVE;
-        s->needs_init = 1u;
-        return u;
+/* Fault or too slow: inputs do not touch the state; fade to 0; re-initialise later. */
+static mrs_real_t fade_out(const mrs_coeffs_t *c, mrs_state_t *s, uint8_t flags)
+{
+    mrs_real_t u = s->u_prev;
+    if (u > c->fade_step) {
+        u -= c->fade_step;
+    } else if (u < -c->fade_step) {
+        u += c->fade_step;
+    } else {
+        u = 0;
     }
+    s->u_prev = u;
+    s->status = (flags != 0u) ? MRS_STATUS_FAULT : MRS_STATUS_INACTIVE;
+    s->needs_init = 1u;
+    return u;
+}
 
-    inv_kn = c->wheelbase / speed + c->k_us * speed;
-    rho = inv_kn * yaw_rate;
+/* The speed strictly between the first and the last breakpoint: the gains interpolate. */
+static int schedule_interior(const mrs_coeffs_t *c, mrs_real_t speed)
+{
+    const int n = c->n_sched;
+    return n > 1 && c->sched_v[0] < speed && speed < c->sched_v[n - 1];
+}
 
-    /* The coefficient set at this speed: linear between breakpoints, held outside them. */
-    j = 0;
-    j1 = 0;
-    f = 0;
+/* The last breakpoint at or below the speed (ascending); 0 below the first. */
+static int schedule_index(const mrs_coeffs_t *c, mrs_real_t speed)
+{
+    int j = 0;
+    const int n = c->n_sched;
     if (n > 1 && speed > c->sched_v[0]) {
         if (speed >= c->sched_v[n - 1]) {
             j = n - 1;
-            j1 = n - 1;
         } else {
             int i;
-            for (i = 1; i < n - 1; ++i) { /* the last breakpoint at or below the speed */
+            for (i = 1; i < n - 1; ++i) {
                 if (speed >= c->sched_v[i]) {
                     j = i;
                 }
             }
-            j1 = j + 1;
-            f = (speed - c->sched_v[j]) * c->sched_inv_dv[j];
         }
     }
-    a = c->sched_a[j] + f * (c->sched_a[j1] - c->sched_a[j]);
-    g_w0 = c->sched_g_w0[j] + f * (c->sched_g_w0[j1] - c->sched_g_w0[j]);
-    g_w1 = c->sched_g_w1[j] + f * (c->sched_g_w1[j1] - c->sched_g_w1[j]);
-    g_r0 = c->sched_g_r0[j] + f * (c->sched_g_r0[j1] - c->sched_g_r0[j]);
-    g_r1 = c->sched_g_r1[j] + f * (c->sched_g_r1[j1] - c->sched_g_r1[j]);
+    return j;
+}
 
-    if (s->needs_init) {
-        /* Every filter at its steady state for the present inputs with the command held. */
-        const mrs_real_t q0 = c->sched_q0[j] + f * (c->sched_q0[j1] - c->sched_q0[j]);
-        const mrs_real_t w0 = delta_driver + s->u_prev;
-        int i;
-        s->z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho);
-        for (i = 0; i < c->model_delay; ++i) {
-            s->u_hist[i] = s->u_prev;
-        }
-        s->hist_idx = 0u;
-        s->p_n = s->u_prev;
-        s->f_s1 = (1 - c->flt_b0) * w0;
-        s->f_s2 = (c->flt_b2 - c->flt_a2) * w0;
-        s->needs_init = 0u;
-        s->recovering = 1u;
+/* The breakpoint the gains interpolate toward: the next one inside the schedule, else j. */
+static int schedule_upper(const mrs_coeffs_t *c, mrs_real_t speed, int j)
+{
+    return schedule_interior(c, speed) ? j + 1 : j;
+}
+
+/* How far the speed is from breakpoint j toward the next one: 0 outside the schedule. */
+static mrs_real_t schedule_fraction(const mrs_coeffs_t *c, mrs_real_t speed, int j)
+{
+    return schedule_interior(c, speed) ? (speed - c->sched_v[j]) * c->sched_inv_dv[j] : (mrs_real_t)0;
+}
+
+/* The coefficient of table a fraction f of the way from breakpoint j to j1. */
+static mrs_real_t interpolate(const mrs_real_t *table, int j, int j1, mrs_real_t f)
+{
+    return table[j] + f * (table[j1] - table[j]);
+}
+
+/* Every filter at its steady state for the present inputs with the command held. */
+static void restart(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t rho, mrs_real_t q0,
+                    mrs_real_t g_w0, mrs_real_t g_r0)
+{
+    const mrs_real_t w0 = delta_driver + s->u_prev;
+    int i;
+    s->z = q0 * (w0 - rho) - (g_w0 * w0 - g_r0 * rho);
+    for (i = 0; i < c->model_delay; ++i) {
+        s->u_hist[i] = s->u_prev;
     }
+    s->hist_idx = 0u;
+    s->p_n = s->u_prev;
+    s->f_s1 = (1 - c->flt_b0) * w0;
+    s->f_s2 = (c->flt_b2 - c->flt_a2) * w0;
+    s->needs_init = 0u;
+    s->recovering = 1u;
+}
 
-    /* Admissible window: actuator range intersected with the slew window. */
-    du = c->du_max;
+/* The most the command may move this period: the rate limit, the fade step while it recovers. */
+static mrs_real_t slew_step(const mrs_coeffs_t *c, const mrs_state_t *s)
+{
+    mrs_real_t du = c->du_max;
     if (s->recovering && c->fade_step < du) {
         du = c->fade_step;
     }
-    lo_slew = s->u_prev - du;
-    hi_slew = s->u_prev + du;
-    lo = lo_slew;
-    hi = hi_slew;
+    return du;
+}
+
+/* The admissible window's lower end: the actuator's range intersected with the slew window; on
+ * hold (lo <= u_prev already) it keeps u_prev and 0's side of it. */
+static mrs_real_t window_low(const mrs_coeffs_t *c, const mrs_state_t *s, mrs_real_t lo_slew, uint8_t hold)
+{
+    mrs_real_t lo = lo_slew;
     if (lo < -c->u_max) {
         lo = -c->u_max;
     }
+    if (hold != 0u) {
+        if (s->u_prev > (mrs_real_t)0) {
+            lo = lo > (mrs_real_t)0 ? lo : (mrs_real_t)0;
+        } else {
+            lo = s->u_prev > lo ? s->u_prev : lo;
+        }
+    }
+    return lo;
+}
+
+/* The admissible window's upper end (as window_low). */
+static mrs_real_t window_high(const mrs_coeffs_t *c, const mrs_state_t *s, mrs_real_t hi_slew, uint8_t hold)
+{
+    mrs_real_t hi = hi_slew;
     if (hi > c->u_max) {
         hi = c->u_max;
     }
     if (hold != 0u) {
-        /* lo <= u_prev <= hi already, so the window keeps u_prev and 0's side of it */
         if (s->u_prev > (mrs_real_t)0) {
-            lo = lo > (mrs_real_t)0 ? lo : (mrs_real_t)0;
             hi = s->u_prev < hi ? s->u_prev : hi;
         } else {
             hi = hi < (mrs_real_t)0 ? hi : (mrs_real_t)0;
-            lo = s->u_prev > lo ? s->u_prev : lo;
         }
     }
+    return hi;
+}
 
-    if (c->model_delay == 0) {
-        /* Tustin's algebraic loop, solved exactly: u = clamp(p / (1 - g_w0), lo, hi). */
-        const mrs_real_t p = g_w0 * delta_driver - g_r0 * rho + s->z;
-        u = p * c->inv_one_minus_g_w0;
-        if (u < lo) {
-            u = lo;
-        } else if (u > hi) {
-            u = hi;
-        }
-        y = p + g_w0 * u;
-        w = delta_driver + u;
-    } else {
-        /* The yaw rate measured now answers the command issued M steps ago, through the
-         * actuator and the sensor filter: the nominal model's answer to that command. */
-        uint8_t i = s->hist_idx;
-        mrs_real_t x;
-        s->p_n = c->act_a * s->p_n + c->act_b * s->u_hist[i];
-        x = delta_driver + s->p_n;
-        w = c->flt_b0 * x + s->f_s1;
-        s->f_s1 = c->flt_b1 * x - c->flt_a1 * w + s->f_s2;
-        s->f_s2 = c->flt_b2 * x - c->flt_a2 * w;
-        y = g_w0 * w - g_r0 * rho + s->z;
-        u = y;
-        if (u < lo) {
-            u = lo;
-        } else if (u > hi) {
-            u = hi;
-        }
-        s->u_hist[i] = u;
-        ++i;
-        if (i >= (uint8_t)c->model_delay) {
-            i = 0u;
-        }
-        s->hist_idx = i;
-    }
+/* u within [lo, hi]. */
+static mrs_real_t clamp(mrs_real_t u, mrs_real_t lo, mrs_real_t hi)
+{
+    return (u < lo) ? lo : ((u > hi) ? hi : u);
+}
 
+/* Tustin's algebraic loop of the constant law, solved exactly: u = clamp(p / (1 - g_w0), lo, hi). */
+static mrs_real_t constant_law(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t rho,
+                               mrs_real_t a, mrs_real_t g_w0, mrs_real_t g_w1, mrs_real_t g_r0, mrs_real_t g_r1,
+                               mrs_real_t lo, mrs_real_t hi)
+{
+    const mrs_real_t p = g_w0 * delta_driver - g_r0 * rho + s->z;
+    const mrs_real_t u = clamp(p * c->inv_one_minus_g_w0, lo, hi);
+    const mrs_real_t y = p + g_w0 * u;
+    const mrs_real_t w = delta_driver + u;
     s->z = g_w1 * w - g_r1 * rho + a * y;
+    return u;
+}
+
+/* The yaw rate measured now answers the command issued M steps ago, through the actuator and
+ * the sensor filter: the nominal model's answer to that command (no algebraic loop). */
+static mrs_real_t delayed_law(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t rho,
+                              mrs_real_t a, mrs_real_t g_w0, mrs_real_t g_w1, mrs_real_t g_r0, mrs_real_t g_r1,
+                              mrs_real_t lo, mrs_real_t hi)
+{
+    uint8_t i = s->hist_idx;
+    mrs_real_t x, w, y, u;
+    s->p_n = c->act_a * s->p_n + c->act_b * s->u_hist[i];
+    x = delta_driver + s->p_n;
+    w = c->flt_b0 * x + s->f_s1;
+    s->f_s1 = c->flt_b1 * x - c->flt_a1 * w + s->f_s2;
+    s->f_s2 = c->flt_b2 * x - c->flt_a2 * w;
+    y = g_w0 * w - g_r0 * rho + s->z;
+    u = clamp(y, lo, hi);
+    s->u_hist[i] = u;
+    ++i;
+    if (i >= (uint8_t)c->model_delay) {
+        i = 0u;
+    }
+    s->hist_idx = i;
+    s->z = g_w1 * w - g_r1 * rho + a * y;
+    return u;
+}
+
+mrs_real_t mrs_step(const mrs_coeffs_t *c, mrs_state_t *s, mrs_real_t delta_driver, mrs_real_t yaw_rate,
+                    mrs_real_t speed, uint8_t hold)
+{
+    const uint8_t flags = input_faults(c, delta_driver, yaw_rate, speed);
+    mrs_real_t u, inv_kn, rho, du, lo_slew, hi_slew, lo, hi, f, a, g_w0, g_w1, g_r0, g_r1;
+    int j, j1;
+    s->fault_flags = flags;
+    if (flags != 0u || speed < c->speed_active_min) {
+        return fade_out(c, s, flags);
+    }
+    inv_kn = c->wheelbase / speed + c->k_us * speed;
+    rho = inv_kn * yaw_rate; /* the yaw rate as the wheel angle the nominal car needs for it */
+    /* The coefficient set at this speed: linear between breakpoints, held outside them. */
+    j = schedule_index(c, speed);
+    j1 = schedule_upper(c, speed, j);
+    f = schedule_fraction(c, speed, j);
+    a = interpolate(c->sched_a, j, j1, f);
+    g_w0 = interpolate(c->sched_g_w0, j, j1, f);
+    g_w1 = interpolate(c->sched_g_w1, j, j1, f);
+    g_r0 = interpolate(c->sched_g_r0, j, j1, f);
+    g_r1 = interpolate(c->sched_g_r1, j, j1, f);
+    if (s->needs_init) {
+        restart(c, s, delta_driver, rho, interpolate(c->sched_q0, j, j1, f), g_w0, g_r0);
+    }
+    /* Admissible window: actuator range intersected with the slew window. */
+    du = slew_step(c, s);
+    lo_slew = s->u_prev - du;
+    hi_slew = s->u_prev + du;
+    lo = window_low(c, s, lo_slew, hold);
+    hi = window_high(c, s, hi_slew, hold);
+    if (c->model_delay == 0) {
+        u = constant_law(c, s, delta_driver, rho, a, g_w0, g_w1, g_r0, g_r1, lo, hi);
+    } else {
+        u = delayed_law(c, s, delta_driver, rho, a, g_w0, g_w1, g_r0, g_r1, lo, hi);
+    }
     if (s->recovering && hold == 0u && lo_slew < u && u < hi_slew) {
         s->recovering = 0u;
     }
