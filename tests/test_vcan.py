@@ -255,7 +255,7 @@ def test_controller_filters_are_installed_in_the_kernel() -> None:
 # seconds (20 s of wall time) for the restarted Python controller to come up.  Every check is the
 # same as on the fallback bus, judged in the car's time.  tools/vcan-vm-test runs it with the C
 # node, and with the Python controller too when MRSTEER_VCAN_MATRIX=1 (MRSTEER_VCAN_C_MATRIX=0
-# leaves the C node's out; docs/decisions/0025-slow-motion-on-an-emulated-machine.md).
+# leaves the C node's out; docs/decisions/0018-slow-motion-on-an-emulated-machine.md).
 VM_SETUP = dict(rate_hz=100.0, slow_motion=4.0, startup_s=5.0)
 
 

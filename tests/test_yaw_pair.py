@@ -149,7 +149,7 @@ def _caused(v: float, fault: SensorFault | None, second: SensorConfig | None) ->
                                      (10.0, SensorFault("yaw_rate", "scale", 1.0, 0.5))], ids=("stuck", "gain"))
 def test_in_closed_loop_the_pair_keeps_the_caused_yaw_under_the_target(v: float, fault: SensorFault) -> None:
     # Issue 18's target: the faulty sensor's command causes < 0.05 rad/s.  A stuck element in the
-    # 40 m/s curve is the prototype's hardest case (docs/decisions/0026-sensor-frame-layouts.md), a gain of
+    # 40 m/s curve is the prototype's hardest case (docs/decisions/0019-sensor-frame-layouts.md), a gain of
     # 0.5 at 10 m/s today's worst gain; the elements at the top of the campaigns' noise and
     # 0.6 deg/s apart.
     second = SensorConfig(seed=99, yaw_rate=YawRateSensorConfig(noise_density=0.028, bias_deg_s=-0.3))

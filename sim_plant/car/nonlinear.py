@@ -51,7 +51,7 @@ saturated, their moments cancel, l_f F_zf = l_r F_zr, and r grows without bound)
 is on the side slip, not on the yaw rate: the tyres bound beta' + r, |beta' + r| <= (mu g +
 |F_ext| / m) / v, not r, so a yaw rate above mu g / v makes beta grow, which the side slip then
 shows; a yaw-rate bound would need each wheel's mu and the side force, and cars within the
-side-slip bound pass mu g / v (docs/decisions/0023-a-run-ends-when-its-car-spins.md has the runs).  ``outputs``
+side-slip bound pass mu g / v (docs/decisions/0016-a-run-ends-when-its-car-spins.md has the runs).  ``outputs``
 gives beta wrapped to (-pi, pi] (``wrap_angle``); the state itself is not wrapped.
 """
 
