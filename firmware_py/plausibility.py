@@ -887,6 +887,16 @@ def turn_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_acc
     s.turn_n = 0
 
 
+def frozen_count(c: MonitorCoefficients, s: MonitorState, same: int, bit: int) -> int:
+    """5. One step of a frozen value whose partner moved: the count, saturated at frozen_steps,
+    latching ``bit`` there.  Shared by the four frozen checks."""
+    if same < c.frozen_steps:
+        same += 1
+    if same >= c.frozen_steps:
+        s.latched |= bit
+    return same
+
+
 def frozen_yaw_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, r_kin: float, lat_ok: bool,
                      new_sample: bool) -> None:
     """5. Frozen yaw rate against a_y / v, taken at its first sample after the yaw rate's last
@@ -900,10 +910,7 @@ def frozen_yaw_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, r
         e = r_kin - s.yaw_ref
         e = -e if e < 0.0 else e
         if e > c.frozen_move_yaw:
-            if s.yaw_same < c.frozen_steps:
-                s.yaw_same += 1
-            if s.yaw_same >= c.frozen_steps:
-                s.latched |= FROZEN_YAW
+            s.yaw_same = frozen_count(c, s, s.yaw_same, FROZEN_YAW)
 
 
 def frozen_lat_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, lat_accel: float) -> None:
@@ -915,10 +922,7 @@ def frozen_lat_check(c: MonitorCoefficients, s: MonitorState, yaw_rate: float, l
         e = yaw_rate - s.lat_ref
         e = -e if e < 0.0 else e
         if e > c.frozen_move_yaw:
-            if s.lat_same < c.frozen_steps:
-                s.lat_same += 1
-            if s.lat_same >= c.frozen_steps:
-                s.latched |= FROZEN_LAT
+            s.lat_same = frozen_count(c, s, s.lat_same, FROZEN_LAT)
 
 
 def frozen_steer_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,
@@ -934,10 +938,7 @@ def frozen_steer_check(c: MonitorCoefficients, s: MonitorState, delta_driver: fl
         e = delta_driver_redundant - s.st_ref
         e = -e if e < 0.0 else e
         if e > c.frozen_move_steer:
-            if s.st_same < c.frozen_steps:
-                s.st_same += 1
-            if s.st_same >= c.frozen_steps:
-                s.latched |= FROZEN_STEER
+            s.st_same = frozen_count(c, s, s.st_same, FROZEN_STEER)
 
 
 def frozen_steer2_check(c: MonitorCoefficients, s: MonitorState, delta_driver: float,
@@ -950,10 +951,7 @@ def frozen_steer2_check(c: MonitorCoefficients, s: MonitorState, delta_driver: f
         e = delta_driver - s.st2_ref
         e = -e if e < 0.0 else e
         if e > c.frozen_move_steer:
-            if s.st2_same < c.frozen_steps:
-                s.st2_same += 1
-            if s.st2_same >= c.frozen_steps:
-                s.latched |= FROZEN_STEER_2
+            s.st2_same = frozen_count(c, s, s.st2_same, FROZEN_STEER_2)
 
 
 def frozen_checks(c: MonitorCoefficients, s: MonitorState, delta_driver: float, delta_driver_redundant: float,

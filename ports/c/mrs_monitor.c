@@ -657,6 +657,20 @@ static void turn_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, do
     s->turn_n = 0;
 }
 
+/* 5. one step of a frozen value whose partner moved: the count, saturated at frozen_steps,
+ * latching bit there; shared by the four frozen checks (plausibility.py frozen_count) */
+static int32_t frozen_count(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, int32_t same, unsigned bit)
+{
+    int32_t n = same;
+    if (n < c->frozen_steps) {
+        n += 1;
+    }
+    if (n >= c->frozen_steps) {
+        s->latched |= bit;
+    }
+    return n;
+}
+
 /* 5. frozen yaw rate against a_y / v, taken at its first sample after the yaw rate's last change */
 static void frozen_yaw_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t *s, double yaw_rate, double r_kin,
                              int lat_ok, int new_sample)
@@ -669,12 +683,7 @@ static void frozen_yaw_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t 
         s->yaw_ref = r_kin;
         s->yaw_ref_ok = 1u;
     } else if (lat_ok && s->yaw_ref_ok && MRS_MAG(r_kin - s->yaw_ref) > c->frozen_move_yaw) {
-        if (s->yaw_same < c->frozen_steps) {
-            s->yaw_same += 1;
-        }
-        if (s->yaw_same >= c->frozen_steps) {
-            s->latched |= MRS_FROZEN_YAW;
-        }
+        s->yaw_same = frozen_count(c, s, s->yaw_same, MRS_FROZEN_YAW);
     }
 }
 
@@ -687,12 +696,7 @@ static void frozen_lat_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state_t 
         s->lat_same = 0;
         s->lat_ref = yaw_rate;
     } else if (MRS_MAG(yaw_rate - s->lat_ref) > c->frozen_move_yaw) {
-        if (s->lat_same < c->frozen_steps) {
-            s->lat_same += 1;
-        }
-        if (s->lat_same >= c->frozen_steps) {
-            s->latched |= MRS_FROZEN_LAT;
-        }
+        s->lat_same = frozen_count(c, s, s->lat_same, MRS_FROZEN_LAT);
     }
 }
 
@@ -709,12 +713,7 @@ static void frozen_steer_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state_
         s->st_ref = delta_driver_redundant;
         s->st_ref_ok = 1u;
     } else if (s->st_ref_ok && MRS_MAG(delta_driver_redundant - s->st_ref) > c->frozen_move_steer) {
-        if (s->st_same < c->frozen_steps) {
-            s->st_same += 1;
-        }
-        if (s->st_same >= c->frozen_steps) {
-            s->latched |= MRS_FROZEN_STEER;
-        }
+        s->st_same = frozen_count(c, s, s->st_same, MRS_FROZEN_STEER);
     }
 }
 
@@ -727,12 +726,7 @@ static void frozen_steer2_check(const mrs_monitor_coeffs_t *c, mrs_monitor_state
         s->st2_same = 0;
         s->st2_ref = delta_driver;
     } else if (MRS_MAG(delta_driver - s->st2_ref) > c->frozen_move_steer) {
-        if (s->st2_same < c->frozen_steps) {
-            s->st2_same += 1;
-        }
-        if (s->st2_same >= c->frozen_steps) {
-            s->latched |= MRS_FROZEN_STEER_2;
-        }
+        s->st2_same = frozen_count(c, s, s->st2_same, MRS_FROZEN_STEER_2);
     }
 }
 
